@@ -185,8 +185,8 @@ def read_transient(path: str | Path) -> np.ndarray:
         data = np.load(path, allow_pickle=False)
     elif path.suffix == ".exr":
         import OpenEXR
-        with OpenEXR.File(str(path)) as handle:
-            data = np.asarray(handle.channels()["Y"].pixels)
+        with OpenEXR.File(str(path)) as handle:   # copy: the pixels die with the handle
+            data = np.array(handle.channels()["Y"].pixels, dtype=np.float64)
     else:
         raise ValueError(f"{path.name}: expected .npy or .exr")
     data = np.asarray(data, dtype=np.float64)

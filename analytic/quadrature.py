@@ -96,8 +96,10 @@ def isochrone_arc_integral(frame, cx, cy, a, b, j0, j1, j2, lo, hi, rtol, stack)
         kronrod, gauss = _arc_rule(frame, cx, cy, a, b, j0, j1, j2, left, right)
         stop = ((right - left) <= _MAX_DEPTH_WIDTH * (hi - lo) or waiting + 2 > _STACK
                 or applied > _MAX_PIECES)
-        if abs(kronrod - gauss) <= rtol * abs(kronrod) or stop:
-            if not abs(kronrod - gauss) <= rtol * abs(kronrod):
+        # arcs narrower than ~1e-12 rad are below the angles' rounding: keep them
+        unresolvable = (right - left) <= 1e-12 * max(1.0, abs(right))
+        if abs(kronrod - gauss) <= rtol * abs(kronrod) or stop or unresolvable:
+            if not (abs(kronrod - gauss) <= rtol * abs(kronrod) or unresolvable):
                 converged = False
             total += kronrod
         else:

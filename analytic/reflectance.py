@@ -130,7 +130,7 @@ def _read_exr(path: Path) -> np.ndarray:
 
     try:
         with OpenEXR.File(str(path)) as handle:
-            channels = {name: np.asarray(ch.pixels, dtype=np.float64)
+            channels = {name: np.array(ch.pixels, dtype=np.float64)   # copy before close
                         for name, ch in handle.channels().items()}
     except Exception as error:  # the binding raises RuntimeError and others
         raise ImageError(f"{path.name}: cannot read EXR ({error})") from None

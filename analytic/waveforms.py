@@ -50,6 +50,11 @@ class Waveform:
         on [0, duration]; decay in 1/m, frequency in rad/m.
     constant : float
         See above.
+    series : numpy.ndarray
+        Taylor coefficients of S at 0, used for u < ``series_limit`` where the
+        exponential sum cancels to S ~ u^order.
+    series_limit : float
+        Metres of path length.
     description : str
         Parameters in words, for reports and file headers.
     """
@@ -64,6 +69,8 @@ class Waveform:
     sin_coefficient: np.ndarray
     constant: float
     description: str
+    series: np.ndarray = None
+    series_limit: float = 0.0
 
     def cumulative(self, u) -> np.ndarray:
         """S(u) = ∫_{-∞}^u s(t) dt, u in metres of path length."""
@@ -76,6 +83,10 @@ class Waveform:
         value = np.full(clipped.shape, self.constant)
         for a, w, b, c in zip(self.decay, self.frequency, self.cos_coefficient, self.sin_coefficient):
             value = value + np.exp(a * clipped) * (b * np.cos(w * clipped) + c * np.sin(w * clipped))
+        # Near u = 0 the exponentials cancel to S ~ u^order: use the Taylor series there.
+        small = clipped < self.series_limit
+        if np.any(small):
+            value = np.where(small, np.polynomial.polynomial.polyval(clipped, self.series), value)
         return np.where(u <= 0, 0.0, value)
 
     def intensity(self, t) -> np.ndarray:
@@ -183,7 +194,17 @@ def _butterworth(illumination: Illumination, period: float) -> Waveform:
     for array in (decay, frequency, cos_coefficient, sin_coefficient):
         array.setflags(write=False)
     constant = float(-np.sum(np.real(coefficients)))
+    # Taylor series of S at 0: S^(m)(0) = h^(m-1)(0) = Re Σ c_i p_i^m, exactly 0 for
+    # m < order (an all-pole filter of that order starts as t^(order-1)).
+    terms = order + 24
+    moments = np.array([np.real(np.sum(coefficients * poles**m)) for m in range(terms)])
+    moments[:order] = 0.0
+    series = moments / np.array([math.factorial(m) for m in range(terms)], dtype=np.float64)
+    series.setflags(write=False)
+    # below this u the series' first omitted term is under 1e-17 of S
+    series_limit = 0.25 / float(np.max(np.abs(poles)))
     description = (f"Butterworth low-pass, order {order}, cutoff {cutoff:.6g} cycles/m, "
                    f"truncated at {duration:.6g} m, unit peak")
     return Waveform("butterworth", EXPONENTIAL_SUM, float(duration), (0.0, float(duration)),
-                    decay, frequency, cos_coefficient, sin_coefficient, constant, description)
+                    decay, frequency, cos_coefficient, sin_coefficient, constant, description,
+                    series, min(series_limit, float(duration)))

@@ -14,7 +14,9 @@ the roots of the line–ellipse intersection).
 
 from __future__ import annotations
 
+import functools
 import math
+import warnings
 
 import numpy as np
 from scipy import integrate, optimize
@@ -53,6 +55,17 @@ def _line_roots(x, y0, y1, level, source, sensor):
     return roots
 
 
+def _quiet(function):
+    """QUADPACK warns of roundoff when asked for 1e-10; the comparison itself judges the result."""
+    @functools.wraps(function)
+    def wrapper(*args, **kwargs):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", integrate.IntegrationWarning)
+            return function(*args, **kwargs)
+    return wrapper
+
+
+@_quiet
 def pixel_entry(box, source, sensor, kernel, breakpoints, kind="lambertian", epsrel=1e-10):
     """∫_box a(x) kernel(d(x)) dx by nested adaptive quadrature.
 
@@ -84,7 +97,28 @@ def pixel_entry(box, source, sensor, kernel, breakpoints, kind="lambertian", eps
             total += value
         return total
 
-    value, _ = integrate.quad(inner, x0, x1, epsabs=0.0, epsrel=epsrel, limit=400)
+    # Cut the outer range where each level set {d < level} begins and ends in x
+    # (roots of the convex m(x) = min_y d(x, y)), so a region far narrower than
+    # the pixel (a just-born isochrone) is not missed by the first rule.
+    def lowest(x):
+        return optimize.minimize_scalar(lambda y: distance_sum(x, y, source, sensor), bounds=(y0, y1),
+                                        method="bounded", options={"xatol": 1e-14}).fun
+
+    x_best = optimize.minimize_scalar(lowest, bounds=(x0, x1), method="bounded",
+                                      options={"xatol": 1e-14}).x
+    cuts = {x0, x1, x_best}
+    for level in breakpoints:
+        if lowest(x_best) >= level:
+            continue
+        for end in (x0, x1):
+            if lowest(end) > level:
+                cuts.add(optimize.brentq(lambda x: lowest(x) - level, *sorted((x_best, end)),
+                                         xtol=1e-15))
+    cuts = sorted(cuts)
+    value = 0.0
+    for lo, hi in zip(cuts[:-1], cuts[1:]):
+        if hi > lo:
+            value += integrate.quad(inner, lo, hi, epsabs=0.0, epsrel=epsrel, limit=400)[0]
     return value
 
 
@@ -92,6 +126,7 @@ def box_kernel(lower, upper):
     return lambda tau: 1.0 if lower <= tau < upper else 0.0
 
 
+@_quiet
 def contour_response(t, image, size, source, sensor, kind="lambertian", epsrel=1e-10):
     """g(t) = ∮_{d = t} f a / |∇d| ds, by adaptive quadrature in the polar angle about x*.
 

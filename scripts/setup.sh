@@ -1,0 +1,17 @@
+#!/usr/bin/env bash
+# Install everything diffuse-imaging needs on a fresh Debian/Ubuntu machine. Idempotent.
+#
+# Dr.Jit's LLVM backend (the renderer's CPU path) aborts with the system's
+# LLVM 15 ("Cannot select: fmaximum"); LLVM 19 from Debian works, so it is
+# installed unless an LLVM >= 16 is already there. transient/backend.py
+# finds it at run time and refuses, in one line, to run on LLVM <= 15.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+if ! ldconfig -p 2>/dev/null | grep -Eq 'libLLVM(-(1[6-9]|[2-9][0-9])\.so|\.so\.(1[6-9]|[2-9][0-9]))'; then
+    sudo=""
+    if [ "$(id -u)" -ne 0 ]; then sudo="sudo"; fi
+    $sudo apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq libllvm19 >/dev/null
+fi
+python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ignore -e ".[test]"

@@ -1,0 +1,165 @@
+"""Renderer throughput and time to a target accuracy.
+
+For each scene: samples per second of :func:`transient.render` (after a
+warm-up render that compiles the kernel), and the time to reach a relative L2
+error ||y_mc - y|| / ||y|| of 1e-3 against the exact model
+(``analytic.system.forward``). The error of a Monte Carlo estimate falls as
+S^(-1/2), so a pilot render predicts the sample count needed; the benchmark
+then renders that many samples, if the prediction fits in ``--budget``
+seconds, and reports the error it actually reached.
+
+Scenes: the built-in default scene (50 x 50 pixels, 16 sensors, 40 bins) and
+a 1 m x 1 m plane of constant reflectance with the source 1 m above its
+centre and one off-centre sensor. If ``mitransient`` imports in this
+interpreter, its ``transient_path`` integrator with an ``irradiancemeter`` is
+timed on the second scene for comparison; otherwise it is reported as not
+installed.
+
+Usage::
+
+    python benchmarks/bench_render.py --out bench.json [--budget 120] [--variant llvm_ad_mono]
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import math
+import platform
+import subprocess
+import sys
+import time
+import warnings
+
+import numpy as np
+
+from analytic.scene import Sampling, Scene, default_scene
+from analytic.system import QuadratureWarning, forward
+from transient.render import render
+
+TARGET = 1e-3
+
+
+def plane_scene() -> Scene:
+    """1 m x 1 m plane, reflectance 0.5, source 1 m above its centre, one off-centre sensor."""
+    return Scene(name="plane 1x1", size=1.0, pixels=1, reflectance=0.5, source=(0.5, 0.5, 1.0),
+                 sensors=[(0.8, 0.3, 1.0)], sampling=Sampling(period=0.05, start=1.5, count=40))
+
+
+def relative_error(estimate: np.ndarray, reference: np.ndarray) -> float:
+    return float(np.linalg.norm(estimate - reference) / np.linalg.norm(reference))
+
+
+def bench_scene(scene: Scene, *, variant: str | None, budget: float, pilot: int) -> dict:
+    with warnings.catch_warnings():
+        # The model's own accuracy (1e-6 per entry) is far below the 1e-3 target.
+        warnings.simplefilter("ignore", QuadratureWarning)
+        start = time.perf_counter()
+        reference = forward(scene)
+        model_seconds = time.perf_counter() - start
+    render(scene, spp=2**16, seed=1, variant=variant, progress=False)      # compile the kernel
+    measured = render(scene, spp=pilot, seed=2, variant=variant, progress=False)
+    rate = measured.samples / measured.seconds
+    error = relative_error(measured.mean, reference)
+    # E||y_mc - y||² = Σ se², and se² falls as 1/S: the predicted count is
+    # steadier than one from the pilot's own (random) error.
+    expected = float(np.sqrt(np.sum(measured.stderr**2)) / np.linalg.norm(reference))
+    needed = int(math.ceil(pilot * (expected / TARGET) ** 2))
+    row = {"scene": scene.name, "sensors": scene.sensor_count, "pixels": scene.pixels,
+           "bins": scene.sampling.count, "variant": measured.variant,
+           "samples_per_second": rate, "sensor_samples_per_second": rate * scene.sensor_count,
+           "pilot_samples": pilot, "pilot_relative_error": error,
+           "pilot_expected_relative_error": expected,
+           "predicted_samples_for_target": needed, "predicted_seconds_for_target": needed / rate,
+           "model_seconds": model_seconds}
+    if needed / rate <= budget:
+        final = render(scene, spp=needed, seed=3, variant=variant, progress=False)
+        row.update(measured_samples=final.samples, measured_seconds=final.seconds,
+                   measured_relative_error=relative_error(final.mean, reference))
+    return row
+
+
+_MITRANSIENT = r"""
+import json, sys, time
+import numpy as np, mitsuba as mi
+mi.set_variant(sys.argv[1])
+import mitransient
+spp, bins, start, width = int(sys.argv[2]), int(sys.argv[3]), float(sys.argv[4]), float(sys.argv[5])
+T = mi.ScalarTransform4f
+def scene(spp):
+    return mi.load_dict({'type': 'scene', 'integrator': {'type': 'transient_path', 'max_depth': 2},
+      'plane': {'type': 'rectangle', 'to_world': T().translate([0.5, 0.5, 0]).scale([0.5, 0.5, 1]),
+                'bsdf': {'type': 'diffuse', 'reflectance': {'type': 'uniform', 'value': 0.5}}},
+      'light': {'type': 'point', 'position': [0.5, 0.5, 1.0], 'intensity': 1.0},
+      'meter': {'type': 'sphere', 'center': [0.8, 0.3, 1.0], 'radius': 0.001, 'bsdf': {'type': 'null'},
+                'sensor': {'type': 'irradiancemeter',
+                           'sampler': {'type': 'independent', 'sample_count': spp},
+                           'film': {'type': 'transient_hdr_film', 'width': 1, 'height': 1,
+                                    'temporal_bins': bins, 'start_opl': start, 'bin_width_opl': width,
+                                    'rfilter': {'type': 'box'}}}}})
+warm = scene(2**16); warm.integrator().render(warm, seed=0)
+s = scene(spp)
+t = time.perf_counter(); steady, transient = s.integrator().render(s, seed=1)
+h = np.array(transient).ravel(); seconds = time.perf_counter() - t
+print(json.dumps({'version': mitransient.__version__, 'samples': spp, 'seconds': seconds,
+                  'samples_per_second': spp / seconds, 'transient_sum': float(h.sum())}))
+"""
+
+
+def bench_mitransient(scene: Scene, variant: str, samples: int) -> dict:
+    if importlib.util.find_spec("mitransient") is None:
+        return {"status": "not installed"}
+    sampling = scene.sampling
+    done = subprocess.run([sys.executable, "-c", _MITRANSIENT, variant, str(samples), str(sampling.count),
+                           str(sampling.start), str(sampling.period)],
+                          capture_output=True, text=True, timeout=600)
+    if done.returncode != 0:
+        return {"status": "failed", "error": done.stderr.strip().splitlines()[-1:]}
+    result = json.loads(done.stdout.strip().splitlines()[-1])
+    result["status"] = "ok"
+    return result
+
+
+def markdown(rows: list[dict], mitransient: dict) -> str:
+    lines = ["| scene | K | bins | variant | samples/s | sensor-samples/s | pilot rel. L2 | "
+             "samples for 1e-3 | time for 1e-3 (s) | measured rel. L2 |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    for row in rows:
+        seconds = row.get("measured_seconds", row["predicted_seconds_for_target"])
+        note = "" if "measured_seconds" in row else " (predicted)"
+        measured = f"{row['measured_relative_error']:.2e}" if "measured_relative_error" in row else "-"
+        lines.append(f"| {row['scene']} | {row['sensors']} | {row['bins']} | {row['variant']} | "
+                     f"{row['samples_per_second']:.3g} | {row['sensor_samples_per_second']:.3g} | "
+                     f"{row['pilot_relative_error']:.2e} | {row['predicted_samples_for_target']:.3g} | "
+                     f"{seconds:.3g}{note} | {measured} |")
+    if mitransient.get("status") == "ok":
+        lines.append(f"\nmitransient {mitransient['version']} (transient_path + irradiancemeter, "
+                     f"plane 1x1): {mitransient['samples_per_second']:.3g} samples/s")
+    else:
+        lines.append(f"\nmitransient: {mitransient.get('status')}")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", required=True, help="JSON file to write")
+    parser.add_argument("--budget", type=float, default=120.0,
+                        help="seconds allowed per scene for the render that checks the 1e-3 target")
+    parser.add_argument("--pilot", type=int, default=2**24, help="samples of the timing render")
+    parser.add_argument("--variant", default=None, help="Mitsuba variant (default: llvm CPU)")
+    args = parser.parse_args(argv)
+    rows = [bench_scene(scene, variant=args.variant, budget=args.budget, pilot=args.pilot)
+            for scene in (default_scene(), plane_scene())]
+    mitransient = bench_mitransient(plane_scene(), "llvm_ad_mono", args.pilot)
+    report = {"machine": platform.platform(), "processor": platform.processor(),
+              "target_relative_l2": TARGET, "scenes": rows, "mitransient": mitransient}
+    with open(args.out, "w") as stream:
+        json.dump(report, stream, indent=2)
+        stream.write("\n")
+    print(markdown(rows, mitransient))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -27,24 +27,18 @@ import importlib.util
 import json
 import math
 import platform
-import subprocess
 import sys
 import time
 import warnings
 
 import numpy as np
 
-from analytic.scene import Sampling, Scene, default_scene
+from analytic.scene import Scene, default_scene
 from analytic.system import QuadratureWarning, forward
 from transient.render import render
+from validation.bench import plane_scene, run_mitransient
 
 TARGET = 1e-3
-
-
-def plane_scene() -> Scene:
-    """1 m x 1 m plane, reflectance 0.5, source 1 m above its centre, one off-centre sensor."""
-    return Scene(name="plane 1x1", size=1.0, pixels=1, reflectance=0.5, source=(0.5, 0.5, 1.0),
-                 sensors=[(0.8, 0.3, 1.0)], sampling=Sampling(period=0.05, start=1.5, count=40))
 
 
 def relative_error(estimate: np.ndarray, reference: np.ndarray) -> float:
@@ -80,37 +74,6 @@ def bench_scene(scene: Scene, *, variant: str | None, budget: float, pilot: int)
     return row
 
 
-_MITRANSIENT = r"""
-import json, sys, time
-import numpy as np, mitsuba as mi
-mi.set_variant(sys.argv[1])
-import mitransient
-spp, bins, start, width = int(sys.argv[2]), int(sys.argv[3]), float(sys.argv[4]), float(sys.argv[5])
-RADIUS = float(sys.argv[6])
-T = mi.ScalarTransform4f
-def scene(spp):
-    return mi.load_dict({'type': 'scene', 'integrator': {'type': 'transient_path', 'max_depth': 2},
-      'plane': {'type': 'rectangle', 'to_world': T().translate([0.5, 0.5, 0]).scale([0.5, 0.5, 1]),
-                'bsdf': {'type': 'diffuse', 'reflectance': {'type': 'uniform', 'value': 0.5}}},
-      'light': {'type': 'point', 'position': [0.5, 0.5, 1.0], 'intensity': 1.0},
-      'meter': {'type': 'sphere', 'center': [0.8, 0.3, 1.0], 'radius': RADIUS, 'bsdf': {'type': 'null'},
-                'sensor': {'type': 'irradiancemeter',
-                           'sampler': {'type': 'independent', 'sample_count': spp},
-                           'film': {'type': 'transient_hdr_film', 'width': 1, 'height': 1,
-                                    'temporal_bins': bins, 'start_opl': start, 'bin_width_opl': width,
-                                    'rfilter': {'type': 'box'}}}}})
-warm = scene(2**16); warm.integrator().render(warm, seed=0)
-s = scene(spp)
-t = time.perf_counter(); steady, transient = s.integrator().render(s, seed=1)
-h = np.array(transient).ravel(); seconds = time.perf_counter() - t
-print(json.dumps({'version': mitransient.__version__, 'samples': spp, 'seconds': seconds,
-                  'samples_per_second': spp / seconds, 'transient': h.tolist()}))
-"""
-
-
-RADIUS = 1e-3   # mitransient's irradiancemeter sphere, metres
-
-
 def bench_mitransient(scene: Scene, variant: str, samples: int, ours: dict) -> dict:
     """mitransient's transient_path on the same scene, corrected, and its time to 1e-3.
 
@@ -128,13 +91,10 @@ def bench_mitransient(scene: Scene, variant: str, samples: int, ours: dict) -> d
     reference = forward(scene)
     runs = []
     for count in (samples, 4 * samples):
-        done = subprocess.run([sys.executable, "-c", _MITRANSIENT, variant, str(count), str(sampling.count),
-                               str(sampling.start - 2 * RADIUS / 3), str(sampling.period), str(RADIUS)],
-                              capture_output=True, text=True, timeout=900)
-        if done.returncode != 0:
-            return {"status": "failed", "error": done.stderr.strip().splitlines()[-1:]}
-        run = json.loads(done.stdout.strip().splitlines()[-1])
-        estimate = 4.0 * np.asarray(run.pop("transient")).reshape(1, -1)
+        try:
+            estimate, run = run_mitransient(sampling, count, variant)
+        except RuntimeError as error:
+            return {"status": "failed", "error": str(error)}
         run["relative_error"] = relative_error(estimate, reference)
         runs.append(run)
     small, large = runs[0]["relative_error"] ** 2, runs[1]["relative_error"] ** 2

@@ -98,6 +98,81 @@ def command_render(args) -> int:
     return 0
 
 
+def command_validate(args) -> int:
+    """Cross-check renders against the model on the given scenes (default: the built-in suite)."""
+    from validation.corner import check_corner
+    from validation.harness import check_scene
+    from validation.report import write_report
+    from validation.suite import validation_suite
+
+    if args.scene:
+        from analytic.scene import load_scene
+        suite = [(load_scene(path), args.spp or 2**22) for path in args.scene]
+    else:
+        suite = [(scene, args.spp or spp) for scene, spp in validation_suite()]
+    checks = []
+    iterator = suite
+    if not args.quiet:
+        from tqdm import tqdm
+        iterator = tqdm(suite, desc="validate", unit="scene")
+    for scene, spp in iterator:
+        # Reconstruction needs an array of sensors; a hard case's one or two cannot image.
+        checks.append(check_scene(scene, spp=spp, seed=args.seed, convergence=not args.fast,
+                                  reconstruction=scene.pixels <= 64 and scene.sensor_count >= 4))
+    corner = None if args.scene else check_corner(spp=args.spp or 2**22, seed=args.seed)
+    metrics = write_report(Path(args.out), checks, corner)
+    failed = [check for check in checks if not check.agreement.agrees]
+    if corner is not None and not corner["one_bounce_agrees"]:
+        print("diffuse-imaging: corner: the one-bounce render disagrees with the one-bounce model",
+              file=sys.stderr)
+    for check in failed:
+        worst = ", ".join(f"sensor {k} bin {n} (z = {z:+.1f})" for k, n, z in check.agreement.worst[:5])
+        print(f"diffuse-imaging: {check.name} DISAGREES: {worst}", file=sys.stderr)
+    if not args.quiet:
+        print(f"validate: {len(checks) - len(failed)} of {len(checks)} scenes agree"
+              + ("" if corner is None else f"; corner: further bounces carry "
+                 f"{100 * corner['further_bounce_share']:.1f} % of the light")
+              + f" -> {Path(args.out) / 'report.md'}")
+    return 0 if metrics["all_agree"] else 1
+
+
+def command_run(args) -> int:
+    """The whole pipeline on one scene: model, render, cross-check, reconstruct from both, report."""
+    from analytic.io import write_transient
+    from analytic.waveforms import make_waveform
+    from validation.harness import check_scene
+    from validation.report import write_report
+
+    scene = _load(args.scene)
+    if scene.noise is not None:
+        scene = scene.replace(noise=None)   # the cross-check compares noiseless model and render
+    out = Path(args.out)
+    check = check_scene(scene, spp=args.spp, seed=args.seed, progress=not args.quiet)
+    waveform = make_waveform(scene.illumination, scene.sampling.period)
+    meta = _scene_meta(scene, waveform)
+    write_transient(out / "model", check.model, meta | {"kind": "model", "samples": 0, "seed": 0})
+    write_transient(out / "render", check.render, meta | {"kind": "render", "samples": args.spp,
+                                                          "seed": args.seed}, stderr=check.stderr)
+    write_report(out, [check])
+    if not args.quiet:
+        print(check.agreement.summary())
+        recon = check.metrics.get("reconstruction", {})
+        if "model" in recon:
+            print(f"reconstruction PSNR: {recon['model']['psnr']:.1f} dB from model data, "
+                  f"{recon['render']['psnr']:.1f} dB from rendered data (same λ) -> {out / 'report.md'}")
+    return 0 if check.agreement.agrees else 1
+
+
+def command_bench(args) -> int:
+    """Speed against error: model over tolerance, renderer and mitransient over samples."""
+    from validation.bench import speed_against_error
+
+    result = speed_against_error(args.out, progress=not args.quiet)
+    if not args.quiet:
+        print(result["markdown"])
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="diffuse-imaging",
@@ -122,6 +197,34 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--variant", help="Mitsuba variant (default: llvm, CPU)")
     render.add_argument("--quiet", action="store_true", help="no progress or summary")
     render.set_defaults(run=command_render)
+
+    validate = commands.add_parser("validate", help="cross-check renders against the model")
+    validate.add_argument("scene", nargs="*", help="scene TOML files (default: the built-in suite)")
+    validate.add_argument("--out", required=True, help="output folder (report.md, metrics.json, plots)")
+    validate.add_argument("--spp", type=int, help="samples per render (default: the suite's)")
+    validate.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    validate.add_argument("--fast", action="store_true", help="skip the convergence studies")
+    validate.add_argument("--quiet", action="store_true", help="no progress or summary")
+    validate.set_defaults(run=command_validate)
+
+    run = commands.add_parser("run", help="model, render, cross-check, reconstruct, report: one scene")
+    run.add_argument("scene", nargs="?", help="scene TOML (default: the built-in scene)")
+    run.add_argument("--out", required=True, help="output folder")
+    run.add_argument("--spp", type=int, default=2**22, help="render samples (default 2^22)")
+    run.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    run.add_argument("--quiet", action="store_true", help="no progress or summary")
+    run.set_defaults(run=command_run)
+
+    bench = commands.add_parser("bench", help="speed against error of model, renderer, mitransient")
+    bench.add_argument("--out", required=True, help="output folder")
+    bench.add_argument("--quiet", action="store_true", help="no summary")
+    bench.set_defaults(run=command_bench)
+    try:
+        from validation.cli_reconstruct import add_commands
+    except ImportError:          # the reconstruction commands are optional during development
+        pass
+    else:
+        add_commands(commands)
     return parser
 
 

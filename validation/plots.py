@@ -8,7 +8,19 @@ import numpy as np
 
 from analytic.io import atomic_write
 
-__all__ = ["plot_transients"]
+__all__ = ["plot_transients", "save_figure"]
+
+
+def save_figure(figure, path: str | Path, dpi: int = 110) -> Path:
+    """Write a matplotlib figure as PNG, atomically, and close it."""
+    import matplotlib.pyplot as plt
+
+    def write(temporary):
+        figure.savefig(temporary, format="png", dpi=dpi)
+    try:
+        return atomic_write(path, write)
+    finally:
+        plt.close(figure)
 
 
 def plot_transients(path: str | Path, edges: np.ndarray, transients: dict[str, np.ndarray], *,
@@ -65,10 +77,4 @@ def plot_transients(path: str | Path, edges: np.ndarray, transients: dict[str, n
     if title:
         figure.suptitle(title, fontsize=10)
     figure.tight_layout()
-
-    def write(temporary):
-        figure.savefig(temporary, format="png", dpi=110)
-    try:
-        return atomic_write(path, write)
-    finally:
-        plt.close(figure)
+    return save_figure(figure, path)

@@ -16,7 +16,7 @@ import numpy as np
 from analytic.reflectance import builtin_reflectance
 from analytic.scene import Illumination, Sampling, Scene
 
-__all__ = ["hard_cases", "response_range"]
+__all__ = ["hard_cases", "response_range", "validation_suite"]
 
 
 def response_range(source, sensor, size: float) -> tuple[float, float]:
@@ -77,3 +77,24 @@ def hard_cases(pixels: int = 10, waveform: str = "impulse") -> dict[str, Scene]:
     period = (high - low) / 1000.0
     cases["far"] = scene("far", far_source, [far_sensor], period, low - 5 * period, 1020, m=6)
     return cases
+
+
+def validation_suite() -> list[tuple[Scene, int]]:
+    """The built-in scenes of ``diffuse-imaging validate`` with their sample counts.
+
+    The default scene under each illumination, every hard case, and a large
+    M; the corner (outside the one-bounce model) is run separately by
+    :func:`validation.corner.check_corner`. Sample counts keep the whole run
+    within a few minutes on 2 cores.
+    """
+    from analytic.scene import default_scene
+
+    suite = []
+    for waveform in ("impulse", "square", "butterworth"):
+        scene = default_scene(noise=None, illumination=Illumination(waveform=waveform))
+        suite.append((scene.replace(name=f"default-{waveform}"), 2**22))
+    for name, scene in hard_cases(pixels=10).items():
+        suite.append((scene, 2**22))
+    large = default_scene(pixels=128, noise=None)
+    suite.append((large.replace(name="large-M128"), 2**22))
+    return suite

@@ -1,0 +1,91 @@
+"""The cross-check harness: passes the right model, fails deliberately wrong ones."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from analytic.system import forward
+from transient.render import render
+from validation.compare import compare_transients
+from validation.corner import check_corner
+from validation.harness import binned_contour_model, check_scene
+from validation.suite import hard_cases, validation_suite
+
+SPP = dict((scene.name, spp) for scene, spp in validation_suite())["outside"]   # the suite's count
+
+
+@pytest.fixture(scope="module")
+def outside():
+    """A suite scene (sensor outside the plane's footprint) rendered at the suite's sample count."""
+    scene = hard_cases(pixels=10)["outside"]
+    return scene, render(scene, spp=SPP, seed=0, progress=False)
+
+
+def test_right_model_passes(outside):
+    scene, result = outside
+    assert compare_transients(result.mean, result.stderr, forward(scene)).agrees
+
+
+def test_contour_form_with_coarea_factor_is_the_model(outside):
+    """Binning g_k(t) (contour form with 1/|∇d|) reproduces A f: the harness's wrong-model
+    builder is right when the factor is in."""
+    scene, _ = outside
+    model = forward(scene)
+    # fixed composite Gauss-Legendre across the kinks of g (pixel corners): ~1e-3
+    np.testing.assert_allclose(binned_contour_model(scene), model, atol=2e-3 * model.max())
+
+
+@pytest.mark.parametrize("wrong", ["no coarea factor", "half-bin shift", "missing cos θ_k"])
+def test_wrong_models_fail(outside, wrong):
+    scene, result = outside
+    model = forward(scene)
+    if wrong == "no coarea factor":
+        reference = binned_contour_model(scene, coarea=False)
+        reference *= np.linalg.norm(model) / np.linalg.norm(reference)   # shape only: same total
+    elif wrong == "half-bin shift":
+        sampling = scene.sampling
+        reference = forward(scene.replace(sampling=sampling.__class__(
+            period=sampling.period, start=sampling.start + sampling.period / 2, count=sampling.count)))
+    else:
+        reference = forward(scene.replace(attenuation="paper")) / np.pi
+        reference *= np.linalg.norm(model) / np.linalg.norm(reference)  # shape only
+    assert not compare_transients(result.mean, result.stderr, reference).agrees
+
+
+def test_check_scene_reports_every_figure():
+    scene = hard_cases(pixels=6)["colocated"]
+    check = check_scene(scene, spp=2**20, seed=1)
+    assert check.agreement.agrees
+    metrics = check.metrics
+    assert metrics["model_convergence"][-1]["over_stderr"] < 1e-2    # model ≪ noise
+    assert -0.75 < metrics["render_slope"] < -0.25
+    costs = metrics["simplifications"]
+    assert costs["paper_attenuation"] > 0.5 and costs["no_coarea_factor"] > 0.01
+    recon = metrics["reconstruction"]
+    assert recon["model"]["mse"] >= 0 and recon["render"]["mse"] >= 0
+
+
+def test_corner_reports_further_bounces_instead_of_agreement():
+    result = check_corner(spp=2**20, seed=2)
+    assert result["one_bounce_agrees"]
+    assert 0.01 < result["further_bounce_share"] < 0.9
+    assert not result["agreement_with_all_bounces"]
+
+
+def test_validate_command_on_a_scene_file(tmp_path):
+    scene = tmp_path / "scene.toml"
+    scene.write_text("[plane]\npixels = 8\n[source]\nposition = [0.5, 0.5, 0.6]\n"
+                     "[sensors]\npositions = [[0.3, 0.4, 0.5]]\n[sampling]\nperiod = 0.05\nstart = 1.0\n"
+                     "count = 30\n")
+    out = tmp_path / "out"
+    done = subprocess.run([sys.executable, "-m", "validation.cli", "validate", str(scene), "--out", str(out),
+                           "--spp", str(2**20), "--fast", "--quiet"], capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0, done.stderr
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["all_agree"] and "scene" in metrics["scenes"]
+    assert (out / "report.md").read_text().count("agree") >= 1
+    assert (out / "scene" / "z_map.png").exists()

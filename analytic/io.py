@@ -15,7 +15,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-__all__ = ["atomic_write", "save_npy", "save_json", "save_exr", "save_png_image",
+__all__ = ["atomic_write", "save_npy", "save_json", "save_exr", "save_png_image", "save_figure",
            "write_transient", "read_transient"]
 
 
@@ -119,6 +119,18 @@ def save_png_image(path: str | Path, image: np.ndarray) -> Path:
     def write(temporary):
         Image.fromarray(data).save(temporary, format="PNG")
     return atomic_write(path, write)
+
+
+def save_figure(figure, path: str | Path, dpi: int = 110) -> Path:
+    """Write a matplotlib figure as PNG, atomically, and close it."""
+    import matplotlib.pyplot as plt
+
+    def write(temporary):
+        figure.savefig(temporary, format="png", dpi=dpi)
+    try:
+        return atomic_write(path, write)
+    finally:
+        plt.close(figure)
 
 
 def write_transient(out_dir: str | Path, transient: np.ndarray, meta: dict[str, Any], *,

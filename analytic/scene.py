@@ -26,6 +26,7 @@ __all__ = [
     "Scene",
     "default_scene",
     "load_scene",
+    "read_toml",
     "scene_from_dict",
     "sensor_grid",
 ]
@@ -460,12 +461,17 @@ def load_scene(path: str | Path) -> Scene:
         Unreadable file, bad TOML, unknown key or bad value.
     """
     path = Path(path)
+    return scene_from_dict(read_toml(path, "scene"), path.parent, name=path.stem)
+
+
+def read_toml(path: str | Path, what: str = "scene") -> dict:
+    """Parse a TOML file; an unreadable file or bad TOML is a SceneError naming the file."""
+    path = Path(path)
     try:
         text = path.read_text()
     except OSError as error:
-        raise SceneError(str(path), f"cannot read scene file ({error.strerror})") from None
+        raise SceneError(str(path), f"cannot read {what} file ({error.strerror})") from None
     try:
-        data = tomllib.loads(text)
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:
         raise SceneError(str(path), f"invalid TOML ({error})") from None
-    return scene_from_dict(data, path.parent, name=path.stem)

@@ -219,12 +219,11 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--out", required=True, help="output folder")
     bench.add_argument("--quiet", action="store_true", help="no summary")
     bench.set_defaults(run=command_bench)
-    try:
-        from validation.cli_reconstruct import add_commands
-    except ImportError:          # the reconstruction commands are optional during development
-        pass
-    else:
-        add_commands(commands)
+    from validation.cli_reconstruct import add_commands as add_reconstruction_commands
+    from validation.cli_sweep import add_commands as add_sweep_commands
+
+    add_reconstruction_commands(commands)   # reconstruct, reproduce
+    add_sweep_commands(commands)            # sweep
     return parser
 
 

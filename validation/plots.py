@@ -6,21 +6,9 @@ from pathlib import Path
 
 import numpy as np
 
-from analytic.io import atomic_write
+from analytic.io import save_figure
 
 __all__ = ["plot_transients", "save_figure"]
-
-
-def save_figure(figure, path: str | Path, dpi: int = 110) -> Path:
-    """Write a matplotlib figure as PNG, atomically, and close it."""
-    import matplotlib.pyplot as plt
-
-    def write(temporary):
-        figure.savefig(temporary, format="png", dpi=dpi)
-    try:
-        return atomic_write(path, write)
-    finally:
-        plt.close(figure)
 
 
 def plot_transients(path: str | Path, edges: np.ndarray, transients: dict[str, np.ndarray], *,

@@ -1,0 +1,300 @@
+"""Parameter sweeps on a local Dask cluster (validation.sweep, validation.cli_sweep).
+
+The reference for every sweep result is an independent code path: a plain
+sequential :func:`transient.render.render` of the same scene, seed and chunk
+size in this process. With Dr.Jit on one thread (as every sweep worker runs)
+a chunk's float64 sums are a function of the chunk alone, so the sweep must
+match the sequential render bit for bit, whatever worker computed which
+chunk, whether a worker died, or whether the sweep was interrupted and
+resumed. Everything runs on loopback with fixed seeds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import signal
+
+import numpy as np
+import pytest
+
+from analytic.scene import SceneError, default_scene, scene_from_dict
+from transient.render import render, scene_fingerprint
+from validation.cli_sweep import add_commands
+from validation.sweep import (
+    ITEM_FILE,
+    STATE_FILE,
+    chunk_ranges,
+    default_scene_table,
+    load_sweep,
+    run_sweep,
+    sweep_client,
+    sweep_from_dict,
+)
+
+distributed = pytest.importorskip("distributed")
+
+CHUNK = 2**13
+SAMPLES = 6 * CHUNK + 100          # 7 chunks, the last one short
+SEED = 23
+
+BASE_SCENE = """
+[plane]
+size = 1.0
+pixels = 8
+reflectance = 0.5
+
+[source]
+position = [0.3, 0.6, 0.8]
+
+[sensors]
+positions = [[0.2, 0.7, 1.0], [0.8, 0.15, 0.5]]
+
+[sampling]
+period = 0.1
+start = 0.8
+count = 20
+"""
+
+SWEEP = f"""
+scene = "base.toml"
+samples = {SAMPLES}
+seed = {SEED}
+chunk = {CHUNK}
+cross_check = {{cross_check}}
+
+[grid]
+"sampling.period" = [0.05, 0.1]
+"illumination.waveform" = ["impulse", "butterworth"]
+"""
+
+
+def write_sweep(folder, *, cross_check=False, text=None):
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "base.toml").write_text(BASE_SCENE)
+    path = folder / "sweep.toml"
+    path.write_text(text if text is not None else SWEEP.replace("{cross_check}",
+                                                                 "true" if cross_check else "false"))
+    return path
+
+
+@pytest.fixture(scope="module")
+def client():
+    with sweep_client(workers=2) as client:
+        yield client
+
+
+@pytest.fixture(scope="module")
+def sweep_file(tmp_path_factory):
+    return write_sweep(tmp_path_factory.mktemp("sweep"))
+
+
+@pytest.fixture(scope="module")
+def reference(sweep_file):
+    """Sequential renders of every item (Dr.Jit on one thread, as in a worker): name -> result."""
+    from transient.backend import select_variant
+
+    select_variant()
+    import drjit as dr
+
+    threads = dr.thread_count()
+    dr.set_thread_count(1)
+    try:
+        return {item.name: render(item.scene, spp=SAMPLES, seed=SEED, chunk_size=CHUNK, progress=False)
+                for item in load_sweep(sweep_file).items}
+    finally:
+        dr.set_thread_count(threads)
+
+
+def assert_matches_reference(out_dir, reference):
+    for name, expected in reference.items():
+        assert (out_dir / name / ITEM_FILE).is_file(), name
+        np.testing.assert_array_equal(np.load(out_dir / name / "transient.npy"), expected.mean)
+        np.testing.assert_array_equal(np.load(out_dir / name / "stderr.npy"), expected.stderr)
+
+
+# -- the sweep file ---------------------------------------------------------
+
+def test_grid_builds_validated_scenes(sweep_file):
+    sweep = load_sweep(sweep_file)
+    assert len(sweep.items) == 4 and sweep.samples == SAMPLES and sweep.seed == SEED
+    periods = [item.scene.sampling.period for item in sweep.items]
+    waveforms = [item.scene.illumination.waveform for item in sweep.items]
+    assert periods == [0.05, 0.05, 0.1, 0.1]
+    assert waveforms == ["impulse", "butterworth", "impulse", "butterworth"]
+    # Everything not in the grid comes from the base scene.
+    assert all(item.scene.pixels == 8 and item.scene.sensor_count == 2 for item in sweep.items)
+    names = [item.name for item in sweep.items]
+    assert len(set(names)) == 4
+    assert all(name == "".join(c for c in name if c.isalnum() or c in "._+-") for name in names)
+    assert len({scene_fingerprint(item.scene) for item in sweep.items}) == 4
+
+
+def test_default_base_is_the_builtin_scene(tmp_path):
+    assert scene_fingerprint(scene_from_dict(default_scene_table())) == scene_fingerprint(default_scene())
+    sweep = sweep_from_dict({"scene": "default", "samples": 100,
+                             "grid": {"plane.pixels": [20], "sensors.extent": [0.5, 2.0]}}, tmp_path)
+    assert scene_fingerprint(sweep.items[0].scene) == scene_fingerprint(
+        default_scene(pixels=20, sensors=sweep.items[0].scene.sensors))
+    spans = [np.ptp(item.scene.sensors[:, 0]) for item in sweep.items]
+    np.testing.assert_allclose(spans, [0.5, 2.0], rtol=1e-12)
+
+
+def test_reflectance_folder_gives_one_item_per_image(tmp_path, rng):
+    from PIL import Image
+
+    images = tmp_path / "images"
+    images.mkdir()
+    expected = {}
+    for name in ("b", "a"):
+        pixels = rng.integers(0, 256, (8, 8), dtype=np.uint8)
+        Image.fromarray(pixels).save(images / f"{name}.png")
+        expected[name] = pixels / 255.0
+    (tmp_path / "base.toml").write_text(BASE_SCENE)
+    sweep = sweep_from_dict({"scene": "base.toml", "samples": 100,
+                             "grid": {"plane.reflectance": {"folder": "images"}}}, tmp_path)
+    assert [item.name for item in sweep.items] == ["000_plane.reflectance-a", "001_plane.reflectance-b"]
+    for item, name in zip(sweep.items, ("a", "b")):
+        np.testing.assert_array_equal(item.scene.reflectance, expected[name])
+
+
+@pytest.mark.parametrize("text, key", [
+    ('scene = "base.toml"\nsamples = 100\nsede = 1\n', "sede"),
+    ('scene = "base.toml"\nsamples = 100\n[grid]\n"sampling.peroid" = [0.1]\n', "grid.sampling.peroid"),
+    ('scene = "base.toml"\nsamples = 100\n[grid]\n"sampling.period" = [0.1, -0.1]\n', "grid.sampling.period"),
+    ('scene = "base.toml"\nsamples = 100\n[grid]\n"sampling.period" = 0.1\n', "grid.sampling.period"),
+    ('scene = "base.toml"\nsamples = 100\n[grid]\n"illumination.waveform" = ["gaussian"]\n',
+     "grid.illumination.waveform"),
+    ('scene = "base.toml"\nsamples = 100\n[grid]\nperiod = [0.1]\n', "grid.period"),
+    ('scene = "base.toml"\nsamples = 1\n', "samples"),
+    ('scene = "base.toml"\nsamples = 100\nchunk = 0\n', "chunk"),
+    ('scene = "missing.toml"\nsamples = 100\n', "scene"),
+    ('samples = 100\n', "scene"),
+])
+def test_bad_sweep_files_name_the_key(tmp_path, text, key):
+    path = write_sweep(tmp_path, text=text)
+    with pytest.raises(SceneError) as caught:
+        load_sweep(path)
+    assert caught.value.key == key
+    # Through the command, before any cluster starts or any file is written.
+    parser = argparse.ArgumentParser()
+    add_commands(parser.add_subparsers(dest="command", required=True))
+    args = parser.parse_args(["sweep", str(path), "--out", str(tmp_path / "out"), "--quiet"])
+    with pytest.raises(SceneError, match=key.replace(".", r"\.")):
+        args.run(args)
+    assert not (tmp_path / "out").exists()
+
+
+def test_chunk_ranges_cover_the_samples_once():
+    assert chunk_ranges(SAMPLES, CHUNK) == [(i * CHUNK, CHUNK) for i in range(6)] + [(6 * CHUNK, 100)]
+    ranges = chunk_ranges(2**32 + 10, 3 * 2**30)   # never straddles 2^32
+    assert ranges == [(0, 3 * 2**30), (3 * 2**30, 2**30), (2**32, 10)]
+
+
+# -- on the cluster ---------------------------------------------------------
+
+def test_sweep_equals_sequential_renders(client, sweep_file, reference, tmp_path):
+    sweep = load_sweep(sweep_file)
+    sweep = sweep_from_dict({"scene": "base.toml", "samples": SAMPLES, "seed": SEED, "chunk": CHUNK,
+                             "cross_check": True, "grid": sweep.grid}, sweep_file.parent)
+    result = run_sweep(sweep, tmp_path, client=client, progress=False)
+    assert_matches_reference(tmp_path, reference)
+    assert sorted(result.computed_chunks) == sorted((item.name, c) for item in sweep.items for c in range(7))
+    # The cross-check ran on every item, and the model files sit beside the render.
+    assert result.all_agree is True
+    index = json.loads((tmp_path / "index.json").read_text())
+    assert [row["name"] for row in index["items"]] == list(reference)
+    for row in index["items"]:
+        assert row["status"] == "done" and row["samples"] == SAMPLES and row["agrees"] is True
+        assert row["render_seconds"] > 0 and row["chi2_per_dof"] > 0
+        folder = tmp_path / row["path"]
+        meta = json.loads((folder / "meta.json").read_text())
+        assert meta["samples"] == SAMPLES and meta["seed"] == SEED and meta["kind"] == "render"
+        assert meta["parameters"] == row["parameters"]
+        assert (folder / "transient.exr").is_file() and (folder / "model" / "transient.npy").is_file()
+        assert json.loads((folder / "agreement.json").read_text())["agrees"] is True
+    with open(tmp_path / "index.csv", newline="") as stream:
+        table = list(csv.DictReader(stream))
+    assert [row["name"] for row in table] == list(reference)
+    assert [float(row["sampling.period"]) for row in table] == [0.05, 0.05, 0.1, 0.1]
+
+
+def test_interrupted_sweep_resumes_without_recomputing(client, sweep_file, reference, tmp_path):
+    sweep = load_sweep(sweep_file)
+    seen = []
+
+    def stop_after_ten_chunks(name, chunk):
+        seen.append((name, chunk))
+        if len(seen) == 10:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run_sweep(sweep, tmp_path, client=client, progress=False, on_chunk=stop_after_ten_chunks)
+    checkpointed = {}
+    finished = []
+    for item in sweep.items:
+        if (tmp_path / item.name / ITEM_FILE).is_file():
+            finished.append(item.name)
+        elif (tmp_path / item.name / STATE_FILE).is_file():
+            with np.load(tmp_path / item.name / STATE_FILE) as state:
+                checkpointed[item.name] = set(np.flatnonzero(state["done"]).tolist())
+    # Items go first to last: ten chunks finish the first item (seven) and start another.
+    assert finished and checkpointed and sum(map(len, checkpointed.values())) + 7 * len(finished) == 10
+    finished_times = {name: os.stat(tmp_path / name / "transient.npy").st_mtime_ns for name in finished}
+    index = json.loads((tmp_path / "index.json").read_text())
+    assert {row["name"] for row in index["items"] if row["status"] == "done"} == set(finished)
+
+    result = run_sweep(sweep, tmp_path, client=client, progress=False)
+    assert set(result.skipped_items) == set(finished)
+    expected = {(item.name, c) for item in sweep.items if item.name not in finished for c in range(7)
+                if c not in checkpointed.get(item.name, ())}
+    assert sorted(result.computed_chunks) == sorted(expected)
+    assert {name: os.stat(tmp_path / name / "transient.npy").st_mtime_ns for name in finished} == finished_times
+    assert_matches_reference(tmp_path, reference)
+    # A third run has nothing left to do.
+    again = run_sweep(sweep, tmp_path, client=client, progress=False)
+    assert again.computed_chunks == () and len(again.skipped_items) == 4
+    # Another seed into the same folder is refused, not mixed in.
+    other = sweep_from_dict({"scene": "base.toml", "samples": SAMPLES, "seed": SEED + 1, "chunk": CHUNK,
+                             "grid": sweep.grid}, sweep_file.parent)
+    with pytest.raises(SceneError, match="another"):
+        run_sweep(other, tmp_path, client=client, progress=False)
+
+
+def test_killed_worker_chunk_is_redone(client, sweep_file, reference, tmp_path):
+    sweep = load_sweep(sweep_file)
+    killed = {}
+
+    def kill_a_busy_worker(name, chunk):
+        if killed:
+            return
+        pids = client.run(os.getpid)
+        busy = {address: keys for address, keys in client.processing().items() if keys}
+        if busy:
+            address, keys = next(iter(busy.items()))
+            killed.update(address=address, tasks=len(keys))
+            os.kill(pids[address], signal.SIGKILL)
+
+    result = run_sweep(sweep, tmp_path, client=client, progress=False, on_chunk=kill_a_busy_worker)
+    assert killed and killed["tasks"] >= 1
+    # The lost chunks were redone elsewhere: every chunk arrived exactly once, and the result is exact.
+    assert sorted(result.computed_chunks) == sorted((item.name, c) for item in sweep.items for c in range(7))
+    assert_matches_reference(tmp_path, reference)
+    client.wait_for_workers(2, timeout=60)
+
+
+def test_cli_on_a_running_scheduler(client, sweep_file, reference, tmp_path, capsys):
+    parser = argparse.ArgumentParser()
+    add_commands(parser.add_subparsers(dest="command", required=True))
+    args = parser.parse_args(["sweep", str(sweep_file), "--out", str(tmp_path),
+                              "--scheduler", client.scheduler.address, "--quiet"])
+    assert args.run(args) == 0
+    assert_matches_reference(tmp_path, reference)
+    args.quiet = False
+    assert args.run(args) == 0
+    assert "4 already done" in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        parser.parse_args(["sweep", str(sweep_file), "--out", str(tmp_path), "--scheduler", "x",
+                           "--workers", "2"])

@@ -476,3 +476,14 @@ def test_tv_keeps_edges_that_the_laplacian_blurs(rng):
     assert np.sum((edges.image - truth) ** 2) < 0.5 * np.sum((smooth.image - truth) ** 2)
     with pytest.raises(ValueError, match="rule"):
         reconstruct(matrix, y, pixels, rule="gcv", regularizer="tv")
+
+
+def test_photon_counting_comparison_counts_whole_photons_with_one_detector():
+    from analytic.experiments import poisson_cases
+
+    rows = poisson_cases(pixels=8, periods=(0.1,), extents=(1.0,), progress=False)
+    assert {r["illumination"] for r in rows} == {"impulsive", "low-pass"}
+    impulsive, low_pass = sorted(rows, key=lambda r: r["illumination"] != "impulsive")
+    assert impulsive["photons_per_unit"] == low_pass["photons_per_unit"]          # the same detector
+    assert low_pass["expected_photons"] > impulsive["expected_photons"]           # more pulse energy
+    assert all(np.isfinite(r["psnr"]) for r in rows)

@@ -360,6 +360,26 @@ def _report(rows, claims, devices, seconds, settings) -> str:
         note = (" (no case beats it: the verdicts below compare failed reconstructions)"
                 if better == 0 else "")
         lines.append(f"- {attenuation}, I = {intensity:g} W/sr: {better} of {len(group)}{note}")
+    lines += ["", "## Conditioning of A", "",
+              "Singular values s_i of A (source 1 W/sr; I A scales them by I). A has M² = "
+              f"{rows[0]['image'].size} unknowns and fewer independent rows, so its condition number over "
+              "all unknowns is infinite; shown are the condition number of its numerically non-zero part "
+              "(s_1 / s_r, r the numerical rank) and the effective rank at the noise level, #{I s_i > σ}.", "",
+              "| attenuation | illumination | T | W | rows | numerical rank r | s_1 | s_1 / s_r | "
+              "#{s_i > σ}, I = 1 | #{I s_i > σ}, I = 1e4 |", "|---|---|---|---|---|---|---|---|---|---|"]
+    seen = set()
+    for r in rows:
+        key = (r["attenuation"], r["illumination"], r["period"], r["extent"])
+        if key in seen:
+            continue
+        seen.add(key)
+        values = r["singular_values"] / r["intensity"]
+        rank = r["numerical_rank"]
+        ranks = {q["intensity"]: q["effective_rank"] for q in rows
+                 if (q["attenuation"], q["illumination"], q["period"], q["extent"]) == key}
+        lines.append(f"| {key[0]} | {key[1]} | {key[2]:g} | {key[3]:g} | {r['rows']} | {rank} | "
+                     f"{values[0]:.3g} | {values[0] / values[rank - 1]:.3g} | {ranks.get(1.0, '-')} | "
+                     f"{ranks.get(1e4, '-')} |")
     lines += ["",
               "## The paper's claims, as found", "",
               "| claim | case | holds | evidence |", "|---|---|---|---|"]

@@ -114,7 +114,7 @@ def markdown(runs: list[dict]) -> str:
 def on_paper(runs: list[dict], *, machines: int, cores: int, chunk: int) -> dict:
     """N machines x cores workers, from the measured per-worker rate, efficiency and per-task cost."""
     one, last = runs[0], runs[-1]
-    per_worker = one["samples_per_second"]
+    per_worker = one["samples_per_second"] / one["workers"]
     efficiency = last["samples_per_second"] / (last["workers"] * per_worker)
     workers = machines * cores
     compute_bound = workers * per_worker * min(efficiency, 1.0)

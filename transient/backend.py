@@ -176,32 +176,29 @@ def _check_loaded_llvm() -> None:
                            f"crashes its LLVM backend; {_FIX}")
 
 
-def default_variant(available: list[str], *, cuda: bool = False) -> str:
-    """The variant to use when none is asked for.
+def default_variant(available: list[str]) -> str:
+    """The CPU variant to use when none is asked for.
 
     Parameters
     ----------
     available : list of str
         ``mitsuba.variants()``.
-    cuda : bool
-        Prefer a CUDA variant.
 
     Returns
     -------
     str
-        The non-AD mono variant when the build has one (no AD bookkeeping:
-        faster), else the AD mono one.
+        ``llvm_mono`` when the build has it (no AD bookkeeping: faster),
+        else ``llvm_ad_mono``.
     """
-    backend = "cuda" if cuda else "llvm"
-    for name in (f"{backend}_mono", f"{backend}_ad_mono"):
+    for name in ("llvm_mono", "llvm_ad_mono"):
         if name in available:
             return name
-    raise BackendError(f"Mitsuba has neither {backend}_mono nor {backend}_ad_mono "
+    raise BackendError(f"Mitsuba has neither llvm_mono nor llvm_ad_mono "
                        f"(available: {', '.join(available)})")
 
 
 _registered: set[str] = set()
-_checked: set[str] = set()
+_llvm_checked = False
 
 
 def select_variant(variant: str | None = None) -> str:
@@ -244,9 +241,10 @@ def select_variant(variant: str | None = None) -> str:
                            f"(available: {', '.join(available)})")
     if mi.variant() != variant:
         mi.set_variant(variant)
-    if variant.startswith("llvm_") and "llvm" not in _checked:
+    global _llvm_checked
+    if variant.startswith("llvm_") and not _llvm_checked:
         _check_loaded_llvm()
-        _checked.add("llvm")
+        _llvm_checked = True
     if variant not in _registered:
         # Plugins register against the variant active at registration time.
         from . import integrator, sensor

@@ -84,6 +84,11 @@ def cumulative(waveform: Waveform, u):
     for a, w, b, c in _real_terms(waveform):
         term = float(b) * dr.cos(w * clipped) + float(c) * dr.sin(w * clipped) if w else float(b)
         value += dr.exp(a * clipped) * term
+    # Near u = 0 the exponentials cancel to S ~ u^order: the Taylor series, as in NumPy.
+    series = mi.Float64(0.0)
+    for coefficient in waveform.series[::-1]:
+        series = series * clipped + float(coefficient)
+    value = dr.select(clipped < waveform.series_limit, series, value)
     return dr.select(u <= 0.0, zero, value)
 
 
@@ -108,23 +113,23 @@ def _real_terms(waveform: Waveform) -> list[tuple[float, float, float, float]]:
     return [(a, w, b, c) for (a, w), (b, c) in merged.items()]
 
 
-def sample_index_key(seed: int, first_sample: int) -> tuple[int, int]:
-    """(key, low index) of a global sample index, for :func:`mitsuba.sample_tea_32`.
+def sample_index_key(first_sample: int) -> tuple[int, int]:
+    """(high, low) 32-bit halves of a global sample index.
 
-    Sample i gets its random stream from ``sample_tea_32(key, i mod 2^32)``;
-    above 2^32 samples the high part is folded into the key, so every global
-    index has its own stream whatever the chunking.
+    Sample i's PCG32 stream is seeded from ``sample_tea_32(seed, low)`` (a
+    bijection of the 64-bit pair, so every (seed, low) differs) with ``high``
+    added above bit 32 of the stream selector: every (seed, global index)
+    triple gets its own stream, whatever the chunking, and for the first 2^32
+    samples (high = 0) the streams are those of Mitsuba's ``independent``
+    sampler.
 
     Parameters
     ----------
-    seed : int
-        Render seed, 0 <= seed < 2^32.
     first_sample : int
         Global index of a sample.
     """
     high, low = divmod(int(first_sample), 2**32)
-    key = int(seed) if high == 0 else (int(seed) ^ (0x9E3779B9 * high)) & 0xFFFFFFFF
-    return key, low
+    return high, low
 
 
 def _is_diffuse(bsdf) -> bool:
@@ -303,7 +308,7 @@ def integrator_class() -> type:
             """
             if not 0 <= int(seed) < 2**32:
                 raise ValueError(f"seed must be in [0, 2^32), got {seed}")
-            key, low = sample_index_key(seed, first_sample)
+            high, low = sample_index_key(first_sample)
             if sample_count < 1 or low + sample_count > 2**32:
                 raise ValueError(f"sample range [{first_sample}, {first_sample + sample_count}) "
                                  f"must be non-empty and not cross a multiple of 2^32")
@@ -312,12 +317,12 @@ def integrator_class() -> type:
                 raise ValueError("transient_opl: every sensor must be an 'omni_point' sensor")
             positions = np.array([sensor.position for sensor in sensors], dtype=np.float64)
 
-            # Per-sample random stream from (key, global index): chunk-invariant.
+            # Per-sample random stream from (seed, global index): chunk-invariant.
             # Opaque offsets keep one compiled kernel for every chunk.
             index = dr.arange(mi.UInt32, sample_count) + dr.opaque(mi.UInt32, low)
-            v0, v1 = mi.sample_tea_32(dr.opaque(mi.UInt32, key), index)
+            v0, v1 = mi.sample_tea_32(dr.opaque(mi.UInt32, int(seed)), index)
             rng = mi.PCG32(sample_count)
-            rng.seed(mi.UInt64(v0), mi.UInt64(v1))
+            rng.seed(mi.UInt64(v0), mi.UInt64(v1) + dr.opaque(mi.UInt64, high << 32))
 
             sums = dr.zeros(mi.Float64, len(positions) * self.bins)
             squares = dr.zeros(mi.Float64, len(positions) * self.bins)

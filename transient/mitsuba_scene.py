@@ -43,10 +43,10 @@ def _integrator_dict(scene: Scene) -> dict:
              "bin_width_opl": float(sampling.period), "waveform": illumination.waveform,
              "plane_to_world": plane_to_world(scene.size),
              "source_position": [float(v) for v in scene.source]}
-    # Pass the resolved waveform parameters so the plugin cannot default differently.
-    waveform = make_waveform(illumination, sampling.period)
+    # The plugin builds its waveform with the same make_waveform and period, so
+    # passing the scene's own fields (defaults left unset) gives the same pulse.
     if illumination.waveform == "square":
-        entry["pulse_width"] = float(waveform.duration)
+        entry["pulse_width"] = float(make_waveform(illumination, sampling.period).duration)
     elif illumination.waveform == "butterworth":
         for name in ("cutoff", "duration", "order"):
             value = getattr(illumination, name)

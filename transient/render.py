@@ -18,6 +18,7 @@ or SIGTERM stops after writing what the finished chunks hold, and
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import signal
@@ -33,8 +34,8 @@ from analytic.io import atomic_write, write_transient
 from analytic.scene import Scene
 from analytic.waveforms import make_waveform
 
-__all__ = ["RenderResult", "render", "scene_fingerprint", "standard_error", "DEFAULT_CHUNK",
-           "STATE_FILE"]
+__all__ = ["RenderResult", "render", "scene_fingerprint", "standard_error", "chunk_ranges",
+           "sigterm_as_interrupt", "DEFAULT_CHUNK", "STATE_FILE"]
 
 #: Samples per chunk: one fused kernel of this width keeps memory flat
 #: (only the K x N accumulators are stored) and takes well under a second.
@@ -118,15 +119,15 @@ def scene_fingerprint(scene: Scene) -> str:
     return digest.hexdigest()
 
 
-def _save_state(path: Path, sums, squares, samples, seed, fingerprint) -> None:
+def _save_state(path: Path, sums, squares, samples, seed, fingerprint, variant) -> None:
     def write(temporary):
         with open(temporary, "wb") as stream:
             np.savez(stream, sums=sums, sums_of_squares=squares, samples=np.int64(samples),
-                     seed=np.int64(seed), fingerprint=np.array(fingerprint))
+                     seed=np.int64(seed), fingerprint=np.array(fingerprint), variant=np.array(variant))
     atomic_write(path, write)
 
 
-def _load_state(path: Path, seed: int, fingerprint: str, shape: tuple[int, int]):
+def _load_state(path: Path, seed: int, fingerprint: str, shape: tuple[int, int], variant: str):
     if not path.is_file():
         raise ValueError(f"resume: no {STATE_FILE} in {path.parent}")
     with np.load(path, allow_pickle=False) as state:
@@ -134,6 +135,9 @@ def _load_state(path: Path, seed: int, fingerprint: str, shape: tuple[int, int])
             raise ValueError(f"resume: {path} belongs to a different scene (fingerprint differs)")
         if int(state["seed"]) != seed:
             raise ValueError(f"resume: {path} was rendered with seed {int(state['seed'])}, not {seed}")
+        # another variant computes other last bits: mixing them breaks reproducibility
+        if str(state["variant"]) != variant:
+            raise ValueError(f"resume: {path} was rendered with variant {state['variant']}, not {variant}")
         sums = np.array(state["sums"], dtype=np.float64)
         squares = np.array(state["sums_of_squares"], dtype=np.float64)
         samples = int(state["samples"])
@@ -142,21 +146,35 @@ def _load_state(path: Path, seed: int, fingerprint: str, shape: tuple[int, int])
     return sums, squares, samples
 
 
-class _Terminate:
-    """Turn SIGTERM into KeyboardInterrupt while rendering, so both keep finished work."""
+def chunk_ranges(samples: int, chunk_size: int, start: int = 0) -> list[tuple[int, int]]:
+    """The chunks ``(first, count)`` covering samples [start, samples).
 
-    def __enter__(self):
-        self.previous = None
-        if threading.current_thread() is threading.main_thread():
-            def handler(signum, frame):
-                raise KeyboardInterrupt(f"signal {signum}")
-            self.previous = signal.signal(signal.SIGTERM, handler)
-        return self
+    Every render (and every sweep task) cuts its sample range here, so equal
+    chunk sizes give equal chunks. Chunks never straddle a multiple of 2^32:
+    the integrator's sample index is 32-bit.
+    """
+    ranges, done = [], int(start)
+    while done < samples:
+        count = min(chunk_size, samples - done, 2**32 - done % 2**32)
+        ranges.append((done, count))
+        done += count
+    return ranges
 
-    def __exit__(self, *exc):
-        if self.previous is not None:
-            signal.signal(signal.SIGTERM, self.previous)
-        return False
+
+@contextlib.contextmanager
+def sigterm_as_interrupt():
+    """Turn SIGTERM into KeyboardInterrupt (main thread only), so both keep finished work."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        raise KeyboardInterrupt(f"signal {signum}")
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def render(scene: Scene, *, spp: int, seed: int = 0, out_dir: str | Path | None = None,
@@ -228,7 +246,7 @@ def render(scene: Scene, *, spp: int, seed: int = 0, out_dir: str | Path | None 
 
     sums, squares, done = np.zeros(shape), np.zeros(shape), 0
     if resume:
-        sums, squares, done = _load_state(state_path, seed, fingerprint, shape)
+        sums, squares, done = _load_state(state_path, seed, fingerprint, shape, variant)
         if done > spp:
             raise ValueError(f"resume: {state_path} already holds {done} samples, more than spp = {spp}")
     waveform = make_waveform(scene.illumination, scene.sampling.period)
@@ -238,7 +256,7 @@ def render(scene: Scene, *, spp: int, seed: int = 0, out_dir: str | Path | None 
         sums, squares, done = totals
         if out_dir is None or done < 2:
             return
-        _save_state(state_path, sums, squares, done, seed, fingerprint)
+        _save_state(state_path, sums, squares, done, seed, fingerprint, variant)
         meta = {"start_opl": float(scene.sampling.start), "period_opl": float(scene.sampling.period),
                 "samples": int(done), "seed": seed, "attenuation": "lambertian",
                 "illumination": waveform.description, "waveform": waveform.name,
@@ -253,16 +271,13 @@ def render(scene: Scene, *, spp: int, seed: int = 0, out_dir: str | Path | None 
     started = time.perf_counter()
     last_checkpoint = started
     try:
-        with _Terminate():
-            while done < spp:
-                # Chunks never straddle a multiple of 2^32: the sample index is 32-bit.
-                count = min(chunk_size, spp - done, 2**32 - done % 2**32)
+        with sigterm_as_interrupt():
+            for first, count in chunk_ranges(spp, chunk_size, start=done):
                 chunk_sums, chunk_squares = integrator.render_transient(
-                    loaded, seed=seed, first_sample=done, sample_count=count)
+                    loaded, seed=seed, first_sample=first, sample_count=count)
                 # One assignment: a signal between bytecodes never leaves the
                 # totals half updated.
-                totals = (totals[0] + chunk_sums, totals[1] + chunk_squares, done + count)
-                done = totals[2]
+                totals = (totals[0] + chunk_sums, totals[1] + chunk_squares, first + count)
                 if bar is not None:
                     bar.update(count)
                 now = time.perf_counter()
@@ -270,7 +285,7 @@ def render(scene: Scene, *, spp: int, seed: int = 0, out_dir: str | Path | None 
                     checkpoint()
                     last_checkpoint = now
                 if on_chunk is not None:
-                    on_chunk(done)
+                    on_chunk(totals[2])
     except KeyboardInterrupt:
         checkpoint()
         raise

@@ -36,10 +36,7 @@ import json
 import logging
 import os
 import re
-import signal
-import threading
 import time
-import tomllib
 from collections import OrderedDict
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -50,6 +47,7 @@ import numpy as np
 
 from analytic.io import atomic_write, save_json, write_transient
 from analytic.scene import Scene, SceneError, read_toml, scene_from_dict
+from transient.render import chunk_ranges, sigterm_as_interrupt
 
 __all__ = ["Sweep", "SweepItem", "SweepResult", "load_sweep", "sweep_from_dict", "default_scene_table",
            "chunk_ranges", "render_chunk", "model_transient", "run_sweep", "sweep_client",
@@ -272,11 +270,9 @@ def sweep_from_dict(data: dict, base_dir: str | Path = ".") -> Sweep:
     else:
         path = base_dir / base
         try:
-            base_table = tomllib.loads(path.read_text())
-        except OSError as error:
-            raise SceneError("scene", f"cannot read {path} ({error.strerror})") from None
-        except tomllib.TOMLDecodeError as error:
-            raise SceneError("scene", f"{path}: invalid TOML ({error})") from None
+            base_table = read_toml(path, "scene")
+        except SceneError as error:       # name the sweep file's key, not the scene file
+            raise SceneError("scene", f"{path}: {error.problem}") from None
         base_table.setdefault("name", path.stem)
         scene_dir, default = path.parent, False
     if "samples" not in data:
@@ -353,19 +349,6 @@ def load_sweep(path: str | Path) -> Sweep:
     """
     path = Path(path)
     return sweep_from_dict(read_toml(path, "sweep"), path.parent)
-
-
-def chunk_ranges(samples: int, chunk_size: int) -> list[tuple[int, int]]:
-    """The chunks ``(first, count)`` of a render, exactly as :func:`transient.render.render` cuts them.
-
-    Chunks never straddle a multiple of 2^32 (the integrator's sample index is 32-bit).
-    """
-    ranges, done = [], 0
-    while done < samples:
-        count = min(chunk_size, samples - done, 2**32 - done % 2**32)
-        ranges.append((done, count))
-        done += count
-    return ranges
 
 
 # -- worker side ----------------------------------------------------------------
@@ -494,22 +477,6 @@ def sweep_client(scheduler: str | None = None, workers: int | None = None) -> It
                       host="127.0.0.1", silence_logs=logging.ERROR) as cluster, \
             Client(cluster) as client:
         yield client
-
-
-@contextlib.contextmanager
-def _sigterm_as_interrupt():
-    """SIGTERM stops the driver as Ctrl-C does, so both checkpoint the finished chunks."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-
-    def handler(signum, frame):
-        raise KeyboardInterrupt(f"signal {signum}")
-    previous = signal.signal(signal.SIGTERM, handler)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
 
 
 @dataclass(eq=False)
@@ -736,18 +703,24 @@ def run_sweep(sweep: Sweep, out_dir: str | Path, *, client=None, scheduler: str 
         When ``out_dir`` holds an item of another sweep (other scene, seed,
         sample count or chunking).
     """
-    if client is None:
-        _prepare(sweep, Path(out_dir))   # refuse another sweep's folder before starting a cluster
-        with sweep_client(scheduler, workers) as own:
-            return run_sweep(sweep, out_dir, client=own, progress=progress, retries=retries,
-                             on_chunk=on_chunk)
-    if scheduler is not None or workers is not None:
+    out_dir = Path(out_dir)
+    if client is not None and (scheduler is not None or workers is not None):
         raise ValueError("give either client or scheduler/workers, not both")
+    # Prepared before any cluster starts: another sweep's folder is refused at once.
+    prepared = _prepare(sweep, out_dir)
+    if client is None:
+        with sweep_client(scheduler, workers) as own:
+            return _run(sweep, out_dir, own, prepared, progress=progress, retries=retries,
+                        on_chunk=on_chunk)
+    return _run(sweep, out_dir, client, prepared, progress=progress, retries=retries, on_chunk=on_chunk)
+
+
+def _run(sweep: Sweep, out_dir: Path, client, prepared, *, progress, retries, on_chunk) -> SweepResult:
+    """run_sweep's work on a connected client, from :func:`_prepare`'s result."""
     from distributed import as_completed
 
     started = time.perf_counter()
-    out_dir = Path(out_dir)
-    rows, states, skipped = _prepare(sweep, out_dir)
+    rows, states, skipped = prepared
     out_dir.mkdir(parents=True, exist_ok=True)
     _write_index(out_dir, sweep, rows)
     worker_count = len(client.nthreads())
@@ -820,7 +793,7 @@ def run_sweep(sweep: Sweep, out_dir: str | Path, *, client=None, scheduler: str 
                 on_chunk(name, chunk)
 
     try:
-        with _sigterm_as_interrupt():
+        with sigterm_as_interrupt():
             collect()
     except BaseException:
         client.cancel(list(tasks))

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["attenuation", "path_length"]
+__all__ = ["attenuation"]
 
 
 def _distances(points, source, sensor):
@@ -24,12 +24,6 @@ def _distances(points, source, sensor):
     d_source = np.sqrt((x - source[0]) ** 2 + (y - source[1]) ** 2 + source[2] ** 2)
     d_sensor = np.sqrt((x - sensor[0]) ** 2 + (y - sensor[1]) ** 2 + sensor[2] ** 2)
     return d_source, d_sensor
-
-
-def path_length(points, source, sensor) -> np.ndarray:
-    """d(x) = |x - p_s| + |x - p_k| for plane points ``(..., 2)``, metres."""
-    d_source, d_sensor = _distances(points, source, sensor)
-    return d_source + d_sensor
 
 
 def attenuation(points, source, sensor, kind: str = "lambertian") -> np.ndarray:

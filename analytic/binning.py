@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["bin_index", "bin_edges"]
+__all__ = ["bin_index"]
 
 
 def bin_index(length_opl, start_opl: float, bin_width_opl: float, count: int, floor=np.floor):
@@ -41,7 +41,3 @@ def bin_index(length_opl, start_opl: float, bin_width_opl: float, count: int, fl
     inside = (index >= 0) & (index < count)
     return index, inside
 
-
-def bin_edges(start_opl: float, bin_width_opl: float, count: int) -> np.ndarray:
-    """The ``count + 1`` bin edges, metres of path length."""
-    return start_opl + bin_width_opl * np.arange(count + 1, dtype=np.float64)

@@ -128,11 +128,6 @@ class Waveform:
         """How many consecutive bins one path length can contribute to."""
         return int(math.ceil(self.duration / period)) + 1 if self.duration > 0 else 1
 
-    def numba_parameters(self) -> tuple:
-        """(code, duration, constant, decay, frequency, cos, sin) for the compiled kernels."""
-        return (self.code, float(self.duration), float(self.constant),
-                self.decay, self.frequency, self.cos_coefficient, self.sin_coefficient)
-
 
 def _empty() -> np.ndarray:
     array = np.zeros(0)

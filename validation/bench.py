@@ -99,7 +99,7 @@ def run_mitransient(sampling: Sampling, samples: int, variant: str = "llvm_ad_mo
     return estimate, run
 
 
-def speed_against_error(out: str | Path, *, powers=range(16, 27, 2), progress: bool = True) -> dict:
+def speed_against_error(out: str | Path, *, powers=range(16, 27, 2)) -> dict:
     """Run the three methods on :func:`plane_scene`; write bench.md, bench.png, metrics.json."""
     from analytic.system import QuadratureWarning, system_matrix
     from transient.render import render

@@ -167,7 +167,7 @@ def command_bench(args) -> int:
     """Speed against error: model over tolerance, renderer and mitransient over samples."""
     from validation.bench import speed_against_error
 
-    result = speed_against_error(args.out, progress=not args.quiet)
+    result = speed_against_error(args.out)
     if not args.quiet:
         print(result["markdown"])
     return 0

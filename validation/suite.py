@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from analytic.isochrone import LAMBERTIAN, make_frame, rectangle_range
 from analytic.reflectance import builtin_reflectance
 from analytic.scene import Illumination, Sampling, Scene
 
@@ -20,19 +21,10 @@ __all__ = ["hard_cases", "response_range", "validation_suite"]
 
 
 def response_range(source, sensor, size: float) -> tuple[float, float]:
-    """(first, last) path length over the plane [0, L]², metres (by a dense grid; for set-up only)."""
-    axis = np.linspace(0.0, size, 401)
-    x, y = np.meshgrid(axis, axis)
-    source = np.asarray(source, float)
-    sensor = np.asarray(sensor, float)
-    d = (np.sqrt((x - source[0]) ** 2 + (y - source[1]) ** 2 + source[2] ** 2)
-         + np.sqrt((x - sensor[0]) ** 2 + (y - sensor[1]) ** 2 + sensor[2] ** 2))
-    ratio = source[2] / (source[2] + sensor[2])
-    foot = source[:2] + (sensor[:2] - source[:2]) * ratio
-    first = d.min()
-    if 0 <= foot[0] <= size and 0 <= foot[1] <= size:
-        first = float(np.hypot(np.hypot(*(sensor[:2] - source[:2])), source[2] + sensor[2]))
-    return float(first), float(d.max())
+    """(first, last) path length over the plane [0, L]², metres (exact: convex d)."""
+    frame = make_frame(np.asarray(source, float), np.asarray(sensor, float), LAMBERTIAN)
+    low, high = rectangle_range(frame, 0.0, size, 0.0, size)
+    return float(low), float(high)
 
 
 def hard_cases(pixels: int = 10, waveform: str = "impulse") -> dict[str, Scene]:
@@ -51,12 +43,9 @@ def hard_cases(pixels: int = 10, waveform: str = "impulse") -> dict[str, Scene]:
         Name -> Scene.
     """
     illumination = Illumination(waveform=waveform)
-    image = builtin_reflectance(pixels)
 
-    def scene(name, source, sensors, period, start, count, size=1.0, m=pixels, reflectance=None):
-        return Scene(name=name, size=size, pixels=m,
-                     reflectance=image if reflectance is None and m == pixels else
-                     (builtin_reflectance(m) if reflectance is None else reflectance),
+    def scene(name, source, sensors, period, start, count, m=pixels):
+        return Scene(name=name, size=1.0, pixels=m, reflectance=builtin_reflectance(m),
                      source=source, sensors=sensors, illumination=illumination,
                      sampling=Sampling(period=period, start=start, count=count))
 

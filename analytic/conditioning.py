@@ -25,7 +25,9 @@ from pathlib import Path
 
 import numpy as np
 
+from .isochrone import LAMBERTIAN, make_frame, rectangle_range
 from .scene import Illumination, Sampling, Scene, sensor_grid
+from .waveforms import make_waveform
 from .system import system_matrix
 
 __all__ = ["singular_values", "conditioning_summary", "covering_sampling", "scene_for",
@@ -83,20 +85,20 @@ def conditioning_summary(values: np.ndarray, unknowns: int, rows: int, *, sigma:
 
 
 def covering_sampling(scene: Scene, period: float) -> Sampling:
-    """Bins of width ``period`` from below the shortest to above the longest path.
+    """Bins of width ``period`` holding every path length and the pulse's tail.
 
-    The extreme path lengths d_s + d_k over the plane are bounded by the
-    corners and the sensors' foot points (a convex function on a square has
-    its maximum at a corner; the minimum is bounded below by the straight
-    line source-sensor, which is at least the source-sensor distance).
+    From the earliest first arrival over the plane to the latest last one
+    (exact, :func:`analytic.isochrone.rectangle_range`) plus the waveform's
+    duration, so no light leaves the window.
     """
-    corners = np.array([[0, 0, 0], [scene.size, 0, 0], [0, scene.size, 0],
-                        [scene.size, scene.size, 0]], dtype=np.float64)
-    longest = max(float(np.max(np.linalg.norm(corners - scene.source, axis=1)
-                               + np.linalg.norm(corners - sensor, axis=1))) for sensor in scene.sensors)
-    shortest = min(float(np.linalg.norm(scene.source - sensor)) for sensor in scene.sensors)
-    start = math.floor(shortest / period) * period
-    count = int(math.ceil((longest - start) / period)) + 1
+    low, high = np.inf, -np.inf
+    for sensor in scene.sensors:
+        frame = make_frame(np.asarray(scene.source, float), np.asarray(sensor, float), LAMBERTIAN)
+        first, last = rectangle_range(frame, 0.0, scene.size, 0.0, scene.size)
+        low, high = min(low, first), max(high, last)
+    longest = high + make_waveform(scene.illumination, period).duration
+    start = math.floor(low / period) * period
+    count = int(math.floor((longest - start) / period)) + 1
     return Sampling(period=period, start=start, count=count)
 
 

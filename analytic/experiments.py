@@ -29,7 +29,8 @@ import numpy as np
 
 from .conditioning import conditioning_summary, scene_for, singular_values
 from .reconstruct import image_metrics, reconstruct
-from .scene import Illumination, default_scene
+from .noise import add_noise
+from .scene import Illumination, Noise, default_scene
 from .system import system_matrix
 from .waveforms import make_waveform
 
@@ -88,7 +89,8 @@ def device_figures(*, period: float = 0.1, unit_m: float = 1.0) -> dict:
 
 def run_cases(*, pixels: int = 50, periods=(0.05, 0.1, 0.2), extents=(1.0, 2.0, 4.0),
               attenuations=("paper", "lambertian"), sigma: float = 0.1,
-              intensities=(1.0, 1e4), seed: int = 0, progress: bool = True) -> list[dict]:
+              intensities=(1.0, 1e4), seed: int = 0, progress: bool = True,
+              matrices: dict | None = None) -> list[dict]:
     """Reconstruct every (attenuation, illumination, T, W, intensity) case.
 
     Parameters
@@ -118,6 +120,7 @@ def run_cases(*, pixels: int = 50, periods=(0.05, 0.1, 0.2), extents=(1.0, 2.0, 
     """
     import warnings
 
+    matrices = {} if matrices is None else matrices
     base = default_scene(pixels=pixels)
     truth = base.reflectance
     mean_psnr = image_metrics(np.full_like(truth, truth.mean()), truth)["psnr"]
@@ -129,13 +132,12 @@ def run_cases(*, pixels: int = 50, periods=(0.05, 0.1, 0.2), extents=(1.0, 2.0, 
         iterator = tqdm(cases, desc="reproduce", unit="case")
     rows = []
     for attenuation, name, period, extent in iterator:
-        scene = scene_for(base, extent=extent, period=period, attenuation=attenuation,
-                          illumination=Illumination(waveform=ILLUMINATIONS[name]))
-        matrix = system_matrix(scene)
+        matrix = _case_matrix(matrices, base, attenuation, ILLUMINATIONS[name], period, extent)
         values = singular_values(matrix)
         clean = matrix @ truth.ravel()
         generator = np.random.default_rng([seed, int(round(period * 1e6)), int(round(extent * 1e6))])
-        noise = sigma * generator.standard_normal(clean.shape)
+        # one noise draw shared by every intensity: I A f + σ ε
+        noise = add_noise(np.zeros_like(clean), Noise(kind="gaussian", sigma=sigma), rng=generator)
         for intensity in intensities:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
@@ -158,8 +160,19 @@ def run_cases(*, pixels: int = 50, periods=(0.05, 0.1, 0.2), extents=(1.0, 2.0, 
     return rows
 
 
+def _case_matrix(cache: dict, base, attenuation: str, waveform: str, period: float, extent: float):
+    """A of one (attenuation, waveform, T, W) case, assembled once per reproduce run."""
+    key = (base.pixels, attenuation, waveform, period, extent)
+    if key not in cache:
+        scene = scene_for(base, extent=extent, period=period, attenuation=attenuation,
+                          illumination=Illumination(waveform=waveform))
+        cache[key] = system_matrix(scene)
+    return cache[key]
+
+
 def poisson_cases(*, pixels: int = 50, periods=(0.05, 0.1, 0.2), extents=(1.0, 2.0, 4.0),
-                  peak_photons: float = 20.0, seed: int = 0, progress: bool = True) -> list[dict]:
+                  peak_photons: float = 20.0, seed: int = 0, progress: bool = True,
+                  matrices: dict | None = None) -> list[dict]:
     """Impulsive against low-pass illumination under photon counting at low flux.
 
     One photon detector for both illuminations: counts = Poisson(η y), data
@@ -178,6 +191,7 @@ def poisson_cases(*, pixels: int = 50, periods=(0.05, 0.1, 0.2), extents=(1.0, 2
     """
     import warnings
 
+    matrices = {} if matrices is None else matrices
     base = default_scene(pixels=pixels)
     truth = base.reflectance
     cases = [(t, w) for t in periods for w in extents]
@@ -189,23 +203,23 @@ def poisson_cases(*, pixels: int = 50, periods=(0.05, 0.1, 0.2), extents=(1.0, 2
     for period, extent in iterator:
         clean = {}
         matrices = {}
+        case = {}
         for name, waveform in ILLUMINATIONS.items():
-            scene = scene_for(base, extent=extent, period=period, attenuation="lambertian",
-                              illumination=Illumination(waveform=waveform))
-            matrices[name] = system_matrix(scene)
-            clean[name] = matrices[name] @ truth.ravel()
+            case[name] = _case_matrix(matrices, base, "lambertian", waveform, period, extent)
+            clean[name] = case[name] @ truth.ravel()
         photons = peak_photons / float(clean["impulsive"].max())
         generator = np.random.default_rng([seed, int(round(period * 1e6)), int(round(extent * 1e6))])
         for name in ILLUMINATIONS:
             # The Butterworth pulse undershoots (s >= -0.115 of its peak), so a few tail
             # bins have y < 0 (at most ~0.1 % of the peak): no light, zero expected photons.
-            counts = generator.poisson(photons * np.clip(clean[name], 0.0, None))
+            data = add_noise(np.clip(clean[name], 0.0, None), Noise(kind="poisson", photons=photons),
+                             rng=generator)
             with warnings.catch_warnings(record=True):
                 warnings.simplefilter("always")
-                result = reconstruct(matrices[name], counts / photons, pixels, rule="oracle", truth=truth)
+                result = reconstruct(case[name], data, pixels, rule="oracle", truth=truth)
             metrics = image_metrics(result.image, truth)
             rows.append({"illumination": name, "period": period, "extent": extent,
-                         "photons_per_unit": photons, "expected_photons": float(photons * clean[name].sum()),
+                         "peak_photons": peak_photons, "photons_per_unit": photons, "expected_photons": float(photons * clean[name].sum()),
                          "lambda": result.lam, "psnr": metrics["psnr"], "ssim": metrics["ssim"]})
     return rows
 
@@ -213,7 +227,7 @@ def poisson_cases(*, pixels: int = 50, periods=(0.05, 0.1, 0.2), extents=(1.0, 2
 def _poisson_report(rows) -> list[str]:
     lines = ["## Photon counting at low flux (beyond the paper)", "",
              "Same detector for both pulses: η photons per unit of y, set so that the impulsive case's "
-             "brightest bin expects 20 photons; lambertian attenuation, 1 W/sr, oracle λ. The truncated "
+             f"brightest bin expects {rows[0]['peak_photons']:g} photons; lambertian attenuation, 1 W/sr, oracle λ. The truncated "
              "Butterworth response undershoots to -0.115 of its peak (no modulator emits negative "
              "intensity); the few bins where y < 0 get zero expected photons.", "",
              "| T | W | η (photons per unit y) | photons, impulsive | photons, low-pass | PSNR impulsive (dB) "
@@ -438,7 +452,8 @@ def reproduce(out, *, quick: bool = False, progress: bool = True) -> dict:
         settings = dict(pixels=50, periods=(0.05, 0.1, 0.2), extents=(1.0, 2.0, 4.0),
                         attenuations=("paper", "lambertian"))
     settings.update(sigma=0.1, intensities=(1.0, 1e4))
-    rows = run_cases(progress=progress, **settings)
+    matrices = {}   # A of each case, shared by the Gaussian and the photon-counting runs
+    rows = run_cases(progress=progress, matrices=matrices, **settings)
     claims = check_claims(rows)
     devices = [device_figures(period=0.1, unit_m=u)
                for u in (1.0, SPEED_OF_LIGHT / (750e6 * 0.1), 15.0)]
@@ -459,7 +474,7 @@ def reproduce(out, *, quick: bool = False, progress: bool = True) -> dict:
                               title=f"A of the impulsive cases, {attenuation} attenuation, "
                                     f"source {intensity:g} W/sr")
     photon_rows = poisson_cases(pixels=settings["pixels"], periods=settings["periods"],
-                                extents=settings["extents"], progress=progress)
+                                extents=settings["extents"], progress=progress, matrices=matrices)
     seconds = time.perf_counter() - started
     text = _report(rows, claims, devices, seconds,
                    ", ".join(f"{k} = {v}" for k, v in settings.items()) + ", 4 x 4 sensors")

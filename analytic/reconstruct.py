@@ -284,11 +284,10 @@ class _IterativeSolver:
         self.scale[1:] = 1.0 / mu[1:]
         self.penalised = np.ones_like(mu)
         self.penalised[0] = 0.0
-        self.mu = mu
         self.tolerance = tolerance
         self.iteration_limit = iteration_limit or min(20 * self.unknowns, 10_000)
         self.rank = None
-        self._last = None
+        self._sweeps = {}   # (grid, probes) -> sweep result: one sweep serves every rule
         if not np.any(self.forward_operator(np.eye(1, self.unknowns, 0).ravel())):
             raise ValueError("matrix: A · (constant image) = 0, the sensors see no light from the "
                              "plane, so the Laplacian cannot fix the image's mean")
@@ -334,7 +333,19 @@ class _IterativeSolver:
         return result[0], result[1]
 
     def sweep(self, lambdas, probes=0):
-        """Solutions for every λ (descending order solved, warm-started)."""
+        """Solutions for every λ (descending order solved, warm-started), remembered.
+
+        A sweep made with GCV's trace probes also serves requests without them.
+        """
+        key = np.asarray(lambdas, dtype=np.float64).tobytes()
+        for (grid, made_with), result in self._sweeps.items():
+            if grid == key and made_with >= probes:
+                return result
+        result = self._sweep(lambdas, probes)
+        self._sweeps[(key, probes)] = result
+        return result
+
+    def _sweep(self, lambdas, probes):
         order = np.argsort(lambdas)[::-1]
         solutions = np.empty((len(lambdas), self.unknowns))
         traces = np.full(len(lambdas), np.nan)
@@ -503,7 +514,12 @@ def reconstruct_rules(matrix, data, pixels: int, *, rules=RULES, truth=None,
         if np.any(dead):
             rank_message = (f"{int(dead.sum())} pixels are seen by no measurement: the Laplacian "
                             f"prior fills them")
+    if method != "svd" and "gcv" in [rule for rule, fixed in parsed if fixed is None]:
+        # sweep once with GCV's probes first, so the other rules reuse that sweep
+        solver.sweep(_default_grid(solver.largest, solver.smallest) if lambdas is None else lambdas,
+                     probes=gcv_probes)
     results = []
+    warned = False
     for rule, fixed in parsed:
         begun = time.perf_counter()
         messages: list[str] = []
@@ -514,7 +530,11 @@ def reconstruct_rules(matrix, data, pixels: int, *, rules=RULES, truth=None,
             result = _choose_iterative(solver, rule, fixed, truth_image, sigma, lambdas, messages,
                                        gcv_probes)
         if rank_message is not None:
-            _warn(messages, rank_message, RankDeficiencyWarning)
+            if warned:            # once per call, recorded with every rule's result
+                messages.append(rank_message)
+            else:
+                _warn(messages, rank_message, RankDeficiencyWarning)
+                warned = True
         image, lam, grid, criterion, residuals, seminorms = result
         results.append(Reconstruction(
             image=image, lam=float(lam), rule=rule if fixed is None else "value", lambdas=grid,

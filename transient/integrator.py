@@ -36,6 +36,8 @@ Import only after :func:`transient.backend.select_variant`.
 
 from __future__ import annotations
 
+import functools
+
 import math
 
 import drjit as dr
@@ -50,7 +52,6 @@ __all__ = ["register", "integrator_class", "PLUGIN_NAME", "cumulative", "sample_
 
 PLUGIN_NAME = "transient_opl"
 
-_classes: dict[str, type] = {}
 
 # Agreement demanded between the double-precision geometry this plugin is given
 # and the float32 copy Mitsuba built the scene from: the float32 rounding, with room.
@@ -148,9 +149,11 @@ def _matrix(transform) -> np.ndarray:
 
 def integrator_class() -> type:
     """The integrator class for the active variant (Mitsuba's base classes are per variant)."""
-    variant = mi.variant()
-    if variant in _classes:
-        return _classes[variant]
+    return _integrator_class(mi.variant())
+
+
+@functools.cache   # one class per variant: Mitsuba's base classes differ between variants
+def _integrator_class(variant: str) -> type:
 
     class TransientPathLength(mi.SamplingIntegrator):
         r"""
@@ -528,7 +531,6 @@ def integrator_class() -> type:
                     dr.scatter_reduce(dr.ReduceOp.Add, sums, total, slot, active=owner)
                     dr.scatter_reduce(dr.ReduceOp.Add, squares, dr.square(total), slot, active=owner)
 
-    _classes[variant] = TransientPathLength
     return TransientPathLength
 
 

@@ -13,6 +13,8 @@ Import only after :func:`transient.backend.select_variant`.
 
 from __future__ import annotations
 
+import functools
+
 import drjit as dr
 import mitsuba as mi
 import numpy as np
@@ -21,7 +23,6 @@ __all__ = ["register", "sensor_class", "PLUGIN_NAME"]
 
 PLUGIN_NAME = "omni_point"
 
-_classes: dict[str, type] = {}
 
 
 def _position(props) -> np.ndarray:
@@ -39,9 +40,11 @@ def _position(props) -> np.ndarray:
 
 def sensor_class() -> type:
     """The sensor class for the active variant (Mitsuba's base classes are per variant)."""
-    variant = mi.variant()
-    if variant in _classes:
-        return _classes[variant]
+    return _sensor_class(mi.variant())
+
+
+@functools.cache   # one class per variant: Mitsuba's base classes differ between variants
+def _sensor_class(variant: str) -> type:
 
     class OmniPointSensor(mi.Sensor):
         r"""
@@ -115,7 +118,6 @@ def sensor_class() -> type:
         def to_string(self):
             return f"OmniPointSensor[position={self.position.tolist()}]"
 
-    _classes[variant] = OmniPointSensor
     return OmniPointSensor
 
 

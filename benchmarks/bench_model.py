@@ -15,7 +15,6 @@ Prints markdown tables and writes ``results.json`` in --out.
 from __future__ import annotations
 
 import argparse
-import json
 import platform
 import resource
 import sys
@@ -28,6 +27,7 @@ import scipy.sparse
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from analytic.io import save_json  # noqa: E402
 from analytic.binning import bin_index  # noqa: E402
 from analytic.scene import default_scene  # noqa: E402
 from analytic.system import QuadratureWarning, system_matrix  # noqa: E402
@@ -142,7 +142,7 @@ def main():
     print("|---|---|---|---|")
     for row in rows:
         print(f"| {row['method']} | {row['setting']} | {row['seconds']:.3f} | {row['error']:.1e} |")
-    (out / "results.json").write_text(json.dumps(results, indent=2))
+    save_json(out / "results.json", results)
 
 
 if __name__ == "__main__":

@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
-import json
 import math
 import platform
 import sys
@@ -33,6 +32,7 @@ import warnings
 
 import numpy as np
 
+from analytic.io import save_json
 from analytic.scene import Scene, default_scene
 from analytic.system import QuadratureWarning, forward
 from transient.render import render
@@ -147,9 +147,7 @@ def main(argv=None) -> int:
     mitransient = bench_mitransient(plane_scene(), "llvm_ad_mono", args.pilot, rows[1])
     report = {"machine": platform.platform(), "processor": platform.processor(),
               "target_relative_l2": TARGET, "scenes": rows, "mitransient": mitransient}
-    with open(args.out, "w") as stream:
-        json.dump(report, stream, indent=2)
-        stream.write("\n")
+    save_json(args.out, report)
     print(markdown(rows, mitransient))
     return 0
 

@@ -28,7 +28,6 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import sys
@@ -36,6 +35,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from analytic.io import save_json
 from validation.sweep import run_sweep, sweep_client, sweep_from_dict
 
 
@@ -168,7 +168,7 @@ def main(argv=None) -> int:
               "machine": {"cpus": os.cpu_count(), "platform": platform.platform(),
                           "python": sys.version.split()[0]}}
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(report, indent=2) + "\n")
+    save_json(args.out, report)
     print(table)
     print()
     print(text)

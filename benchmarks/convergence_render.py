@@ -14,7 +14,6 @@ agree). Writes results.json and convergence.png in --out; prints a table.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
@@ -25,6 +24,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_render import plane_scene  # noqa: E402
 
+from analytic.io import save_json  # noqa: E402
 from analytic.scene import default_scene  # noqa: E402
 from analytic.system import forward  # noqa: E402
 from transient.render import render  # noqa: E402
@@ -87,7 +87,7 @@ def main():
     for name, fit in results["slopes"].items():
         print(f"{name}: relative L2 ∝ N^({fit['slope']:.3f} ± {fit['standard_error']:.3f}) "
               f"over {fit['decades']:.1f} decades")
-    (out / "results.json").write_text(json.dumps(results, indent=2))
+    save_json(out / "results.json", results)
     _plot(out / "convergence.png", results)
 
 

@@ -99,7 +99,7 @@ def covering_sampling(scene: Scene, period: float) -> Sampling:
     longest = high + make_waveform(scene.illumination, period).duration
     start = math.floor(low / period) * period
     count = int(math.floor((longest - start) / period)) + 1
-    return Sampling(period=period, start=start, count=count)
+    return Sampling(bin_width_opl=period, start_opl=start, count=count)
 
 
 def scene_for(base: Scene, *, extent: float, period: float, illumination: Illumination | None = None,

@@ -142,31 +142,38 @@ class Illumination:
 
 @dataclass(frozen=True, kw_only=True)
 class Sampling:
-    """Box ("integrate and dump") sampling: bin n covers [start + n period, start + (n+1) period).
+    """Box ("integrate and dump") sampling: bin n covers
+    [start_opl + n bin_width_opl, start_opl + (n + 1) bin_width_opl).
+
+    The scene file's keys are ``[sampling] period`` (T), ``start`` (t0) and
+    ``count`` (N), as DESIGN.md section 5 fixes; in code and in every output
+    file the first two are named as mitransient names them.
 
     Parameters
     ----------
-    period : float
-        Bin width T, metres of path length.
-    start : float
-        Lower edge t0 of the first bin, metres of path length.
+    bin_width_opl : float
+        Bin width T, metres of path length (TOML ``sampling.period``).
+    start_opl : float
+        Lower edge t0 of the first bin, metres of path length (TOML
+        ``sampling.start``).
     count : int
         Number of bins N.
     """
 
-    period: float = 0.1
-    start: float = 0.0
+    bin_width_opl: float = 0.1
+    start_opl: float = 0.0
     count: int = 40
 
     def __post_init__(self):
-        object.__setattr__(self, "period", _number("sampling.period", self.period, positive=True))
-        object.__setattr__(self, "start", _number("sampling.start", self.start))
+        object.__setattr__(self, "bin_width_opl",
+                           _number("sampling.period", self.bin_width_opl, positive=True))
+        object.__setattr__(self, "start_opl", _number("sampling.start", self.start_opl))
         object.__setattr__(self, "count", _integer("sampling.count", self.count))
 
     @property
     def edges(self) -> np.ndarray:
         """Bin edges, ``(N + 1,)`` metres of path length."""
-        return self.start + self.period * np.arange(self.count + 1)
+        return self.start_opl + self.bin_width_opl * np.arange(self.count + 1)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -344,7 +351,7 @@ def default_scene(**changes) -> Scene:
         source=(0.5, 0.5, 1.0),
         sensors=sensor_grid((4, 4), 1.0, (0.5, 0.5, 1.0)),
         illumination=Illumination(waveform="impulse"),
-        sampling=Sampling(period=0.1, start=0.0, count=40),
+        sampling=Sampling(bin_width_opl=0.1, start_opl=0.0, count=40),
         attenuation="lambertian",
         noise=Noise(kind="gaussian", sigma=0.1, seed=0),
     )
@@ -352,6 +359,9 @@ def default_scene(**changes) -> Scene:
         changes["reflectance"] = builtin_reflectance(int(changes["pixels"]))
     return scene.replace(**changes) if changes else scene
 
+
+# TOML keys of [sampling] -> Sampling fields
+_SAMPLING_FIELDS = {"period": "bin_width_opl", "start": "start_opl", "count": "count"}
 
 _SCHEMA = {
     "name": None,
@@ -440,7 +450,7 @@ def scene_from_dict(data: dict, base_dir: str | Path = ".", *, name: str = "scen
         source=source.get("position", (0.5, 0.5, 1.0)),
         sensors=positions,
         illumination=Illumination(**illumination),
-        sampling=Sampling(**sampling),
+        sampling=Sampling(**{_SAMPLING_FIELDS[key]: value for key, value in sampling.items()}),
         attenuation=model.get("attenuation", "lambertian"),
         tolerance=model.get("tolerance", 1e-6),
         noise=noise,

@@ -309,7 +309,7 @@ def _available_memory() -> int:
 
 
 def _prepare(scene: Scene):
-    waveform = make_waveform(scene.illumination, scene.sampling.period)
+    waveform = make_waveform(scene.illumination, scene.sampling.bin_width_opl)
     mode = LAMBERTIAN if scene.attenuation == "lambertian" else PAPER
     source = np.ascontiguousarray(scene.source, dtype=np.float64)
     sensors = np.ascontiguousarray(scene.sensors, dtype=np.float64)
@@ -347,7 +347,7 @@ def count_entries(scene: Scene, *, memory_limit: int | None = None) -> tuple[np.
     sampling = scene.sampling
     firsts = np.empty(jobs, dtype=np.int64)
     counts = np.empty(jobs, dtype=np.int64)
-    _count_bins(source, sensors, mode, scene.size, scene.pixels, sampling.start, sampling.period,
+    _count_bins(source, sensors, mode, scene.size, scene.pixels, sampling.start_opl, sampling.bin_width_opl,
                 sampling.count, waveform.duration, firsts, counts)
     nnz = int(counts.sum())
     # data + row index, once in CSC and once in CSR, plus the index arrays above
@@ -415,8 +415,8 @@ def system_matrix(scene: Scene, *, tolerance: float | None = None, memory_limit:
         np.cumsum(sub_counts, out=sub_offsets[1:])
         sub_rows = np.empty(int(sub_offsets[-1]), dtype=np.int64)
         sub_data = np.empty(int(sub_offsets[-1]), dtype=np.float64)
-        failures += _fill(source, sensors[k:k + 1], mode, scene.size, scene.pixels, sampling.start,
-                          sampling.period, sampling.count, packed, tolerance * 0.1,
+        failures += _fill(source, sensors[k:k + 1], mode, scene.size, scene.pixels, sampling.start_opl,
+                          sampling.bin_width_opl, sampling.count, packed, tolerance * 0.1,
                           sub_firsts, sub_counts, sub_offsets, sub_rows, sub_data)
         sub_rows += k * sampling.count
         # scatter this sensor's runs into their slots of the pixel-major layout

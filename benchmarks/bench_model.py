@@ -79,7 +79,7 @@ def supersampled(scene, factor: int):
         ds = np.sqrt((xx - source[0]) ** 2 + (yy - source[1]) ** 2 + source[2] ** 2)
         dk = np.sqrt((xx - sensor[0]) ** 2 + (yy - sensor[1]) ** 2 + sensor[2] ** 2)
         a = source[2] * sensor[2] / (np.pi * ds**3 * dk**3) * weight_area
-        n, inside = bin_index(ds + dk, scene.sampling.start, scene.sampling.period, count)
+        n, inside = bin_index(ds + dk, scene.sampling.start_opl, scene.sampling.bin_width_opl, count)
         rows = (k * count + n[inside]).astype(np.int64).ravel()
         blocks.append(scipy.sparse.coo_array((a[inside].ravel(), (rows, index[inside.ravel()])),
                                              shape=(scene.sensor_count * count, pixels * pixels)))

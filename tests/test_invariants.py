@@ -19,7 +19,7 @@ def _whole_response_scene(waveform="impulse", **changes):
     """A window that holds every path length of the response (and the pulse's tail)."""
     base = dict(pixels=12, source=(0.4, 0.55, 0.7), sensors=[(0.8, 0.3, 0.5), (-0.3, 1.2, 0.2)],
                 illumination=Illumination(waveform=waveform),
-                sampling=Sampling(period=0.07, start=0.5, count=60))
+                sampling=Sampling(bin_width_opl=0.07, start_opl=0.5, count=60))
     base.update(changes)
     return Scene(**base)
 
@@ -37,7 +37,7 @@ def test_time_integral_equals_steady_response(waveform):
     """Σ_n (A 1)_k = (∫ s dt) ∫_plane a_k dx when the window covers the whole response."""
     scene = _whole_response_scene(waveform)
     matrix = system_matrix(scene)
-    energy = make_waveform(scene.illumination, scene.sampling.period).energy
+    energy = make_waveform(scene.illumination, scene.sampling.bin_width_opl).energy
     totals = (matrix @ np.ones(scene.pixels**2)).reshape(scene.sensor_count, -1).sum(axis=1)
     for k in range(scene.sensor_count):
         steady = energy * _plane_integral(scene.source, scene.sensors[k])
@@ -46,7 +46,7 @@ def test_time_integral_equals_steady_response(waveform):
 
 def test_mirror_symmetric_sensors_give_equal_traces():
     scene = Scene(pixels=15, source=(0.5, 0.37, 0.8), sensors=[(0.2, 0.6, 0.9), (0.8, 0.6, 0.9)],
-                  sampling=Sampling(period=0.03, start=1.4, count=50))
+                  sampling=Sampling(bin_width_opl=0.03, start_opl=1.4, count=50))
     matrix = system_matrix(scene)
     image = np.random.default_rng(4).uniform(size=(15, 15))
     image = 0.5 * (image + image[:, ::-1])            # symmetric under x -> L - x
@@ -62,7 +62,7 @@ def test_mirror_symmetric_sensors_give_equal_traces():
 @pytest.mark.parametrize("pixel", [(0, 0), (3, 7), (9, 2)])
 def test_single_bright_pixel_lights_exactly_its_path_length_bins(pixel):
     scene = Scene(pixels=10, source=(0.3, 0.6, 0.5), sensors=[(0.7, 0.2, 0.4)],
-                  sampling=Sampling(period=0.01, start=0.8, count=150))
+                  sampling=Sampling(bin_width_opl=0.01, start_opl=0.8, count=150))
     image = np.zeros((10, 10))
     image[pixel] = 1.0
     y = system_matrix(scene) @ image.ravel()
@@ -141,7 +141,7 @@ def test_adjoint_passes_dot_test(rng):
 def test_image_orientation_top_left_pixel_is_nearest_to_a_sensor_above_it():
     """image[0, 0] covers x ∈ [0, Δ), y ∈ [L - Δ, L): a sensor above (0, L) sees it first."""
     scene = Scene(pixels=8, source=(0.05, 0.95, 0.3), sensors=[(0.0, 1.0, 0.3)],
-                  sampling=Sampling(period=0.01, start=0.5, count=200))
+                  sampling=Sampling(bin_width_opl=0.01, start_opl=0.5, count=200))
     matrix = system_matrix(scene).toarray()
     first_bins = np.array([np.nonzero(matrix[:, p])[0].min() for p in range(64)])
     assert np.argmin(first_bins) == 0

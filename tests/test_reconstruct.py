@@ -68,7 +68,7 @@ def small_scene():
     image = 0.4 + 0.2 * np.cos(np.pi * x) * np.sin(np.pi * y) + 0.1 * x
     scene = Scene(pixels=pixels, reflectance=image, source=(0.5, 0.5, 1.0),
                   sensors=sensor_grid((6, 6), 2.0, (0.5, 0.5, 1.0)),
-                  sampling=Sampling(period=0.02, start=1.9, count=100), name="small")
+                  sampling=Sampling(bin_width_opl=0.02, start_opl=1.9, count=100), name="small")
     return scene, system_matrix(scene)
 
 
@@ -214,7 +214,7 @@ def test_collinear_sensors_warn_and_give_the_mirror_symmetric_answer(rng):
     pixels = 10
     sensors = [(x, 0.5, 1.0) for x in (0.1, 0.3, 0.7, 0.9)]
     scene = Scene(pixels=pixels, reflectance=rng.random((pixels, pixels)), source=(0.5, 0.5, 1.0),
-                  sensors=sensors, sampling=Sampling(period=0.02, start=1.9, count=80))
+                  sensors=sensors, sampling=Sampling(bin_width_opl=0.02, start_opl=1.9, count=80))
     matrix = system_matrix(scene)
     y = matrix @ scene.reflectance.ravel() + 1e-3 * rng.standard_normal(matrix.shape[0])
     with pytest.warns(RankDeficiencyWarning):
@@ -350,7 +350,7 @@ def test_covering_sampling_keeps_every_path():
 
     base = Scene(pixels=6, reflectance=0.5, source=(0.5, 0.5, 1.0), sensors=((0.2, 0.3, 1.0),))
     narrow = scene_for(base, extent=3.0, period=0.1, grid=(2, 2))
-    wide = narrow.replace(sampling=Sampling(period=0.1, start=0.0, count=120))
+    wide = narrow.replace(sampling=Sampling(bin_width_opl=0.1, start_opl=0.0, count=120))
     k, n = narrow.sensor_count, narrow.sampling.count
     covered = system_matrix(narrow).toarray().reshape(k, n, -1).sum(axis=1)
     everything = system_matrix(wide).toarray().reshape(k, 120, -1).sum(axis=1)

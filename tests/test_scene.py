@@ -115,7 +115,7 @@ def test_wrong_size_and_colour_images_are_rejected(tmp_path):
 def test_window_too_large_for_memory_is_refused_before_allocation():
     from analytic.system import system_matrix
     from analytic.scene import Sampling
-    scene = default_scene(pixels=20).replace(sampling=Sampling(period=0.001, start=0.0, count=5000))
+    scene = default_scene(pixels=20).replace(sampling=Sampling(bin_width_opl=0.001, start_opl=0.0, count=5000))
     with pytest.raises(SceneError, match="sampling"):
         system_matrix(scene, memory_limit=1_000_000)
 

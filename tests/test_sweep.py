@@ -120,7 +120,7 @@ def assert_matches_reference(out_dir, reference):
 def test_grid_builds_validated_scenes(sweep_file):
     sweep = load_sweep(sweep_file)
     assert len(sweep.items) == 4 and sweep.samples == SAMPLES and sweep.seed == SEED
-    periods = [item.scene.sampling.period for item in sweep.items]
+    periods = [item.scene.sampling.bin_width_opl for item in sweep.items]
     waveforms = [item.scene.illumination.waveform for item in sweep.items]
     assert periods == [0.05, 0.05, 0.1, 0.1]
     assert waveforms == ["impulse", "butterworth", "impulse", "butterworth"]

@@ -61,7 +61,7 @@ CASES = [pytest.param(name, waveform, marks=[pytest.mark.slow] if name == "far" 
 def test_entries_match_reference_on_hard_geometry(name, waveform, rng):
     scene = hard_cases(pixels=10, waveform=waveform)[name]
     matrix = system_matrix(scene)
-    wave = make_waveform(scene.illumination, scene.sampling.period)
+    wave = make_waveform(scene.illumination, scene.sampling.bin_width_opl)
     picks, row_max = _picks(matrix, scene, rng)
     if name == "far":
         picks = picks[:2]
@@ -75,7 +75,7 @@ def test_entries_match_reference_on_hard_geometry(name, waveform, rng):
 def test_default_scene_entries_match_reference(waveform, rng):
     scene = default_scene().replace(illumination=default_scene().illumination.__class__(waveform=waveform))
     matrix = system_matrix(scene)
-    wave = make_waveform(scene.illumination, scene.sampling.period)
+    wave = make_waveform(scene.illumination, scene.sampling.bin_width_opl)
     picks, row_max = _picks(matrix, scene, rng)
     for row, pixel in picks[:6]:
         reference = _reference(scene, wave, row, pixel)
@@ -90,7 +90,7 @@ def test_samples_match_reference_sum_over_pixels(rng):
     scene = scene.replace(reflectance=image)
     matrix = system_matrix(scene)
     y = (matrix @ image.ravel()).reshape(scene.sensor_count, -1)
-    wave = make_waveform(scene.illumination, scene.sampling.period)
+    wave = make_waveform(scene.illumination, scene.sampling.bin_width_opl)
     for k in range(scene.sensor_count):
         n = int(np.argmax(y[k]))
         row = k * scene.sampling.count + n

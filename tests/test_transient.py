@@ -55,7 +55,7 @@ def image():
 def scene(image):
     return Scene(size=1.0, pixels=12, reflectance=image, source=(0.3, 0.6, 0.8),
                  sensors=[(0.2, 0.7, 1.0), (0.8, 0.15, 0.5), (0.6, 0.9, 0.3)],
-                 sampling=Sampling(period=0.05, start=0.8, count=40))
+                 sampling=Sampling(bin_width_opl=0.05, start_opl=0.8, count=40))
 
 
 @pytest.fixture(scope="module")
@@ -81,7 +81,7 @@ def test_wrong_model_fails(scene, rendered, wrong):
         reference = model(scene.replace(attenuation="paper"))
     elif wrong == "half-bin shift":
         sampling = scene.sampling
-        shifted = Sampling(period=sampling.period, start=sampling.start + sampling.period / 2,
+        shifted = Sampling(bin_width_opl=sampling.bin_width_opl, start_opl=sampling.start_opl + sampling.bin_width_opl / 2,
                            count=sampling.count)
         reference = model(scene.replace(sampling=shifted))
     elif wrong == "mirrored image":
@@ -99,7 +99,7 @@ def test_single_pixel_lights_only_its_path_lengths():
     image = np.zeros((pixels, pixels))
     image[row, col] = 1.0
     source, sensor = np.array([0.5, 0.5, 0.4]), np.array([0.1, 0.1, 0.3])
-    sampling = Sampling(period=0.02, start=0.5, count=80)
+    sampling = Sampling(bin_width_opl=0.02, start_opl=0.5, count=80)
     scene = Scene(size=1.0, pixels=pixels, reflectance=image, source=source, sensors=[sensor],
                   sampling=sampling)
     result = render(scene, spp=2**20, seed=5, progress=False)
@@ -115,8 +115,8 @@ def test_single_pixel_lights_only_its_path_lengths():
         points = np.stack([gx, gy, np.zeros_like(gx)], axis=-1)
         length = (np.linalg.norm(points - source, axis=-1) + np.linalg.norm(points - sensor, axis=-1))
         lowest, highest = length.min() - 2 * step, length.max() + 2 * step
-        return (int(np.floor((lowest - sampling.start) / sampling.period)),
-                int(np.floor((highest - sampling.start) / sampling.period)))
+        return (int(np.floor((lowest - sampling.start_opl) / sampling.bin_width_opl)),
+                int(np.floor((highest - sampling.start_opl) / sampling.bin_width_opl)))
 
     lit = np.flatnonzero(result.mean[0] > 0)
     first, last = bins_of(row, col)
@@ -155,7 +155,7 @@ def test_far_plane_bins_exactly():
     period = spread / 1000
     image = np.random.default_rng(3).uniform(0.2, 1.0, (4, 4))
     scene = Scene(size=1.0, pixels=4, reflectance=image, source=source, sensors=[sensor],
-                  sampling=Sampling(period=period, start=length.min() - 20 * period, count=1040))
+                  sampling=Sampling(bin_width_opl=period, start_opl=length.min() - 20 * period, count=1040))
     result = render(scene, spp=2**24, seed=13, progress=False)
     reference = model(scene)
     chi2_per_dof, largest, dof, passes = agreement(result.mean, result.stderr, reference)
@@ -195,7 +195,7 @@ def test_general_path_matches_model_on_the_plane(mitsuba, scene, rendered):
 CORNER_SOURCE = np.array([0.6, 0.4, 0.7])
 CORNER_SENSORS = np.array([[0.5, 0.6, 0.8], [0.3, 0.2, 0.4]])
 CORNER_ALBEDO = 0.5
-CORNER_SAMPLING = Sampling(period=0.1, start=0.6, count=30)
+CORNER_SAMPLING = Sampling(bin_width_opl=0.1, start_opl=0.6, count=30)
 
 
 def _corner(mitsuba, max_depth: int) -> dict:
@@ -206,7 +206,7 @@ def _corner(mitsuba, max_depth: int) -> dict:
     entries = {
         "type": "scene",
         "integrator": {"type": "transient_opl", "bins": CORNER_SAMPLING.count,
-                       "start_opl": CORNER_SAMPLING.start, "bin_width_opl": CORNER_SAMPLING.period,
+                       "start_opl": CORNER_SAMPLING.start_opl, "bin_width_opl": CORNER_SAMPLING.bin_width_opl,
                        "max_depth": max_depth},
         "floor": {"type": "rectangle",
                   "to_world": mitsuba.ScalarTransform4f().translate([0.5, 0.5, 0]).scale([0.5, 0.5, 1]),
@@ -271,7 +271,7 @@ def _corner_two_bounce_reference(samples: int, rng) -> tuple[np.ndarray, np.ndar
             cos_sensor = np.clip(to_sensor @ normal1 / sensor_distance, 0.0, None)
             value = (cos_sensor / sensor_distance**2 * CORNER_ALBEDO * CORNER_ALBEDO / np.pi
                      * cos_source / source_distance**2)
-            n = np.floor((sensor_distance + t + source_distance - sampling.start) / sampling.period)
+            n = np.floor((sensor_distance + t + source_distance - sampling.start_opl) / sampling.bin_width_opl)
             keep = hit & (n >= 0) & (n < sampling.count)
             np.add.at(sums[k], n[keep].astype(int), value[keep])
             np.add.at(squares[k], n[keep].astype(int), value[keep] ** 2)
@@ -340,7 +340,7 @@ def test_float64_accumulation_of_2_26_samples_in_one_bin():
     standard error (about 1e-4 of the mean here).
     """
     scene = Scene(size=1.0, pixels=2, reflectance=0.5, source=(0.5, 0.5, 1.0),
-                  sensors=[(0.4, 0.6, 1.0)], sampling=Sampling(period=10.0, start=0.0, count=1))
+                  sensors=[(0.4, 0.6, 1.0)], sampling=Sampling(bin_width_opl=10.0, start_opl=0.0, count=1))
     samples = 2**26
     result = render(scene, spp=samples, seed=14, chunk_size=samples, progress=False)
     reference = model(scene)

@@ -48,7 +48,7 @@ def test_wrong_models_fail(outside, wrong):
     elif wrong == "half-bin shift":
         sampling = scene.sampling
         reference = forward(scene.replace(sampling=sampling.__class__(
-            period=sampling.period, start=sampling.start + sampling.period / 2, count=sampling.count)))
+            bin_width_opl=sampling.bin_width_opl, start_opl=sampling.start_opl + sampling.bin_width_opl / 2, count=sampling.count)))
     else:
         reference = forward(scene.replace(attenuation="paper")) / np.pi
         reference *= np.linalg.norm(model) / np.linalg.norm(reference)  # shape only

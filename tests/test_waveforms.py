@@ -9,7 +9,7 @@ from analytic.noise import add_noise
 from analytic.scene import Illumination, Noise, Sampling
 from analytic.waveforms import make_waveform
 
-SAMPLING = Sampling(period=0.1, start=0.0, count=40)
+SAMPLING = Sampling(bin_width_opl=0.1, start_opl=0.0, count=40)
 
 
 def test_butterworth_matches_scipy_impulse_response_with_unit_peak():

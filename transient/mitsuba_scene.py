@@ -39,14 +39,14 @@ def plane_to_world(size: float):
 def _integrator_dict(scene: Scene) -> dict:
     illumination = scene.illumination
     sampling = scene.sampling
-    entry = {"type": INTEGRATOR, "bins": int(sampling.count), "start_opl": float(sampling.start),
-             "bin_width_opl": float(sampling.period), "waveform": illumination.waveform,
+    entry = {"type": INTEGRATOR, "bins": int(sampling.count), "start_opl": float(sampling.start_opl),
+             "bin_width_opl": float(sampling.bin_width_opl), "waveform": illumination.waveform,
              "plane_to_world": plane_to_world(scene.size),
              "source_position": [float(v) for v in scene.source]}
     # The plugin builds its waveform with the same make_waveform and period, so
     # passing the scene's own fields (defaults left unset) gives the same pulse.
     if illumination.waveform == "square":
-        entry["pulse_width"] = float(make_waveform(illumination, sampling.period).duration)
+        entry["pulse_width"] = float(make_waveform(illumination, sampling.bin_width_opl).duration)
     elif illumination.waveform == "butterworth":
         for name in ("cutoff", "duration", "order"):
             value = getattr(illumination, name)

@@ -105,12 +105,12 @@ def scene_fingerprint(scene: Scene) -> str:
     The attenuation and noise settings are left out: the renderer always
     renders physical transport, noiselessly.
     """
-    waveform = make_waveform(scene.illumination, scene.sampling.period)
+    waveform = make_waveform(scene.illumination, scene.sampling.bin_width_opl)
     description = {
         "size": repr(float(scene.size)), "pixels": int(scene.pixels),
         "source": [repr(float(v)) for v in scene.source],
         "sensors": [[repr(float(v)) for v in p] for p in scene.sensors],
-        "sampling": [repr(float(scene.sampling.period)), repr(float(scene.sampling.start)),
+        "sampling": [repr(float(scene.sampling.bin_width_opl)), repr(float(scene.sampling.start_opl)),
                      int(scene.sampling.count)],
         "waveform": waveform.description,
     }
@@ -249,7 +249,7 @@ def render(scene: Scene, *, spp: int, seed: int = 0, out_dir: str | Path | None 
         sums, squares, done = _load_state(state_path, seed, fingerprint, shape, variant)
         if done > spp:
             raise ValueError(f"resume: {state_path} already holds {done} samples, more than spp = {spp}")
-    waveform = make_waveform(scene.illumination, scene.sampling.period)
+    waveform = make_waveform(scene.illumination, scene.sampling.bin_width_opl)
     totals = (sums, squares, done)
 
     def checkpoint():
@@ -257,7 +257,7 @@ def render(scene: Scene, *, spp: int, seed: int = 0, out_dir: str | Path | None 
         if out_dir is None or done < 2:
             return
         _save_state(state_path, sums, squares, done, seed, fingerprint, variant)
-        meta = {"start_opl": float(scene.sampling.start), "period_opl": float(scene.sampling.period),
+        meta = {"start_opl": float(scene.sampling.start_opl), "period_opl": float(scene.sampling.bin_width_opl),
                 "samples": int(done), "seed": seed, "attenuation": "lambertian",
                 "illumination": waveform.description, "waveform": waveform.name,
                 "variant": variant, "kind": "render", "requested_samples": spp,

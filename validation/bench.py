@@ -40,7 +40,7 @@ RADIUS = 1e-3   # mitransient's irradiancemeter sphere, metres
 def plane_scene() -> Scene:
     """1 m x 1 m plane, reflectance 0.5, source 1 m above its centre, one off-centre sensor."""
     return Scene(name="plane 1x1", size=1.0, pixels=1, reflectance=0.5, source=(0.5, 0.5, 1.0),
-                 sensors=[(0.8, 0.3, 1.0)], sampling=Sampling(period=0.05, start=1.5, count=40))
+                 sensors=[(0.8, 0.3, 1.0)], sampling=Sampling(bin_width_opl=0.05, start_opl=1.5, count=40))
 
 
 # Runs in a subprocess so that mitransient's plugins never load into our process.
@@ -90,7 +90,7 @@ def run_mitransient(sampling: Sampling, samples: int, variant: str = "llvm_ad_mo
     if importlib.util.find_spec("mitransient") is None:
         raise RuntimeError("mitransient not installed (pip install -e .[bench])")
     done = subprocess.run([sys.executable, "-c", _MITRANSIENT, variant, str(samples), str(sampling.count),
-                           str(sampling.start - 2 * RADIUS / 3), str(sampling.period), str(RADIUS)],
+                           str(sampling.start_opl - 2 * RADIUS / 3), str(sampling.bin_width_opl), str(RADIUS)],
                           capture_output=True, text=True, timeout=1800)
     if done.returncode != 0:
         raise RuntimeError("mitransient failed: " + " ".join(done.stderr.strip().splitlines()[-1:]))
@@ -144,7 +144,7 @@ def speed_against_error(out: str | Path, *, powers=range(16, 27, 2)) -> dict:
                      "seconds": run["seconds"], "error": float(np.linalg.norm(estimate - reference) / norm),
                      "error_kind": "relative L2"})
     lines = [f"Scene: {scene.name} (source 1 m above the centre, one off-centre sensor, "
-             f"{scene.sampling.count} bins of {scene.sampling.period} m).", "",
+             f"{scene.sampling.count} bins of {scene.sampling.bin_width_opl} m).", "",
              "| method | setting | wall time (s) | error | error measure |", "|---|---|---|---|---|"]
     lines += [f"| {r['method']} | {r['setting']} | {r['seconds']:.4f} | {r['error']:.2e} | {r['error_kind']} |"
               for r in rows]

@@ -29,8 +29,8 @@ def _load(scene_path: str | None):
 def _scene_meta(scene, waveform) -> dict:
     return {
         "scene": scene.name,
-        "start_opl": scene.sampling.start,
-        "period_opl": scene.sampling.period,
+        "start_opl": scene.sampling.start_opl,
+        "period_opl": scene.sampling.bin_width_opl,
         "attenuation": scene.attenuation,
         "illumination": waveform.name,
         "illumination_detail": waveform.description,
@@ -51,7 +51,7 @@ def command_forward(args) -> int:
     scene = _load(args.scene)
     if args.tolerance is not None:
         scene = scene.replace(tolerance=args.tolerance)
-    waveform = make_waveform(scene.illumination, scene.sampling.period)
+    waveform = make_waveform(scene.illumination, scene.sampling.bin_width_opl)
     started = time.perf_counter()
     matrix = system_matrix(scene, progress=not args.quiet)
     assembly = time.perf_counter() - started
@@ -148,7 +148,7 @@ def command_run(args) -> int:
         scene = scene.replace(noise=None)   # the cross-check compares noiseless model and render
     out = Path(args.out)
     check = check_scene(scene, spp=args.spp, seed=args.seed, progress=not args.quiet)
-    waveform = make_waveform(scene.illumination, scene.sampling.period)
+    waveform = make_waveform(scene.illumination, scene.sampling.bin_width_opl)
     meta = _scene_meta(scene, waveform)
     write_transient(out / "model", check.model, meta | {"kind": "model", "samples": 0, "seed": 0})
     write_transient(out / "render", check.render, meta | {"kind": "render", "samples": args.spp,

@@ -35,7 +35,7 @@ class Corner:
 
 def default_corner() -> Corner:
     return Corner(name="corner", source=(0.6, 0.4, 0.7), sensors=((0.5, 0.6, 0.8), (0.3, 0.2, 0.4)),
-                  albedo=0.5, sampling=Sampling(period=0.05, start=0.6, count=60))
+                  albedo=0.5, sampling=Sampling(bin_width_opl=0.05, start_opl=0.6, count=60))
 
 
 def _planes(corner: Corner) -> list[Scene]:
@@ -60,7 +60,7 @@ def _scene_dict(corner: Corner, max_depth: int) -> dict:
     entries = {
         "type": "scene",
         "integrator": {"type": "transient_opl", "bins": corner.sampling.count,
-                       "start_opl": corner.sampling.start, "bin_width_opl": corner.sampling.period,
+                       "start_opl": corner.sampling.start_opl, "bin_width_opl": corner.sampling.bin_width_opl,
                        "max_depth": max_depth},
         "floor": {"type": "rectangle", "to_world": mi.ScalarTransform4f().translate([0.5, 0.5, 0]).scale(
             [0.5, 0.5, 1]), "bsdf": {"type": "diffuse", "reflectance": corner.albedo}},

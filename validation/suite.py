@@ -47,7 +47,7 @@ def hard_cases(pixels: int = 10, waveform: str = "impulse") -> dict[str, Scene]:
     def scene(name, source, sensors, period, start, count, m=pixels):
         return Scene(name=name, size=1.0, pixels=m, reflectance=builtin_reflectance(m),
                      source=source, sensors=sensors, illumination=illumination,
-                     sampling=Sampling(period=period, start=start, count=count))
+                     sampling=Sampling(bin_width_opl=period, start_opl=start, count=count))
 
     cases = {}
     cases["low"] = scene("low", (0.3, 0.4, 1e-3), [(0.7, 0.6, 1e-3), (0.31, 0.41, 1e-3)],

@@ -292,7 +292,7 @@ def sweep_from_dict(data: dict, base_dir: str | Path = ".") -> Sweep:
         raise SceneError("grid", "expected a table of \"table.key\" = [values]")
     grid = {}
     for key, values in grid_table.items():
-        # TOML turns an unquoted sampling.period into a nested table: accept both spellings.
+        # TOML turns an unquoted sampling.bin_width_opl into a nested table: accept both spellings.
         flat = _flatten(key, values)
         for dotted, value in flat.items():
             if dotted.count(".") != 1 or dotted == "name":
@@ -316,7 +316,7 @@ def sweep_from_dict(data: dict, base_dir: str | Path = ".") -> Sweep:
 
 
 def _flatten(key: str, value: Any) -> dict:
-    # An unquoted ``sampling.period = [...]`` is a nested TOML table; a quoted
+    # An unquoted ``sampling.bin_width_opl = [...]`` is a nested TOML table; a quoted
     # ``"sampling.period" = [...]`` a flat key. Both mean the same.
     if "." not in key and isinstance(value, dict):
         return {f"{key}.{inner}": v for inner, v in value.items()}
@@ -581,8 +581,8 @@ def _finish_item(state: _ItemState, sweep: Sweep, out_dir: Path) -> dict:
     sums, squares = _merge(state)
     samples = sweep.samples
     mean, stderr = sums / samples, standard_error(sums, squares, samples)
-    waveform = make_waveform(scene.illumination, scene.sampling.period)
-    meta = {"start_opl": float(scene.sampling.start), "period_opl": float(scene.sampling.period),
+    waveform = make_waveform(scene.illumination, scene.sampling.bin_width_opl)
+    meta = {"start_opl": float(scene.sampling.start_opl), "period_opl": float(scene.sampling.bin_width_opl),
             "samples": int(samples), "seed": sweep.seed, "attenuation": "lambertian",
             "illumination": waveform.description, "waveform": waveform.name, "variant": state.variant,
             "kind": "render", "requested_samples": int(samples), "scene_fingerprint": state.fingerprint,
@@ -597,7 +597,7 @@ def _finish_item(state: _ItemState, sweep: Sweep, out_dir: Path) -> dict:
            "finished_after_seconds": time.perf_counter() - state.started, "variant": state.variant,
            "agrees": None}
     if state.model is not None:
-        model_meta = {"start_opl": float(scene.sampling.start), "period_opl": float(scene.sampling.period),
+        model_meta = {"start_opl": float(scene.sampling.start_opl), "period_opl": float(scene.sampling.bin_width_opl),
                       "samples": 0, "seed": 0, "attenuation": scene.attenuation,
                       "illumination": waveform.description, "waveform": waveform.name, "kind": "model",
                       "tolerance": scene.tolerance, "parameters": item.parameters}

@@ -37,7 +37,7 @@ from .isochrone import (LAMBERTIAN, PAPER, TMIN, ellipse, first_arrival_point, m
                         path_length_at, rectangle_range, segment_minimum)
 from .quadrature import GAUSS_WEIGHTS, KRONROD_NODES, KRONROD_WEIGHTS, pixel_isochrone_integral
 from .scene import Scene, SceneError
-from .waveforms import Waveform, make_waveform
+from .waveforms import cumulative_scalar, make_waveform
 
 __all__ = ["system_matrix", "forward", "count_entries", "QuadratureWarning"]
 
@@ -50,46 +50,6 @@ _MAX_PIECES = 4000  # rule applications per τ-piece before the rest is accepted
 
 class QuadratureWarning(RuntimeWarning):
     """Some quadrature pieces stopped refining before meeting the tolerance."""
-
-
-def _pack_waveform(waveform: Waveform) -> np.ndarray:
-    """[code, duration, constant, terms, decay..., frequency..., cos..., sin...,
-    series limit, series length, series...]."""
-    terms = len(waveform.decay)
-    series = waveform.series if waveform.series is not None else np.zeros(0)
-    return np.concatenate([[waveform.code, waveform.duration, waveform.constant, terms],
-                           waveform.decay, waveform.frequency, waveform.cos_coefficient,
-                           waveform.sin_coefficient, [waveform.series_limit, len(series)],
-                           series]).astype(np.float64)
-
-
-@njit(cache=True)
-def _cumulative(packed, u):
-    """S(u) = ∫_{-∞}^u s, the waveform's cumulative (see analytic.waveforms)."""
-    code = packed[0]
-    duration = packed[1]
-    if code == 0.0:
-        return 1.0 if u > 0.0 else 0.0
-    if code == 1.0:
-        return min(max(u, 0.0), duration)
-    if u <= 0.0:
-        return 0.0
-    if u > duration:
-        u = duration
-    terms = int(packed[3])
-    tail = 4 + 4 * terms
-    if u < packed[tail]:   # Taylor series near 0, where the exponentials cancel
-        value = 0.0
-        for m in range(int(packed[tail + 1]) - 1, -1, -1):
-            value = value * u + packed[tail + 2 + m]
-        return value
-    value = packed[2]
-    for i in range(terms):
-        decay = packed[4 + i]
-        frequency = packed[4 + terms + i]
-        value += math.exp(decay * u) * (packed[4 + 2 * terms + i] * math.cos(frequency * u)
-                                        + packed[4 + 3 * terms + i] * math.sin(frequency * u))
-    return value
 
 
 @njit(cache=True)
@@ -108,9 +68,9 @@ def _pixel_bins(frame, x0, x1, y0, y1, start, period, count, duration):
 
 
 @njit(cache=True)
-def _pixel_breakpoints(frame, x0, x1, y0, y1, start, period, first, bins, packed):
+def _pixel_breakpoints(frame, x0, x1, y0, y1, start, period, first, bins, terms):
     """Sorted τ where the pixel's integrand stops being smooth, within its τ-range."""
-    duration = packed[1]
+    duration = terms.duration
     low, high = rectangle_range(frame, x0, x1, y0, y1)
     low = max(low, start - duration)
     high = min(high, start + (first + bins) * period)
@@ -160,10 +120,10 @@ def _pixel_breakpoints(frame, x0, x1, y0, y1, start, period, first, bins, packed
 
 
 @njit(cache=True)
-def _pixel_entries(frame, x0, x1, y0, y1, start, period, first, bins, packed, rtol, out):
+def _pixel_entries(frame, x0, x1, y0, y1, start, period, first, bins, terms, rtol, out):
     """Fill out[i] = A[(k, first + i), p] for one (sensor, pixel); returns #unconverged pieces."""
-    duration = packed[1]
-    breakpoints = _pixel_breakpoints(frame, x0, x1, y0, y1, start, period, first, bins, packed)
+    duration = terms.duration
+    breakpoints = _pixel_breakpoints(frame, x0, x1, y0, y1, start, period, first, bins, terms)
     angles = np.empty(8)
     arc_stack = np.empty((128, 2))
     segments = np.empty((_OUTER_STACK, 2))
@@ -214,7 +174,7 @@ def _pixel_entries(frame, x0, x1, y0, y1, start, period, first, bins, packed, rt
                     failures += 1
                 response[j] = value * dtau_dv
                 for i in range(nb + 1):
-                    cumulative[j, i] = _cumulative(packed, start + (lo_bin + i) * period - tau)
+                    cumulative[j, i] = cumulative_scalar(terms, start + (lo_bin + i) * period - tau)
             accept = True
             for i in range(nb):
                 k_sum = 0.0
@@ -274,7 +234,7 @@ def _count_bins(source, sensors, mode, size, pixels, start, period, count, durat
 
 
 @njit(parallel=True, cache=True)
-def _fill(source, sensors, mode, size, pixels, start, period, count, packed, rtol,
+def _fill(source, sensors, mode, size, pixels, start, period, count, terms, rtol,
           firsts, counts, offsets, rows, data):
     sensor_count = sensors.shape[0]
     failures = 0
@@ -292,7 +252,7 @@ def _fill(source, sensors, mode, size, pixels, start, period, count, packed, rto
         out[:] = 0.0
         for i in range(bins):
             rows[offset + i] = k * count + first + i
-        failures += _pixel_entries(frame, x0, x1, y0, y1, start, period, first, bins, packed, rtol, out)
+        failures += _pixel_entries(frame, x0, x1, y0, y1, start, period, first, bins, terms, rtol, out)
     return failures
 
 
@@ -392,7 +352,7 @@ def system_matrix(scene: Scene, *, tolerance: float | None = None, memory_limit:
         raise SceneError("model.tolerance", f"must be in (0, 0.1), got {tolerance}")
     firsts, counts = count_entries(scene, memory_limit=memory_limit)
     waveform, mode, source, sensors = _prepare(scene)
-    packed = _pack_waveform(waveform)
+    terms = waveform.terms
     sampling = scene.sampling
     offsets = np.zeros(len(counts) + 1, dtype=np.int64)
     np.cumsum(counts, out=offsets[1:])
@@ -416,7 +376,7 @@ def system_matrix(scene: Scene, *, tolerance: float | None = None, memory_limit:
         sub_rows = np.empty(int(sub_offsets[-1]), dtype=np.int64)
         sub_data = np.empty(int(sub_offsets[-1]), dtype=np.float64)
         failures += _fill(source, sensors[k:k + 1], mode, scene.size, scene.pixels, sampling.start_opl,
-                          sampling.bin_width_opl, sampling.count, packed, tolerance * 0.1,
+                          sampling.bin_width_opl, sampling.count, terms, tolerance * 0.1,
                           sub_firsts, sub_counts, sub_offsets, sub_rows, sub_data)
         sub_rows += k * sampling.count
         # scatter this sensor's runs into their slots of the pixel-major layout

@@ -20,14 +20,62 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
+from numba import njit
 
 from .scene import Illumination, Sampling
 
-__all__ = ["Waveform", "make_waveform", "IMPULSE", "SQUARE", "EXPONENTIAL_SUM"]
+__all__ = ["Waveform", "WaveformTerms", "make_waveform", "cumulative_scalar", "IMPULSE", "SQUARE",
+           "EXPONENTIAL_SUM"]
 
+#: How S(u) is evaluated (``Waveform.kind``).
 IMPULSE, SQUARE, EXPONENTIAL_SUM = 0, 1, 2
+
+
+class WaveformTerms(NamedTuple):
+    """A waveform's closed form as a record that compiled (Numba) code accepts.
+
+    S(u) = 0 for u <= 0; for 0 < u: ``kind`` IMPULSE: 1; SQUARE: min(u,
+    duration); EXPONENTIAL_SUM: with v = min(u, duration), the Taylor
+    series Σ_m series[m] v^m when v < series_limit, else
+    constant + Σ_i e^{decay_i v} (cos_coefficient_i cos(frequency_i v)
+    + sin_coefficient_i sin(frequency_i v)).
+    """
+
+    kind: int
+    duration: float
+    constant: float
+    decay: np.ndarray
+    frequency: np.ndarray
+    cos_coefficient: np.ndarray
+    sin_coefficient: np.ndarray
+    series: np.ndarray
+    series_limit: float
+
+
+@njit(cache=True)
+def cumulative_scalar(terms, u):
+    """S(u) of :class:`WaveformTerms` at one path length u (metres), compiled."""
+    if terms.kind == IMPULSE:
+        return 1.0 if u > 0.0 else 0.0
+    if terms.kind == SQUARE:
+        return min(max(u, 0.0), terms.duration)
+    if u <= 0.0:
+        return 0.0
+    if u > terms.duration:
+        u = terms.duration
+    if u < terms.series_limit:   # Taylor series near 0, where the exponentials cancel
+        value = 0.0
+        for m in range(terms.series.size - 1, -1, -1):
+            value = value * u + terms.series[m]
+        return value
+    value = terms.constant
+    for i in range(terms.decay.size):
+        value += math.exp(terms.decay[i] * u) * (terms.cos_coefficient[i] * math.cos(terms.frequency[i] * u)
+                                                 + terms.sin_coefficient[i] * math.sin(terms.frequency[i] * u))
+    return value
 
 
 @dataclass(frozen=True, eq=False)
@@ -38,7 +86,7 @@ class Waveform:
     ----------
     name : str
         "impulse", "square" or "butterworth".
-    code : int
+    kind : int
         IMPULSE, SQUARE or EXPONENTIAL_SUM: how ``cumulative`` is evaluated.
     duration : float
         Support [0, duration], metres of path length (0 for the impulse).
@@ -60,7 +108,7 @@ class Waveform:
     """
 
     name: str
-    code: int
+    kind: int
     duration: float
     breakpoints: tuple
     decay: np.ndarray
@@ -75,9 +123,9 @@ class Waveform:
     def cumulative(self, u) -> np.ndarray:
         """S(u) = ∫_{-∞}^u s(t) dt, u in metres of path length."""
         u = np.asarray(u, dtype=np.float64)
-        if self.code == IMPULSE:
+        if self.kind == IMPULSE:
             return (u > 0).astype(np.float64)
-        if self.code == SQUARE:
+        if self.kind == SQUARE:
             return np.clip(u, 0.0, self.duration)
         clipped = np.clip(u, 0.0, self.duration)
         value = np.full(clipped.shape, self.constant)
@@ -89,13 +137,21 @@ class Waveform:
             value = np.where(small, np.polynomial.polynomial.polyval(clipped, self.series), value)
         return np.where(u <= 0, 0.0, value)
 
+    @property
+    def terms(self) -> WaveformTerms:
+        """The closed form as a :class:`WaveformTerms` record for compiled code."""
+        series = self.series if self.series is not None else np.zeros(0)
+        return WaveformTerms(self.kind, float(self.duration), float(self.constant), self.decay,
+                             self.frequency, self.cos_coefficient, self.sin_coefficient, series,
+                             float(self.series_limit))
+
     def intensity(self, t) -> np.ndarray:
         """s(t), radiant intensity in W/sr per unit source (not defined for the impulse)."""
-        if self.code == IMPULSE:
+        if self.kind == IMPULSE:
             raise ValueError("the impulse has no pointwise intensity; use cumulative()")
         t = np.asarray(t, dtype=np.float64)
         inside = (t >= 0) & (t <= self.duration)
-        if self.code == SQUARE:
+        if self.kind == SQUARE:
             return inside.astype(np.float64)
         value = np.zeros(t.shape)
         for a, w, b, c in zip(self.decay, self.frequency, self.cos_coefficient, self.sin_coefficient):

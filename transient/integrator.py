@@ -74,12 +74,12 @@ def cumulative(waveform: Waveform, u):
         S(u): dimensionless for the impulse (a step), metres for the others.
     """
     zero = mi.Float64(0.0)
-    if waveform.code == IMPULSE:
+    if waveform.kind == IMPULSE:
         return dr.select(u > 0.0, mi.Float64(1.0), zero)
-    if waveform.code == SQUARE:
+    if waveform.kind == SQUARE:
         return dr.clip(u, 0.0, waveform.duration)
-    if waveform.code != EXPONENTIAL_SUM:
-        raise ValueError(f"waveform {waveform.name!r}: unknown closed form {waveform.code}")
+    if waveform.kind != EXPONENTIAL_SUM:
+        raise ValueError(f"waveform {waveform.name!r}: unknown closed form {waveform.kind}")
     clipped = dr.clip(u, 0.0, waveform.duration)
     value = mi.Float64(float(waveform.constant))
     for a, w, b, c in _real_terms(waveform):

@@ -11,11 +11,9 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["ImageError", "builtin_reflectance", "read_reflectance"]
+from .errors import ImageError
 
-
-class ImageError(ValueError):
-    """A reflectance image that cannot be used (unreadable, wrong size, ...)."""
+__all__ = ["builtin_reflectance", "read_reflectance"]
 
 
 def builtin_reflectance(pixels: int) -> np.ndarray:

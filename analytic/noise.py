@@ -4,9 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from .errors import SceneError
 from .scene import Noise
 
-__all__ = ["add_noise"]
+__all__ = ["add_noise", "MAX_EXPECTED_PHOTONS"]
+
+#: Largest expected count per sample that Poisson sampling handles exactly
+#: (NumPy's limit is about 9.2e18; beyond 1e15 the counts' spacing exceeds 1).
+MAX_EXPECTED_PHOTONS = 1e15
 
 
 def add_noise(y: np.ndarray, noise: Noise, rng: np.random.Generator | None = None) -> np.ndarray:
@@ -18,8 +23,9 @@ def add_noise(y: np.ndarray, noise: Noise, rng: np.random.Generator | None = Non
         Noiseless samples, any shape, units of y.
     noise : Noise
         ``gaussian``: y + σ ε with ε ~ N(0, 1) i.i.d.;
-        ``poisson``: Poisson(photons · y) / photons (photon counting at low
-        flux; y must be >= 0).
+        ``poisson``: Poisson(photons · max(y, 0)) / photons (photon counting
+        at low flux; a negative y, from a pulse's undershoot, is light no
+        modulator emits and expects no photons).
     rng : numpy.random.Generator, optional
         Generator; default ``numpy.random.default_rng(noise.seed)``.
 
@@ -27,11 +33,22 @@ def add_noise(y: np.ndarray, noise: Noise, rng: np.random.Generator | None = Non
     -------
     numpy.ndarray
         float64, same shape as y.
+
+    Raises
+    ------
+    SceneError
+        ``noise.photons`` so large that a sample expects more than
+        :data:`MAX_EXPECTED_PHOTONS` photons.
     """
     rng = np.random.default_rng(noise.seed) if rng is None else rng
     y = np.asarray(y, dtype=np.float64)
     if noise.kind == "gaussian":
         return y + noise.sigma * rng.standard_normal(y.shape)
-    if np.any(y < 0):
-        raise ValueError("Poisson noise needs non-negative samples")
-    return rng.poisson(noise.photons * y).astype(np.float64) / noise.photons
+    expected = noise.photons * np.clip(y, 0.0, None)
+    largest = float(np.max(expected)) if expected.size else 0.0
+    if not largest <= MAX_EXPECTED_PHOTONS:
+        raise SceneError("noise.photons", f"{noise.photons:g} photons per unit of y make a sample "
+                                          f"expect {largest:.3g} photons, over the "
+                                          f"{MAX_EXPECTED_PHOTONS:g} Poisson sampling handles; "
+                                          f"use fewer photons (or Gaussian noise)")
+    return rng.poisson(expected).astype(np.float64) / noise.photons

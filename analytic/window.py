@@ -1,0 +1,118 @@
+"""The time window: which path lengths the plane sends to the sensors, and how much light a window holds.
+
+Path length d(x) = |x − p_s| + |x − p_k| is convex on the plane, so its
+range over the plane is exact: the maximum at a corner, the minimum at the
+first-arrival point or on an edge (:func:`analytic.isochrone.rectangle_range`).
+A window [t0, t0 + N T) holds all the light when it covers
+[min d, max d + pulse duration]; otherwise the share it holds is the ratio of
+two one-bin models, since the box prefilter is additive over adjacent bins:
+the bin that is the whole window over the bin that covers every path.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+
+from .isochrone import LAMBERTIAN, make_frame, rectangle_range
+from .scene import Sampling, Scene
+
+__all__ = ["response_range", "covering_sampling", "window_share", "warn_if_cut", "WindowWarning", "FULL_SHARE"]
+
+#: The share of the light a window must hold not to be warned about.
+FULL_SHARE = 0.999
+
+
+class WindowWarning(UserWarning):
+    """The time window cuts the response: some of the light falls outside its bins."""
+
+
+def response_range(scene: Scene) -> tuple[float, float]:
+    """(first, last) path length from the source over the plane to any sensor, metres (exact)."""
+    source = np.asarray(scene.source, dtype=np.float64)
+    low, high = math.inf, -math.inf
+    for sensor in np.asarray(scene.sensors, dtype=np.float64):
+        first, last = rectangle_range(make_frame(source, sensor, LAMBERTIAN), 0.0, scene.size,
+                                      0.0, scene.size)
+        low, high = min(low, float(first)), max(high, float(last))
+    return low, high
+
+
+def covering_sampling(scene: Scene, bin_width_opl: float, *, margin: int = 0) -> Sampling:
+    """Bins of width T holding every path length and the pulse's tail, on the grid t0 = j T.
+
+    Parameters
+    ----------
+    scene : Scene
+        Geometry and illumination.
+    bin_width_opl : float
+        T, metres of path length.
+    margin : int
+        Empty bins added before the first arrival and after the last light.
+    """
+    from .waveforms import make_waveform
+
+    low, high = response_range(scene)
+    longest = high + make_waveform(scene.illumination, bin_width_opl).duration
+    start = (math.floor(low / bin_width_opl) - margin) * bin_width_opl
+    count = int(math.floor((longest - start) / bin_width_opl)) + 1 + margin
+    return Sampling(bin_width_opl=bin_width_opl, start_opl=start, count=count)
+
+
+def window_share(scene: Scene) -> float:
+    """Share of the light reaching the sensors that the scene's window holds.
+
+    1.0 exactly when the window covers every path and the pulse's tail;
+    otherwise Σ_k y_k(window) / Σ_k y_k(all), two one-bin models of the
+    scene's own reflectance and attenuation.
+    """
+    from .system import forward
+    from .waveforms import make_waveform
+
+    sampling = scene.sampling
+    low, high = response_range(scene)
+    duration = make_waveform(scene.illumination, sampling.bin_width_opl).duration
+    end = sampling.start_opl + sampling.count * sampling.bin_width_opl
+    if sampling.start_opl <= low and end >= high + duration:
+        return 1.0
+    if end <= low or sampling.start_opl >= high + duration:
+        return 0.0
+    # one bin on the same edges' grid, so that both models integrate the same pulse
+    width = sampling.bin_width_opl
+    first = math.floor((min(low, sampling.start_opl) - sampling.start_opl) / width)
+    last = math.ceil((max(high + duration, end) - sampling.start_opl) / width)
+    everything = Sampling(bin_width_opl=(last - first) * width,
+                          start_opl=sampling.start_opl + first * width, count=1)
+    window = Sampling(bin_width_opl=sampling.count * width, start_opl=sampling.start_opl, count=1)
+    # the one-bin pulses differ from the scene's (their default widths follow the period): pin them
+    illumination = _pinned(scene, width)
+    total = float(np.sum(forward(scene.replace(sampling=everything, illumination=illumination))))
+    held = float(np.sum(forward(scene.replace(sampling=window, illumination=illumination))))
+    return held / total if total > 0 else 0.0
+
+
+def _pinned(scene: Scene, period: float):
+    """The scene's illumination with its period-dependent defaults written out."""
+    from .scene import Illumination
+    from .waveforms import make_waveform
+
+    illumination = scene.illumination
+    waveform = make_waveform(illumination, period)
+    if waveform.name == "square":
+        return Illumination(waveform="square", width=waveform.duration)
+    if waveform.name == "butterworth":
+        return Illumination(waveform="butterworth", cutoff=waveform.cutoff, duration=waveform.duration,
+                            order=waveform.order)
+    return illumination
+
+
+def warn_if_cut(scene: Scene, share: float) -> None:
+    """One-line :class:`WindowWarning` when the window holds less than :data:`FULL_SHARE`."""
+    if share < FULL_SHARE:
+        low, high = response_range(scene)
+        warnings.warn(f"the window [{scene.sampling.start_opl:g}, "
+                      f"{scene.sampling.start_opl + scene.sampling.count * scene.sampling.bin_width_opl:g}) m "
+                      f"holds {100 * share:.2f} % of the light (paths span [{low:.4g}, {high:.4g}] m plus "
+                      f"the pulse); widen [sampling] start/count", WindowWarning, stacklevel=2)

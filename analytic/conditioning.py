@@ -21,17 +21,13 @@ Reported per case:
 from __future__ import annotations
 
 import math
-from pathlib import Path
-
 import numpy as np
 
-from .isochrone import LAMBERTIAN, make_frame, rectangle_range
-from .scene import Illumination, Sampling, Scene, sensor_grid
-from .waveforms import make_waveform
+from .scene import Illumination, Scene, sensor_grid
 from .system import system_matrix
+from .window import covering_sampling
 
-__all__ = ["singular_values", "conditioning_summary", "covering_sampling", "scene_for",
-           "conditioning_table", "plot_conditioning"]
+__all__ = ["singular_values", "conditioning_summary", "scene_for", "conditioning_table"]
 
 
 def singular_values(matrix, *, memory_limit: int = 2 * 2**30) -> np.ndarray:
@@ -84,24 +80,6 @@ def conditioning_summary(values: np.ndarray, unknowns: int, rows: int, *, sigma:
     }
 
 
-def covering_sampling(scene: Scene, period: float) -> Sampling:
-    """Bins of width ``period`` holding every path length and the pulse's tail.
-
-    From the earliest first arrival over the plane to the latest last one
-    (exact, :func:`analytic.isochrone.rectangle_range`) plus the waveform's
-    duration, so no light leaves the window.
-    """
-    low, high = np.inf, -np.inf
-    for sensor in scene.sensors:
-        frame = make_frame(np.asarray(scene.source, float), np.asarray(sensor, float), LAMBERTIAN)
-        first, last = rectangle_range(frame, 0.0, scene.size, 0.0, scene.size)
-        low, high = min(low, first), max(high, last)
-    longest = high + make_waveform(scene.illumination, period).duration
-    start = math.floor(low / period) * period
-    count = int(math.floor((longest - start) / period)) + 1
-    return Sampling(bin_width_opl=period, start_opl=start, count=count)
-
-
 def scene_for(base: Scene, *, extent: float, period: float, illumination: Illumination | None = None,
               attenuation: str | None = None, grid=(4, 4)) -> Scene:
     """The base scene with a ``grid`` array of extent W centred above the source at its height.
@@ -114,7 +92,7 @@ def scene_for(base: Scene, *, extent: float, period: float, illumination: Illumi
         Array extent W, metres.
     period : float
         Bin width T, metres of path length (bins cover every path, see
-        :func:`covering_sampling`).
+        :func:`analytic.window.covering_sampling`).
     illumination : Illumination, optional
         Default: the base scene's.
     attenuation : {"lambertian", "paper"}, optional
@@ -166,45 +144,3 @@ def conditioning_table(base: Scene, *, extents=(0.5, 1.0, 2.0, 4.0), periods=(0.
         row["singular_values"] = values
         table.append(row)
     return table
-
-
-def plot_conditioning(path, table: list[dict], *, title: str = "") -> Path:
-    """Singular-value spectra (one curve per (W, T)) and effective rank against W.
-
-    Parameters
-    ----------
-    path : str or Path
-        PNG to write (atomically).
-    table : list of dict
-        From :func:`conditioning_table`.
-    title : str
-        Figure title.
-    """
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from .io import save_figure
-
-    figure, (left, right) = plt.subplots(1, 2, figsize=(11, 4))
-    periods = sorted({row["period"] for row in table})
-    for i, period in enumerate(periods):
-        rows = sorted((r for r in table if r["period"] == period), key=lambda r: r["extent"])
-        for j, row in enumerate(rows):
-            left.semilogy(row["singular_values"], color=f"C{i}", alpha=0.4 + 0.6 * j / max(len(rows) - 1, 1),
-                          lw=1, label=f"T = {period:g}, W = {row['extent']:g}")
-        right.plot([r["extent"] for r in rows], [r["effective_rank"] for r in rows], "o-",
-                   color=f"C{i}", label=f"T = {period:g} m")
-    if table:
-        left.axhline(table[0]["sigma"], color="k", ls="--", lw=0.8, label=f"σ = {table[0]['sigma']:g}")
-    left.set_xlabel("index i", fontsize=8)
-    left.set_ylabel("singular value s_i of A", fontsize=8)
-    left.legend(fontsize=6, ncol=2)
-    right.set_xlabel("array extent W (m)", fontsize=8)
-    right.set_ylabel("effective rank: #{s_i > σ}", fontsize=8)
-    right.legend(fontsize=8)
-    if title:
-        figure.suptitle(title, fontsize=10)
-    figure.tight_layout()
-
-    return save_figure(figure, path, dpi=110)

@@ -1,0 +1,460 @@
+"""Image recovery: Laplacian-regularised least squares with a λ rule (paper Sections IV, VI).
+
+    f_λ = argmin_f ||A f - y||² + λ ||D f||²,
+
+D the 5-point discrete Laplacian with reflecting (Neumann) boundaries
+(:mod:`.laplacian`). D's null space is the constant images and
+A · 1 ≠ 0 for any scene whose sensors see the plane, so the problem has a
+unique solution for every λ > 0 even when A itself is rank-deficient.
+
+Two solvers, neither forms AᵀA (which would square the condition number):
+
+``"svd"`` (exact; small and medium problems)
+    Write f = C c with C the orthonormal inverse 2-D DCT-II, which
+    diagonalises D: ||D f||² = Σ μ_ij² c_ij². The constant coefficient c_00
+    is not penalised and is eliminated by projecting the data orthogonally
+    to A · (constant image); the other coefficients are scaled, z = μ c, to
+    give a standard-form problem ||P (B z - y)||² + λ ||z||² with
+    B = A C diag(1/μ). One thin SVD of the dense P B (zero rows of A
+    dropped) then gives, for every λ in closed form, the solution, the
+    residual, the seminorm, GCV's trace and the L-curve's curvature
+    (filter factors φ_i = s_i² / (s_i² + λ), all bounded for λ > 0).
+``"lsqr"`` (large problems, matrix-free)
+    :func:`scipy.sparse.linalg.lsqr` on the stacked system
+    [A C S; √λ W] v = [y; 0] in the same variables v = (c_00, z), where
+    S = diag(1, 1/μ) and W zeroes c_00: the operator is applied with sparse
+    A and fast DCTs, never densified, and the DCT scaling makes it far better
+    conditioned than [A; √λ D] in pixel variables (the same minimiser).
+    The λ sweep runs from large λ to small with warm starts. GCV's trace is
+    then estimated by Hutchinson's method (fixed-seed Rademacher probes).
+
+``method="auto"`` takes ``"svd"`` when its dense matrices fit
+``memory_limit`` and ``"lsqr"`` otherwise.
+
+λ is chosen by a rule of :mod:`.rules`. Beyond the paper,
+``regularizer="tv"`` hands over to :func:`.tv.reconstruct_tv`.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import scipy.sparse
+import scipy.sparse.linalg
+
+from .laplacian import dct2, idct2, laplacian_eigenvalues
+from .result import (Problem, RankDeficiencyWarning, Reconstruction, parse_rule, record_warning)
+from .rules import RULES, choose_iterative, choose_spectral, curvature, default_grid
+
+__all__ = ["reconstruct", "reconstruct_rules", "METHODS", "DEFAULT_MEMORY_LIMIT"]
+
+METHODS = ("auto", "svd", "lsqr")
+DEFAULT_MEMORY_LIMIT = 2 * 2**30  # bytes the dense SVD route may use
+DEFAULT_GCV_PROBES = 4
+
+
+class SpectralSolver:
+    """Closed-form Tikhonov solutions of the DCT-transformed, projected problem."""
+
+    def __init__(self, problem: Problem):
+        matrix, y, pixels = problem.matrix, problem.y, problem.pixels
+        dense = matrix.toarray() if scipy.sparse.issparse(matrix) else np.array(matrix, dtype=np.float64)
+        self.pixels = pixels
+        self.measurements = dense.shape[0]
+        live = problem.live
+        self.live_count = int(live.sum())
+        # rows that see nothing carry only noise: a constant in the residual
+        self.dead_residual = float(np.sum(y[~live] ** 2))
+        rows = dense[live].reshape(-1, pixels, pixels)
+        transformed = dct2(rows).reshape(rows.shape[0], -1)  # A C, one row at a time
+        del rows, dense
+        mu = laplacian_eigenvalues(pixels).ravel()
+        self.mu = mu[1:]
+        constant = transformed[:, 0]
+        self.constant_norm = float(np.linalg.norm(constant))
+        if self.constant_norm == 0.0:
+            raise ValueError("matrix: A · (constant image) = 0, the sensors see no light from the "
+                             "plane, so the Laplacian cannot fix the image's mean")
+        self.q = constant / self.constant_norm
+        scaled = transformed[:, 1:] / self.mu
+        del transformed
+        self.w = self.q @ scaled  # qᵀB, to recover c_00 from z
+        scaled -= np.outer(self.q, self.w)  # P B
+        y_live = y[live]
+        self.qy = float(self.q @ y_live)
+        projected = y_live - self.q * self.qy
+        u, s, vt = np.linalg.svd(scaled, full_matrices=False)
+        del scaled
+        self.s = s
+        self.vt = vt
+        self.beta = u.T @ projected
+        # the data's part outside range(P B), formed directly (no ||y||² - ||β||²
+        # cancellation when the fit is nearly exact)
+        outside = projected - u @ self.beta
+        self.outside_live = float(outside @ outside)
+        self.outside = self.outside_live + self.dead_residual
+        tol = s[0] * max(self.measurements, pixels * pixels) * np.finfo(float).eps if s.size else 0.0
+        # rank(A) = 1 (the constant) + rank(P B)
+        self.rank = 1 + int(np.sum(s > tol))
+        self.largest = float(s[0]) if s.size else 1.0
+        positive = s[s > tol]
+        self.smallest = float(positive[-1]) if positive.size else self.largest
+
+    def filters(self, lam):
+        lam = np.asarray(lam, dtype=np.float64)[..., None]
+        return self.s**2 / (self.s**2 + lam)
+
+    def squared_residual(self, lam):
+        """||A f_λ - y||² over every row."""
+        phi = self.filters(lam)
+        return np.sum(((1.0 - phi) * self.beta) ** 2, axis=-1) + self.outside
+
+    def squared_seminorm(self, lam):
+        """||D f_λ||²."""
+        lam = np.asarray(lam, dtype=np.float64)[..., None]
+        return np.sum((self.s * self.beta / (self.s**2 + lam)) ** 2, axis=-1)
+
+    def gcv(self, lam):
+        """GCV over the live rows (see :mod:`.rules`): the dead rows' residual is left out."""
+        phi = self.filters(lam)
+        trace = self.live_count - 1.0 - np.sum(phi, axis=-1)
+        live_residual = np.sum(((1.0 - phi) * self.beta) ** 2, axis=-1) + self.outside_live
+        return live_residual / np.maximum(trace, np.finfo(float).tiny) ** 2
+
+    def curvature(self, lam):
+        lam = np.asarray(lam, dtype=np.float64)
+        phi = self.filters(lam)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            g = np.where(self.s > 0, self.beta**2 / np.maximum(self.s, np.finfo(float).tiny) ** 2, 0.0)
+        rho = self.squared_residual(lam)
+        eta = np.sum(phi**2 * g, axis=-1)
+        s1 = np.sum(phi**2 * (1 - phi) * g, axis=-1)
+        s1t = -np.sum(phi**2 * (1 - phi) * (2 - 3 * phi) * g, axis=-1)
+        # t = ln λ; dρ/dt = 2 λ S1, dη/dt = -2 S1 (closed-form derivatives)
+        xt = 2 * lam * s1 / rho
+        yt = -2 * s1 / eta
+        rhot = 2 * lam * s1
+        etat = -2 * s1
+        xtt = 2 * lam * s1 / rho + 2 * lam * s1t / rho - 2 * lam * s1 * rhot / rho**2
+        ytt = -2 * s1t / eta + 2 * s1 * etat / eta**2
+        return curvature(xt, yt, xtt, ytt)
+
+    def coefficients(self, lam):
+        """DCT coefficients c (M²,) of f_λ; several λ give (len, M²)."""
+        lam = np.atleast_1d(np.asarray(lam, dtype=np.float64))
+        weights = (self.s * self.beta)[None, :] / (self.s[None, :] ** 2 + lam[:, None])
+        z = weights @ self.vt
+        c0 = (self.qy - z @ self.w) / self.constant_norm
+        return np.concatenate([c0[:, None], z / self.mu], axis=1)
+
+    def image(self, lam):
+        return idct2(self.coefficients(lam)[0].reshape(self.pixels, self.pixels))
+
+    def squared_error(self, lam, truth_coefficients):
+        # C is orthonormal: ||f_λ - f||² = ||c_λ - c||²
+        return np.sum((self.coefficients(lam) - truth_coefficients) ** 2, axis=1)
+
+
+class IterativeSolver:
+    """Matrix-free LSQR on the stacked, DCT-scaled system; warm starts along the sweep."""
+
+    def __init__(self, problem: Problem, *, tolerance=1e-10, iteration_limit=None):
+        matrix, y, pixels = problem.matrix, problem.y, problem.pixels
+        self.matrix = matrix if scipy.sparse.issparse(matrix) else np.asarray(matrix, dtype=np.float64)
+        self.y = y
+        self.live = problem.live
+        self.pixels = pixels
+        self.measurements = y.size
+        self.unknowns = pixels * pixels
+        mu = laplacian_eigenvalues(pixels).ravel()
+        self.scale = np.ones_like(mu)
+        self.scale[1:] = 1.0 / mu[1:]
+        self.penalised = np.ones_like(mu)
+        self.penalised[0] = 0.0
+        self.tolerance = tolerance
+        self.iteration_limit = iteration_limit or min(20 * self.unknowns, 10_000)
+        self.rank = None
+        self._sweeps = {}   # (grid, probes) -> sweep result: one sweep serves every rule
+        if not np.any(self.forward_operator(np.eye(1, self.unknowns, 0).ravel())):
+            raise ValueError("matrix: A · (constant image) = 0, the sensors see no light from the "
+                             "plane, so the Laplacian cannot fix the image's mean")
+        operator = self._standard_operator()
+        try:
+            self.largest = float(scipy.sparse.linalg.svds(operator, k=1, return_singular_vectors=False,
+                                                          rng=np.random.default_rng(0))[0])
+        except (ValueError, scipy.sparse.linalg.ArpackError):
+            # ARPACK refuses or fails on tiny operators; a dense fallback is cheap there
+            self.largest = float(np.linalg.norm(operator @ np.eye(self.unknowns), 2))
+        self.smallest = 1e-7 * self.largest
+
+    def to_image(self, v):
+        return idct2((self.scale * v).reshape(self.pixels, self.pixels))
+
+    def forward_operator(self, v):
+        return self.matrix @ self.to_image(v).ravel()
+
+    def adjoint_operator(self, r):
+        return self.scale * dct2((self.matrix.T @ r).reshape(self.pixels, self.pixels)).ravel()
+
+    def _standard_operator(self):
+        # the penalised part only, for the largest singular value
+        n = self.unknowns
+        return scipy.sparse.linalg.LinearOperator(
+            (self.measurements, n), dtype=np.float64,
+            matvec=lambda v: self.forward_operator(np.ravel(v) * self.penalised),
+            rmatvec=lambda r: self.adjoint_operator(np.ravel(r)) * self.penalised)
+
+    def solve(self, lam, rhs=None, start=None):
+        m, n = self.measurements, self.unknowns
+        root = math.sqrt(lam)
+        rhs = self.y if rhs is None else rhs
+        stacked = scipy.sparse.linalg.LinearOperator(
+            (m + n, n), dtype=np.float64,
+            matvec=lambda v: np.concatenate([self.forward_operator(np.ravel(v)),
+                                             root * self.penalised * np.ravel(v)]),
+            rmatvec=lambda r: (self.adjoint_operator(np.ravel(r)[:m])
+                               + root * self.penalised * np.ravel(r)[m:]))
+        result = scipy.sparse.linalg.lsqr(stacked, np.concatenate([rhs, np.zeros(n)]),
+                                          atol=self.tolerance, btol=self.tolerance, conlim=1e14,
+                                          iter_lim=self.iteration_limit, x0=start)
+        return result[0], result[1]
+
+    def sweep(self, lambdas, probes=0):
+        """Solutions for every λ (descending order solved, warm-started), remembered.
+
+        A sweep made with GCV's trace probes also serves requests without them.
+        """
+        key = np.asarray(lambdas, dtype=np.float64).tobytes()
+        for (grid, made_with), result in self._sweeps.items():
+            if grid == key and made_with >= probes:
+                return result
+        result = self._sweep(lambdas, probes)
+        self._sweeps[(key, probes)] = result
+        return result
+
+    def _sweep(self, lambdas, probes):
+        order = np.argsort(lambdas)[::-1]
+        solutions = np.empty((len(lambdas), self.unknowns))
+        traces = np.full(len(lambdas), np.nan)
+        generator = np.random.default_rng(0)
+        # Rademacher probes on the live rows only: GCV's trace counts those (see .rules)
+        vectors = (generator.choice([-1.0, 1.0], size=(probes, self.measurements)) * self.live
+                   if probes else None)
+        probe_starts = [None] * probes
+        start = None
+        failed = 0
+        for index in order:
+            v, stop = self.solve(lambdas[index], start=start)
+            failed += stop == 7
+            solutions[index] = start = v
+            if probes:
+                quadratic = 0.0
+                for p in range(probes):
+                    x, _ = self.solve(lambdas[index], rhs=vectors[p], start=probe_starts[p])
+                    probe_starts[p] = x
+                    quadratic += vectors[p] @ self.forward_operator(x)
+                traces[index] = int(self.live.sum()) - quadratic / probes
+        return solutions, traces, failed
+
+    def squared_residual_of(self, v, live_only=False):
+        """||A f - y||² of the solution v, over every row or over the live rows."""
+        r = self.forward_operator(v) - self.y
+        if live_only:
+            r = r[self.live]
+        return float(r @ r)
+
+    def squared_seminorm_of(self, v):
+        """||D f||² of the solution v."""
+        return float(np.sum((self.penalised * v) ** 2))  # z = μ c, so ||D f|| = ||z||
+
+
+def reconstruct(matrix, data, pixels: int, *, rule: str | float = "gcv", truth=None,
+                sigma: float | None = None, lambdas=None, method: str | None = None,
+                memory_limit: int | None = None, gcv_probes: int | None = None,
+                regularizer: str = "laplacian") -> Reconstruction:
+    """Regularised reconstruction of the image from the samples.
+
+    Parameters
+    ----------
+    matrix : scipy.sparse array or numpy.ndarray
+        A, ``(K N, M²)``, row k N + n, column r M + c (``image.ravel()``), as
+        from :func:`analytic.system_matrix`.
+    data : array_like
+        y, ``(K, N)`` or ``(K N,)`` samples, units of y.
+    pixels : int
+        Image side M.
+    rule : str or float
+        How λ is chosen (:mod:`.rules`): ``"oracle"`` (minimises
+        ||f_λ - f_true||, needs ``truth``; the paper's choice), ``"gcv"``
+        (generalised cross-validation over the rows that see the plane),
+        ``"lcurve"`` (maximum curvature of the L-curve
+        (log ||A f - y||, log ||D f||)), ``"discrepancy"`` (Morozov:
+        ||A f - y||² = m σ², m = K N; needs ``sigma``), or a positive number
+        used as λ itself.
+    truth : array_like, optional
+        ``(M, M)`` true image, for ``"oracle"``.
+    sigma : float, optional
+        Noise standard deviation per sample, units of y, for ``"discrepancy"``.
+    lambdas : array_like, optional
+        λ grid to sweep (positive). Default: 40 values log-spaced over the
+        squared singular values s² of the standard-form operator
+        A C diag(1/μ) (s floored at 1e-7 s_max), widened by a factor 100 at
+        both ends (:func:`.rules.default_grid`). With the svd method the
+        rule's optimum is then refined between neighbouring grid values.
+    method : {"auto", "svd", "lsqr"}, optional
+        Laplacian only. Default ``"auto"``: ``"svd"`` when its dense
+        matrices (about 3 m M² doubles) fit ``memory_limit``.
+    memory_limit : int, optional
+        Laplacian only: bytes the svd method may use. Default 2 GiB.
+    gcv_probes : int, optional
+        Laplacian only: Hutchinson probes for GCV's trace with the lsqr
+        method. Default 4.
+    regularizer : {"laplacian", "tv"}
+        ``"tv"`` hands over to :func:`.tv.reconstruct_tv` (rules ``oracle``,
+        ``discrepancy`` or a number); giving it ``method``,
+        ``memory_limit`` or ``gcv_probes`` is an error, not ignored.
+
+    Returns
+    -------
+    Reconstruction
+
+    Warns
+    -----
+    RankDeficiencyWarning
+        When A has rank below M² (fewer independent measurements than
+        unknowns): the answer is still unique, its null-space part set by the
+        Laplacian prior. The svd method counts the numerical rank (singular
+        values above s_max max(m, M²) ε); lsqr sees only structural
+        deficiency (fewer non-zero rows than M², or pixels no row sees).
+    RegularizationWarning
+        When the rule's optimum lies at an end of the λ grid, or the
+        discrepancy equation has no root inside it.
+
+    Notes
+    -----
+    f_λ = argmin ||A f - y||² + λ ||D f||², D the Neumann 5-point Laplacian
+    (unit pixel spacing). GCV(λ) = ||A f_λ - y||² / trace(I - H_λ)², H_λ the
+    influence matrix (its trace counts the unpenalised constant as one).
+    """
+    if regularizer == "tv":
+        given = [name for name, value in (("method", method), ("memory_limit", memory_limit),
+                                          ("gcv_probes", gcv_probes)) if value is not None]
+        if given:
+            raise ValueError(f"{', '.join(given)}: apply to the Laplacian regulariser only, "
+                             f"not to regularizer='tv'")
+        from .tv import reconstruct_tv
+
+        return reconstruct_tv(matrix, data, pixels, rule=rule, truth=truth, sigma=sigma,
+                              lambdas=lambdas)
+    if regularizer != "laplacian":
+        raise ValueError(f"regularizer: must be 'laplacian' or 'tv', got {regularizer!r}")
+    return reconstruct_rules(matrix, data, pixels, rules=(rule,), truth=truth, sigma=sigma,
+                             lambdas=lambdas, method=method, memory_limit=memory_limit,
+                             gcv_probes=gcv_probes)[0]
+
+
+def reconstruct_rules(matrix, data, pixels: int, *, rules=RULES, truth=None,
+                      sigma: float | None = None, lambdas=None, method: str | None = None,
+                      memory_limit: int | None = None,
+                      gcv_probes: int | None = None) -> list[Reconstruction]:
+    """:func:`reconstruct` (Laplacian) for several λ rules sharing one factorisation.
+
+    Parameters are those of :func:`reconstruct`, with ``rules`` a sequence of
+    its ``rule`` values. Returns one :class:`Reconstruction` per rule, in
+    order; each one's ``seconds`` includes the shared factorisation.
+    """
+    started = time.perf_counter()
+    method = "auto" if method is None else method
+    memory_limit = DEFAULT_MEMORY_LIMIT if memory_limit is None else int(memory_limit)
+    gcv_probes = DEFAULT_GCV_PROBES if gcv_probes is None else int(gcv_probes)
+    problem = Problem.checked(matrix, data, pixels)
+    pixels = problem.pixels
+    if method not in METHODS:
+        raise ValueError(f"method: must be one of {', '.join(map(repr, METHODS))}, got {method!r}")
+    if isinstance(rules, (str, int, float)):
+        rules = (rules,)
+    parsed = [(rule, parse_rule(rule, RULES)) for rule in rules]
+    a, c = problem.matrix_scale, problem.data_scale
+    truth_image = None
+    if "oracle" in rules:
+        if truth is None:
+            raise ValueError("truth: the oracle rule needs the true image")
+        truth_image = np.asarray(truth, dtype=np.float64)
+        if truth_image.shape != (pixels, pixels):
+            raise ValueError(f"truth: shape {truth_image.shape}, expected ({pixels}, {pixels})")
+        truth_image = truth_image / problem.image_scale
+    if "discrepancy" in rules:
+        if sigma is None or not (math.isfinite(float(sigma)) and float(sigma) > 0):
+            raise ValueError(f"sigma: the discrepancy rule needs a noise level > 0, got {sigma!r}")
+    scaled_sigma = None if sigma is None else float(sigma) / c
+    if lambdas is not None:
+        lambdas = np.sort(np.asarray(lambdas, dtype=np.float64).ravel())
+        if lambdas.size < 1 or not np.all(np.isfinite(lambdas)) or np.any(lambdas <= 0):
+            raise ValueError("lambdas: expected finite values > 0")
+        lambdas = lambdas / a**2
+    rows = problem.matrix.shape[0]
+    unknowns = pixels * pixels
+    if method == "auto":
+        method = "svd" if 3 * rows * unknowns * 8 <= memory_limit else "lsqr"
+    solver = SpectralSolver(problem) if method == "svd" else IterativeSolver(problem)
+    shared = time.perf_counter() - started
+    rank = solver.rank
+    rank_message = None
+    live_rows = int(problem.live.sum())
+    if (rank is not None and rank < unknowns) or (rank is None and live_rows < unknowns):
+        known = f"rank {rank}" if rank is not None else f"only {live_rows} non-zero rows"
+        rank_message = (f"A has {known} for {unknowns} unknowns (M = {pixels}): the data fix only "
+                        f"part of the image, the Laplacian prior fills the rest")
+    elif rank is None:
+        dead = np.asarray(abs(problem.matrix).sum(axis=0)).ravel() == 0
+        if np.any(dead):
+            rank_message = (f"{int(dead.sum())} pixels are seen by no measurement: the Laplacian "
+                            f"prior fills them")
+    default = default_grid(solver.largest, solver.smallest) if lambdas is None else lambdas
+    if method != "svd" and "gcv" in [rule for rule, fixed in parsed if fixed is None]:
+        # sweep once with GCV's probes first, so the other rules reuse that sweep
+        solver.sweep(default, probes=gcv_probes)
+    results = []
+    warned = False
+    for rule, fixed in parsed:
+        begun = time.perf_counter()
+        messages: list[str] = []
+        scaled_fixed = None if fixed is None else fixed / a**2
+        grid = default if (fixed is None or lambdas is not None) else np.array([scaled_fixed])
+        if method == "svd":
+            result = choose_spectral(solver, rule, scaled_fixed, truth_image, scaled_sigma, grid,
+                                     messages)
+        else:
+            result = choose_iterative(solver, rule, scaled_fixed, truth_image, scaled_sigma, grid,
+                                      messages, gcv_probes)
+        if rank_message is not None:
+            if warned:            # once per call, recorded with every rule's result
+                messages.append(rank_message)
+            else:
+                record_warning(messages, rank_message, RankDeficiencyWarning)
+                warned = True
+        image, lam, grid, criterion, residuals, seminorms = result
+        # back to the caller's units: f = (c/a) g, λ = a² λ', r = c r', D f = (c/a) D g
+        results.append(Reconstruction(
+            image=problem.image_scale * image, lam=float(lam) * a**2,
+            rule=rule if fixed is None else "value", lambdas=grid * a**2,
+            criterion=criterion * _criterion_scale(rule, fixed, problem),
+            residual_norms=c * np.sqrt(residuals),
+            seminorms=problem.image_scale * np.sqrt(seminorms),
+            residual_norm=c * float(np.linalg.norm(problem.matrix @ image.ravel() - problem.y)),
+            seminorm=problem.image_scale * float(np.linalg.norm(
+                idct2(-laplacian_eigenvalues(pixels) * dct2(image)))),
+            method=method, rank=rank, unknowns=unknowns, measurements=rows,
+            seconds=shared + time.perf_counter() - begun, warnings=tuple(messages)))
+    return results
+
+
+def _criterion_scale(rule, fixed, problem: Problem) -> float:
+    """Factor from the scaled problem's criterion to the caller's units."""
+    if fixed is not None or rule == "lcurve":   # NaN, or a log-log curvature (scale-free)
+        return 1.0
+    if rule == "oracle":
+        return problem.image_scale**2
+    return problem.data_scale**2                   # gcv and discrepancy: squared residuals

@@ -1,0 +1,95 @@
+"""The two Tikhonov routes (SVD, LSQR) against dense least squares; argument checks; rank deficiency."""
+
+import numpy as np
+import pytest
+
+from analytic.inversion import RankDeficiencyWarning, reconstruct, reconstruct_rules
+from analytic.scene import Sampling, Scene, sensor_grid
+from analytic.system import system_matrix
+from dense_reference import dense_solution, synthetic_problem
+
+
+@pytest.fixture(scope="module")
+def small_scene():
+    """A well-posed scene: M = 8, a 6 x 6 array of extent 2 m, 2 cm bins."""
+    pixels = 8
+    x, y = np.meshgrid((np.arange(pixels) + 0.5) / pixels, (np.arange(pixels) + 0.5) / pixels)
+    image = 0.4 + 0.2 * np.cos(np.pi * x) * np.sin(np.pi * y) + 0.1 * x
+    scene = Scene(pixels=pixels, reflectance=image, source=(0.5, 0.5, 1.0),
+                  sensors=sensor_grid((6, 6), 2.0, (0.5, 0.5, 1.0)),
+                  sampling=Sampling(bin_width_opl=0.02, start_opl=1.9, count=100), name="small")
+    return scene, system_matrix(scene)
+
+
+
+@pytest.mark.parametrize("lam", [1e-8, 1e-3, 1.0, 1e3])
+def test_svd_solver_equals_dense_stacked_least_squares(rng, lam):
+    matrix, y, _ = synthetic_problem(rng, rows=30)  # 30 rows for 36 unknowns: rank-deficient
+    with pytest.warns(RankDeficiencyWarning):
+        result = reconstruct(matrix, y, 6, rule=lam, method="svd")
+    reference = dense_solution(matrix, y, 6, lam)
+    assert np.max(np.abs(result.image.ravel() - reference)) <= 1e-8 * np.max(np.abs(reference))
+    assert result.residual_norm == pytest.approx(np.linalg.norm(matrix @ reference - y), rel=1e-8)
+
+
+def test_both_solvers_agree_on_a_scene_matrix(small_scene, rng):
+    scene, matrix = small_scene
+    y = matrix @ scene.reflectance.ravel() + 1e-4 * rng.standard_normal(matrix.shape[0])
+    lam = 1e-9
+    svd = reconstruct(matrix, y, scene.pixels, rule=lam, method="svd")
+    lsqr = reconstruct(matrix, y, scene.pixels, rule=lam, method="lsqr")
+    reference = dense_solution(matrix.toarray(), y, scene.pixels, lam)
+    assert np.max(np.abs(svd.image.ravel() - reference)) < 1e-8 * np.max(np.abs(reference))
+    assert np.max(np.abs(lsqr.image.ravel() - reference)) < 1e-6 * np.max(np.abs(reference))
+
+
+def test_smooth_image_is_recovered_exactly_from_noiseless_well_posed_data(small_scene):
+    scene, matrix = small_scene
+    y = matrix @ scene.reflectance.ravel()
+    result = reconstruct(matrix, y, scene.pixels, rule=1e-16)
+    assert result.rank == scene.pixels**2  # 3600 rows, full column rank: no warning
+    assert np.max(np.abs(result.image - scene.reflectance)) < 1e-6
+
+
+def test_rule_arguments_are_validated(rng):
+    matrix, y, _ = synthetic_problem(rng)
+    with pytest.raises(ValueError, match="truth"):
+        reconstruct(matrix, y, 6, rule="oracle")
+    with pytest.raises(ValueError, match="sigma"):
+        reconstruct(matrix, y, 6, rule="discrepancy")
+    with pytest.raises(ValueError, match="rule"):
+        reconstruct(matrix, y, 6, rule="best")
+    with pytest.raises(ValueError, match="rule"):
+        reconstruct(matrix, y, 6, rule=-1.0)
+    with pytest.raises(ValueError, match="method"):
+        reconstruct(matrix, y, 6, method="cholesky")
+    with pytest.raises(ValueError, match="data"):
+        reconstruct(matrix, y[:-1], 6)
+
+
+def test_collinear_sensors_warn_and_give_the_mirror_symmetric_answer(rng):
+    # Source and sensors on the line y = 0.5: an image and its mirror across
+    # that line give the same data, so A is rank-deficient, and the unique
+    # regularised answer (the Laplacian is mirror-invariant) is mirror-symmetric.
+    pixels = 10
+    sensors = [(x, 0.5, 1.0) for x in (0.1, 0.3, 0.7, 0.9)]
+    scene = Scene(pixels=pixels, reflectance=rng.random((pixels, pixels)), source=(0.5, 0.5, 1.0),
+                  sensors=sensors, sampling=Sampling(bin_width_opl=0.02, start_opl=1.9, count=80))
+    matrix = system_matrix(scene)
+    y = matrix @ scene.reflectance.ravel() + 1e-3 * rng.standard_normal(matrix.shape[0])
+    with pytest.warns(RankDeficiencyWarning):
+        svd = reconstruct(matrix, y, pixels, rule="gcv", method="svd")
+    assert any("unknowns" in w for w in svd.warnings)
+    assert svd.rank <= pixels * (pixels // 2)  # at most the mirror-symmetric images
+    # lsqr cannot see a numerical rank deficiency (it has more non-zero rows than
+    # unknowns here, so it does not warn) but it still returns the same answer
+    lsqr = reconstruct(matrix, y, pixels, rule=svd.lam, method="lsqr")
+    for result in (svd, lsqr):
+        assert np.all(np.isfinite(result.image))
+        assert np.allclose(result.image, np.flipud(result.image),
+                           atol=1e-6 * np.abs(result.image).max())
+    assert np.allclose(lsqr.image, svd.image, atol=1e-5 * np.abs(svd.image).max())
+    # fewer measurements than unknowns: lsqr warns too
+    with pytest.warns(RankDeficiencyWarning):
+        few = reconstruct(matrix[:60], y[:60], pixels, rule=1e-6, method="lsqr")
+    assert np.all(np.isfinite(few.image))

@@ -30,7 +30,7 @@ from typing import Callable
 
 import numpy as np
 
-from analytic.io import atomic_write, write_transient
+from analytic.io import atomic_write, build_meta, write_transient
 from analytic.scene import Scene
 from analytic.waveforms import make_waveform
 
@@ -257,11 +257,8 @@ def render(scene: Scene, *, spp: int, seed: int = 0, out_dir: str | Path | None 
         if out_dir is None or done < 2:
             return
         _save_state(state_path, sums, squares, done, seed, fingerprint, variant)
-        meta = {"start_opl": float(scene.sampling.start_opl), "period_opl": float(scene.sampling.bin_width_opl),
-                "samples": int(done), "seed": seed, "attenuation": "lambertian",
-                "illumination": waveform.description, "waveform": waveform.name,
-                "variant": variant, "kind": "render", "requested_samples": spp,
-                "scene_fingerprint": fingerprint}
+        meta = build_meta(scene, kind="render", samples=done, seed=seed, variant=variant,
+                          requested_samples=spp, scene_fingerprint=fingerprint)
         write_transient(out_dir, sums / done, meta, stderr=standard_error(sums, squares, done))
 
     bar = None

@@ -125,5 +125,5 @@ def check_corner(corner: Corner | None = None, *, spp: int = 2**22, seed: int = 
             "one_bounce": first.as_dict(), "further_bounce_share": share,
             "further_bounce_share_per_sensor": per_sensor,
             "agreement_with_all_bounces": full.agrees, "text": text,
-            "arrays": {"edges": corner.sampling.edges, "model": model, "one": one, "one_se": one_se,
+            "arrays": {"sampling": corner.sampling, "model": model, "one": one, "one_se": one_se,
                        "many": many, "many_se": many_se}}

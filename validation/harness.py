@@ -14,8 +14,11 @@ For a scene, :func:`check_scene`
 5. measures the paper's simplifications as relative differences: eq. (1)'s
    attenuation against physical transport, and eq. (3)'s contour integral
    without the coarea factor against the correct one;
-6. reconstructs the image from the rendered and from the modelled data with
-   the same λ and reports both errors against the true image.
+6. reconstructs the image from the modelled and from the rendered data, each
+   with the scene's noise added (the same draw) and λ chosen by a
+   data-driven rule (:func:`data_driven_rule`), and reports both errors
+   against the true image beside the oracle λ's (a bound) and the best flat
+   image's (the floor).
 """
 
 from __future__ import annotations
@@ -26,13 +29,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from analytic.errors import SceneError
 from analytic.response import impulse_response
 from analytic.scene import Scene
 from analytic.system import QuadratureWarning, system_matrix
 from validation.compare import Agreement, compare_transients
 
 __all__ = ["SceneCheck", "check_scene", "simplification_costs", "model_convergence",
-           "binned_contour_model"]
+           "binned_contour_model", "data_driven_rule", "reconstruct_from_noisy_data"]
 
 TOLERANCES = (1e-2, 1e-4, 1e-6)
 REFERENCE_TOLERANCE = 1e-7
@@ -150,23 +154,88 @@ def binned_contour_model(scene: Scene, *, coarea: bool = True, pieces: int = 8, 
     return y
 
 
-def _reconstructions(matrix, scene: Scene, model: np.ndarray, rendered: np.ndarray) -> dict:
-    """Same λ (oracle on the modelled data) for both data sets; errors against the true image."""
-    from analytic.reconstruct import image_metrics, reconstruct
+def data_driven_rule(scene: Scene, requested="auto") -> tuple:
+    """The λ rule for a scene's data, and the σ it needs.
+
+    ``"auto"``: ``discrepancy`` when the scene's noise is Gaussian with
+    σ > 0 (σ is known), else ``gcv``. A named rule or a number is kept;
+    ``discrepancy`` without a Gaussian σ is a SceneError naming
+    ``noise.sigma``.
+
+    Returns
+    -------
+    (rule, sigma)
+        ``sigma`` is the scene's σ for ``discrepancy``, else None.
+    """
+    noise = scene.noise
+    known = noise is not None and noise.kind == "gaussian" and noise.sigma > 0
+    if requested == "auto":
+        requested = "discrepancy" if known else "gcv"
+    if requested == "discrepancy":
+        if not known:
+            raise SceneError("noise.sigma", "the discrepancy rule needs the scene's Gaussian noise level "
+                                            "([noise] kind = \"gaussian\", sigma > 0)")
+        return "discrepancy", float(noise.sigma)
+    return requested, None
+
+
+def reconstruct_from_noisy_data(matrix, scene: Scene, model: np.ndarray, rendered: np.ndarray, *,
+                                rule="auto") -> dict:
+    """Reconstruct from the model's and the render's data, each with the scene's noise.
+
+    The same noise draw (the scene's ``noise.seed``) is added to both; the
+    rule is data-driven (:func:`data_driven_rule`) unless given. Beside them:
+    the oracle λ on the model's noisy data (a bound no data-driven rule can
+    beat on average) and the best flat image, the true mean (the floor).
+
+    Returns
+    -------
+    dict
+        ``noise`` (the scene's, None when noiseless), ``rule``, ``data`` (one
+        sentence saying which data and rule gave each number), ``model``
+        and ``render``: {``psnr``, ``ssim``, ``lambda``, ``image``},
+        ``oracle``: {``psnr``, ``lambda``, ``image``}, ``flat_psnr``.
+    """
+    from analytic.inversion import flat_image_psnr, image_metrics, reconstruct
+    from analytic.noise import add_noise
 
     truth = scene.reflectance
     pixels = scene.pixels
+    rule, sigma = data_driven_rule(scene, rule)
+    noise = scene.noise
+    if noise is not None:
+        model_data = add_noise(model, noise, rng=np.random.default_rng(noise.seed))
+        render_data = add_noise(rendered, noise, rng=np.random.default_rng(noise.seed))
+        what = (f"{noise.kind} noise (σ = {noise.sigma:g})" if noise.kind == "gaussian"
+                else f"photon-counting noise ({noise.photons:g} photons per unit of y)")
+    else:
+        model_data, render_data, what = model, rendered, "no added noise"
+    results = {}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)     # rank-deficient A: regularised answer
-        from_model = reconstruct(matrix, model.ravel(), pixels, rule="oracle", truth=truth)
-        from_render = reconstruct(matrix, rendered.ravel(), pixels, rule=float(from_model.lam))
-    return {"lambda": float(from_model.lam),
-            "model": {"image": from_model.image, **image_metrics(from_model.image, truth)},
-            "render": {"image": from_render.image, **image_metrics(from_render.image, truth)}}
+        for key, data in (("model", model_data), ("render", render_data)):
+            result = reconstruct(matrix, data.ravel(), pixels, rule=rule, truth=truth, sigma=sigma)
+            results[key] = {"image": result.image, "lambda": float(result.lam),
+                            **{k: v for k, v in image_metrics(result.image, truth).items()
+                               if k in ("psnr", "ssim")}}
+        oracle = reconstruct(matrix, model_data.ravel(), pixels, rule="oracle", truth=truth)
+    rule_name = rule if isinstance(rule, str) else f"λ = {rule:g}"
+    return {
+        "noise": None if noise is None else {"kind": noise.kind, "sigma": noise.sigma,
+                                             "photons": noise.photons, "seed": noise.seed},
+        "rule": rule_name,
+        "data": (f"The model's and the render's transients, each with the scene's {what} added "
+                 f"(the same draw), reconstructed with λ by the {rule_name} rule; the oracle λ "
+                 f"(the truth's) on the model's noisy data is a bound, the best flat image the floor."),
+        **results,
+        "oracle": {"image": oracle.image, "lambda": float(oracle.lam),
+                   "psnr": image_metrics(oracle.image, truth)["psnr"]},
+        "flat_psnr": flat_image_psnr(truth),
+    }
 
 
 def check_scene(scene: Scene, *, spp: int, seed: int = 0, convergence: bool = True,
-                reconstruction: bool = True, progress: bool = False) -> SceneCheck:
+                reconstruction: bool = True, progress: bool = False, rule="auto") -> SceneCheck:
     """Model, render and compare one scene; see the module docstring.
 
     Parameters
@@ -180,13 +249,20 @@ def check_scene(scene: Scene, *, spp: int, seed: int = 0, convergence: bool = Tr
     convergence : bool
         Also run the model's tolerance sweep and the smaller renders.
     reconstruction : bool
-        Also reconstruct from both data sets.
+        Also reconstruct from both data sets (:func:`reconstruct_from_noisy_data`).
     progress : bool
         Progress bars for the renders.
+    rule : str or float
+        λ rule of the reconstructions: ``"auto"`` (:func:`data_driven_rule`),
+        a rule's name, or λ itself.
     """
     from transient.render import render
 
+    from analytic.window import warn_if_cut, window_share
+
     timings = {}
+    share = window_share(scene)
+    warn_if_cut(scene, share)
     started = time.perf_counter()
     matrix = _matrix(scene)
     model = _y(matrix, scene)
@@ -196,6 +272,7 @@ def check_scene(scene: Scene, *, spp: int, seed: int = 0, convergence: bool = Tr
     agreement = compare_transients(result.mean, result.stderr, model)
     check = SceneCheck(scene.name, scene, spp, seed, model, result.mean, result.stderr, agreement)
     check.metrics.update(timings)
+    check.metrics["window_share"] = share
     check.metrics["agreement"] = agreement.as_dict()
     judged = np.isfinite(agreement.z)
     if convergence:
@@ -216,7 +293,7 @@ def check_scene(scene: Scene, *, spp: int, seed: int = 0, convergence: bool = Tr
         check.metrics["render_convergence"] = rows
     check.metrics["simplifications"] = simplification_costs(scene, model)
     if reconstruction:
-        check.reconstructions = _reconstructions(matrix, scene, model, result.mean)
+        check.reconstructions = reconstruct_from_noisy_data(matrix, scene, model, result.mean, rule=rule)
         check.metrics["reconstruction"] = {
             key: ({k: v for k, v in value.items() if k != "image"} if isinstance(value, dict) else value)
             for key, value in check.reconstructions.items()}

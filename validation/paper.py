@@ -27,15 +27,17 @@ from pathlib import Path
 
 import numpy as np
 
-from .conditioning import conditioning_summary, scene_for, singular_values
-from .reconstruct import image_metrics, reconstruct
-from .noise import add_noise
-from .scene import Illumination, Noise, default_scene
-from .system import system_matrix
-from .waveforms import make_waveform
+from analytic.conditioning import conditioning_summary, scene_for, singular_values
+from analytic.inversion import flat_image_psnr, image_metrics, reconstruct
+from analytic.io import save_json, staged_writes
+from analytic.noise import add_noise
+from analytic.scene import Illumination, Noise, default_scene
+from analytic.system import system_matrix
+from analytic.waveforms import make_waveform
+from validation.plots import plot_conditioning, plot_panels
+from validation.report import write_markdown
 
-__all__ = ["PAPER_DEVICE", "device_figures", "run_cases", "check_claims", "plot_panels",
-           "reproduce"]
+__all__ = ["PAPER_DEVICE", "device_figures", "run_cases", "poisson_cases", "check_claims", "reproduce"]
 
 SPEED_OF_LIGHT = 299_792_458.0  # m/s
 PAPER_DEVICE = {"bandwidth_hz": 375e6, "sampling_hz": 750e6, "energy_j": 44e-3}
@@ -123,7 +125,7 @@ def run_cases(*, pixels: int = 50, periods=(0.05, 0.1, 0.2), extents=(1.0, 2.0, 
     matrices = {} if matrices is None else matrices
     base = default_scene(pixels=pixels)
     truth = base.reflectance
-    mean_psnr = image_metrics(np.full_like(truth, truth.mean()), truth)["psnr"]
+    mean_psnr = flat_image_psnr(truth)
     cases = [(a, name, t, w) for a in attenuations for name in ILLUMINATIONS
              for t in periods for w in extents]
     iterator = cases
@@ -202,7 +204,6 @@ def poisson_cases(*, pixels: int = 50, periods=(0.05, 0.1, 0.2), extents=(1.0, 2
     rows = []
     for period, extent in iterator:
         clean = {}
-        matrices = {}
         case = {}
         for name, waveform in ILLUMINATIONS.items():
             case[name] = _case_matrix(matrices, base, "lambertian", waveform, period, extent)
@@ -306,49 +307,6 @@ def check_claims(rows: list[dict], *, gain_db: float = 3.0) -> list[dict]:
     return claims
 
 
-def plot_panels(path, rows: list[dict], *, attenuation: str, intensity: float, truth=None) -> Path:
-    """Figs. 7-8 style panel: impulsive (left block) and low-pass (right), rows T, columns W.
-
-    Each image is shown on a fixed [0, 1] grey scale with its PSNR (dB,
-    data range 1) beneath.
-    """
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from .io import save_figure
-
-    group = [r for r in rows if r["attenuation"] == attenuation and r["intensity"] == intensity]
-    periods = sorted({r["period"] for r in group})
-    extents = sorted({r["extent"] for r in group})
-    columns = 2 * len(extents) + (1 if truth is not None else 0)
-    figure, axes = plt.subplots(len(periods), columns, figsize=(1.9 * columns, 2.1 * len(periods)),
-                                squeeze=False)
-    table = {(r["illumination"], r["period"], r["extent"]): r for r in group}
-    for i, period in enumerate(periods):
-        for block, name in enumerate(ILLUMINATIONS):
-            for j, extent in enumerate(extents):
-                axis = axes[i, block * len(extents) + j]
-                row = table[(name, period, extent)]
-                axis.imshow(np.clip(row["image"], 0, 1), cmap="gray", vmin=0, vmax=1,
-                            interpolation="nearest")
-                axis.set_xticks([])
-                axis.set_yticks([])
-                axis.set_xlabel(f"{row['psnr']:.1f} dB", fontsize=7)
-                axis.set_title(f"{name}\nT={period:g} W={extent:g}", fontsize=7)
-        if truth is not None:
-            axis = axes[i, -1]
-            axis.imshow(truth, cmap="gray", vmin=0, vmax=1, interpolation="nearest")
-            axis.set_xticks([])
-            axis.set_yticks([])
-            axis.set_title("true image", fontsize=7)
-    figure.suptitle(f"oracle-λ reconstructions, {attenuation} attenuation, σ = {group[0]['sigma']:g}, "
-                    f"source {intensity:g} W/sr (PSNR, range 1)", fontsize=9)
-    figure.tight_layout()
-
-    return save_figure(figure, path, dpi=100)
-
-
 def _verdict(holds) -> str:
     return "untestable (all values equal)" if holds is None else "yes" if holds else "**no**"
 
@@ -442,8 +400,6 @@ def reproduce(out, *, quick: bool = False, progress: bool = True) -> dict:
     dict
         ``cases``, ``seconds``, ``claims``.
     """
-    from .io import save_json
-
     started = time.perf_counter()
     out = Path(out)
     if quick:
@@ -458,34 +414,35 @@ def reproduce(out, *, quick: bool = False, progress: bool = True) -> dict:
     devices = [device_figures(period=0.1, unit_m=u)
                for u in (1.0, SPEED_OF_LIGHT / (750e6 * 0.1), 15.0)]
     truth = default_scene(pixels=settings["pixels"]).reflectance
-    for attenuation in settings["attenuations"]:
-        for intensity in settings["intensities"]:
-            plot_panels(out / f"panels_{attenuation}_I{intensity:g}.png", rows, attenuation=attenuation,
-                        intensity=intensity, truth=truth)
-    from .conditioning import plot_conditioning
-
-    for attenuation in settings["attenuations"]:
-        for intensity in settings["intensities"]:
-            table = [{"extent": r["extent"], "period": r["period"], "sigma": r["sigma"],
-                      "singular_values": r["singular_values"], "effective_rank": r["effective_rank"]}
-                     for r in rows if r["attenuation"] == attenuation and r["intensity"] == intensity
-                     and r["illumination"] == "impulsive"]
-            plot_conditioning(out / f"conditioning_{attenuation}_I{intensity:g}.png", table,
-                              title=f"A of the impulsive cases, {attenuation} attenuation, "
-                                    f"source {intensity:g} W/sr")
     photon_rows = poisson_cases(pixels=settings["pixels"], periods=settings["periods"],
                                 extents=settings["extents"], progress=progress, matrices=matrices)
     seconds = time.perf_counter() - started
-    text = _report(rows, claims, devices, seconds,
-                   ", ".join(f"{k} = {v}" for k, v in settings.items()) + ", 4 x 4 sensors")
-    text = text.rstrip("\n") + "\n\n" + "\n".join(_poisson_report(photon_rows))
-    from .io import atomic_write
-
-    def write(temporary):
-        Path(temporary).write_text(text)
-    atomic_write(out / "report.md", write)
-    save_json(out / "results.json", {
-        "settings": settings, "claims": claims, "devices": devices, "paper_device": PAPER_DEVICE,
-        "cases": [{k: v for k, v in r.items() if k not in ("image", "singular_values")} for r in rows],
-        "photon_counting": photon_rows, "seconds": seconds})
+    figures = []
+    with staged_writes():
+        for attenuation in settings["attenuations"]:
+            for intensity in settings["intensities"]:
+                name = f"panels_{attenuation}_I{intensity:g}.png"
+                plot_panels(out / name, rows, attenuation=attenuation, intensity=intensity,
+                            illuminations=tuple(ILLUMINATIONS), truth=truth)
+                figures.append((f"Reconstructions, {attenuation} attenuation, source {intensity:g} W/sr", name))
+                table = [{"extent": r["extent"], "period": r["period"], "sigma": r["sigma"],
+                          "singular_values": r["singular_values"], "effective_rank": r["effective_rank"]}
+                         for r in rows if r["attenuation"] == attenuation and r["intensity"] == intensity
+                         and r["illumination"] == "impulsive"]
+                name = f"conditioning_{attenuation}_I{intensity:g}.png"
+                plot_conditioning(out / name, table,
+                                  title=f"A of the impulsive cases, {attenuation} attenuation, "
+                                        f"source {intensity:g} W/sr")
+                figures.append((f"Singular values of A, {attenuation} attenuation, source {intensity:g} W/sr",
+                                name))
+        text = _report(rows, claims, devices, seconds,
+                       ", ".join(f"{k} = {v}" for k, v in settings.items()) + ", 4 x 4 sensors")
+        lines = text.rstrip("\n").split("\n") + [""] + _poisson_report(photon_rows)
+        lines += ["## Figures", ""] + [line for caption, name in figures
+                                       for line in (f"### {caption}", "", f"![{caption}]({name})", "")]
+        write_markdown(out / "report.md", lines)
+        save_json(out / "results.json", {
+            "settings": settings, "claims": claims, "devices": devices, "paper_device": PAPER_DEVICE,
+            "cases": [{k: v for k, v in r.items() if k not in ("image", "singular_values")} for r in rows],
+            "photon_counting": photon_rows, "seconds": seconds})
     return {"cases": len(rows), "seconds": seconds, "claims": claims, "photon_counting": photon_rows}

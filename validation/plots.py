@@ -1,4 +1,10 @@
-"""PNG plots of transients (matplotlib is imported inside each function so the CLI starts fast)."""
+"""Every figure the project draws, as PNG (matplotlib imported inside each function).
+
+Figures are built on :class:`matplotlib.figure.Figure` with the Agg canvas,
+never through pyplot's global state, and written atomically. Time axes are
+cropped to the light (the window's edges drawn when in view) and labelled in
+metres of path length and nanoseconds; every image has a colour bar.
+"""
 
 from __future__ import annotations
 
@@ -6,63 +12,342 @@ from pathlib import Path
 
 import numpy as np
 
-from analytic.io import save_figure
+from analytic.io import atomic_write
 
-__all__ = ["plot_transients", "save_figure"]
+__all__ = ["save_figure", "new_figure", "plot_transients", "plot_z_map", "plot_convergence",
+           "plot_reconstructions", "plot_reconstruction", "plot_criterion", "plot_conditioning",
+           "plot_panels", "NANOSECONDS_PER_METRE", "Y_LABEL"]
+
+#: Light travels 1 m of path in 3.3356 ns.
+NANOSECONDS_PER_METRE = 1e9 / 299_792_458.0
+#: y's units for a source intensity in W/sr (DESIGN.md section 1; the README explains them).
+Y_LABEL = "y_k[n] (W m⁻¹)"
 
 
-def plot_transients(path: str | Path, edges: np.ndarray, transients: dict[str, np.ndarray], *,
+def new_figure(width: float, height: float):
+    """A Figure with constrained layout on an Agg canvas (no pyplot state)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    figure = Figure(figsize=(width, height), layout="constrained")
+    FigureCanvasAgg(figure)
+    return figure
+
+
+def save_figure(figure, path: str | Path, dpi: int = 110) -> Path:
+    """Write a figure as PNG, atomically."""
+    def write(temporary):
+        figure.savefig(temporary, format="png", dpi=dpi)
+    return atomic_write(path, write)
+
+
+def _lit_bins(arrays, sampling, margin: int = 2) -> tuple[int, int]:
+    """[first, last) bins where the first (reference) array holds light, with ``margin`` bins either side."""
+    stacked = np.abs(np.atleast_2d(arrays[0]))   # the reference: noisy curves would light every bin
+    peak = float(stacked.max()) if stacked.size else 0.0
+    lit = np.nonzero(stacked.max(axis=0) > 1e-6 * peak)[0] if peak > 0 else np.arange(sampling.count)
+    if lit.size == 0:
+        return 0, sampling.count
+    return max(int(lit[0]) - margin, 0), min(int(lit[-1]) + 1 + margin, sampling.count)
+
+
+def _nanosecond_axis(axis) -> None:
+    secondary = axis.secondary_xaxis("top", functions=(lambda m: m * NANOSECONDS_PER_METRE,
+                                                       lambda ns: ns / NANOSECONDS_PER_METRE))
+    secondary.set_xlabel("ns", fontsize=7)
+    secondary.tick_params(labelsize=6)
+
+
+def plot_transients(path: str | Path, sampling, transients: dict[str, np.ndarray], *,
                     errors: dict[str, np.ndarray] | None = None, title: str = "",
-                    max_panels: int = 16) -> Path:
-    """One panel per sensor: each named transient against path length.
+                    max_panels: int = 8) -> Path:
+    """Transients against path length, one panel per sensor, with z residuals when errors are given.
 
     Parameters
     ----------
     path : str or Path
         PNG to write (atomically).
-    edges : numpy.ndarray
-        ``(N + 1,)`` bin edges, metres of path length.
+    sampling : analytic.Sampling
+        The bins (path length in metres).
     transients : dict
-        Label -> ``(K, N)`` samples. The first is drawn as a step line, the
-        others as points (with error bars from ``errors`` when given).
+        Label -> ``(K, N)`` samples. The first is the reference, drawn as a
+        step line; the others as points, with ±1 standard-error bars from
+        ``errors``.
     errors : dict, optional
-        Label -> ``(K, N)`` one-standard-error bars.
+        Label -> ``(K, N)`` standard errors. With them each panel gets a strip
+        below it showing z = (value − reference) / error per bin, where the
+        error bars are too small to see.
     title : str
         Figure title.
     max_panels : int
-        At most this many sensors are drawn.
+        At most this many sensors, evenly chosen, are drawn.
     """
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     errors = errors or {}
-    first = next(iter(transients.values()))
-    sensors = min(first.shape[0], max_panels)
-    columns = int(np.ceil(np.sqrt(sensors)))
-    rows = int(np.ceil(sensors / columns))
-    figure, axes = plt.subplots(rows, columns, figsize=(3.2 * columns, 2.4 * rows), squeeze=False,
-                                sharex=True)
+    labels = list(transients)
+    reference = np.atleast_2d(transients[labels[0]])
+    sensors = reference.shape[0]
+    chosen = np.unique(np.linspace(0, sensors - 1, min(sensors, max_panels)).round().astype(int))
+    first, last = _lit_bins(list(transients.values()), sampling)
+    edges = sampling.edges[first:last + 1]
     centres = 0.5 * (edges[:-1] + edges[1:])
-    for k in range(rows * columns):
-        axis = axes.flat[k]
-        if k >= sensors:
-            axis.axis("off")
-            continue
-        for i, (label, data) in enumerate(transients.items()):
+    window = (sampling.edges[0], sampling.edges[-1])
+    columns = min(len(chosen), 4)
+    rows = int(np.ceil(len(chosen) / columns))
+    residual = bool(errors)
+    figure = new_figure(3.3 * columns, (3.4 if residual else 2.6) * rows + 0.4)
+    grid = figure.add_gridspec(rows * (2 if residual else 1), columns,
+                               height_ratios=[3, 1] * rows if residual else None)
+    for slot, k in enumerate(chosen):
+        row, column = divmod(slot, columns)
+        axis = figure.add_subplot(grid[row * (2 if residual else 1), column])
+        for i, label in enumerate(labels):
+            data = np.atleast_2d(transients[label])[k, first:last]
             if i == 0:
-                axis.stairs(data[k], edges, label=label, color="C0")
+                axis.stairs(data, edges, label=label, color="C0", lw=1.2)
             elif label in errors:
-                axis.errorbar(centres, data[k], yerr=errors[label][k], fmt=".", ms=3, color=f"C{i}",
-                              label=label, elinewidth=0.8)
+                axis.errorbar(centres, data, yerr=np.atleast_2d(errors[label])[k, first:last], fmt="o",
+                              ms=2.5, color=f"C{i}", label=f"{label} ±1 se", elinewidth=1.0, capsize=1.5)
             else:
-                axis.plot(centres, data[k], ".", ms=3, color=f"C{i}", label=label)
+                axis.plot(centres, data, "o", ms=2.5, color=f"C{i}", label=label)
+        for edge in window:
+            if edges[0] <= edge <= edges[-1]:
+                axis.axvline(edge, color="0.4", ls=":", lw=0.8)
         axis.set_title(f"sensor {k}", fontsize=8)
-        axis.tick_params(labelsize=7)
-    axes.flat[0].legend(fontsize=7)
-    figure.supxlabel("path length t (m, c = 1)", fontsize=9)
-    figure.supylabel("y_k[n]", fontsize=9)
+        axis.tick_params(labelsize=6)
+        axis.set_ylabel(Y_LABEL, fontsize=7)
+        _nanosecond_axis(axis)
+        if slot == 0:
+            axis.legend(fontsize=6, loc="upper right")
+        if residual:
+            strip = figure.add_subplot(grid[row * 2 + 1, column], sharex=axis)
+            for i, label in enumerate(labels[1:], start=1):
+                if label not in errors:
+                    continue
+                se = np.atleast_2d(errors[label])[k, first:last]
+                value = np.atleast_2d(transients[label])[k, first:last]
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    z = np.where(se > 0, (value - reference[k, first:last]) / se, np.nan)
+                strip.plot(centres, z, "o", ms=2, color=f"C{i}")
+            strip.axhline(0, color="0.3", lw=0.6)
+            for level in (-3, 3):
+                strip.axhline(level, color="0.6", lw=0.6, ls="--")
+            strip.set_ylabel("z", fontsize=7)
+            strip.tick_params(labelsize=6)
+            strip.set_xlabel("path length (m)", fontsize=7)
+        else:
+            axis.set_xlabel("path length (m)", fontsize=7)
     if title:
-        figure.suptitle(title, fontsize=10)
-    figure.tight_layout()
+        figure.suptitle(title + ("" if not any(e <= edges[-1] and e >= edges[0] for e in window)
+                                 else "  (dotted: the window's edges)"), fontsize=9)
     return save_figure(figure, path)
+
+
+def plot_z_map(path: str | Path, z: np.ndarray, threshold: float, sampling, title: str) -> Path:
+    """z-scores over sensors x bins (cropped to the judged bins); grey where a bin was not judged."""
+    from matplotlib.patches import Patch
+
+    judged = np.isfinite(z)
+    columns = np.nonzero(judged.any(axis=0))[0]
+    first, last = (int(columns[0]), int(columns[-1]) + 1) if columns.size else (0, z.shape[1])
+    shown = z[:, first:last]
+    limit = max(threshold, float(np.nanmax(np.abs(shown))) if np.isfinite(shown).any() else threshold)
+    figure = new_figure(7.5, 0.3 * z.shape[0] + 2.0)
+    axis = figure.add_subplot()
+    from matplotlib import colormaps
+
+    cmap = colormaps["RdBu_r"].copy()
+    cmap.set_bad("0.85")
+    edges = sampling.edges[first:last + 1]
+    image = axis.pcolormesh(edges, np.arange(z.shape[0] + 1) - 0.5, np.ma.masked_invalid(shown),
+                            cmap=cmap, vmin=-limit, vmax=limit)
+    figure.colorbar(image, ax=axis, label=f"z = (render − model) / se  (limit ±{threshold:.2f})")
+    axis.set_xlabel("path length (m)")
+    axis.set_ylabel("sensor k")
+    axis.invert_yaxis()
+    _nanosecond_axis(axis)
+    axis.legend(handles=[Patch(color="0.85", label="not judged: too few samples (se ≥ 0.1 y) or none")],
+                fontsize=7, loc="lower right", framealpha=0.9)
+    axis.set_title(title, fontsize=9)
+    return save_figure(figure, path, dpi=100)
+
+
+def plot_convergence(path: str | Path, name: str, render_rows: list, slope: float | None,
+                     model_rows: list) -> Path:
+    """Render error against samples (with N^-1/2) and the model's error against tolerance."""
+    figure = new_figure(8.5, 3.4)
+    left, right = figure.subplots(1, 2)
+    samples = np.array([r["samples"] for r in render_rows], float)
+    errors = np.array([r["relative_l2"] for r in render_rows])
+    label = "render" + ("" if slope is None else f" (slope {slope:.3f})")
+    left.loglog(samples, errors, "o-", label=label)
+    left.loglog(samples, errors[0] * (samples / samples[0]) ** -0.5, ":", color="grey", label="N^-1/2")
+    left.set_xlabel("samples N")
+    left.set_ylabel("relative L2 error against the model")
+    left.legend(fontsize=7)
+    if model_rows:
+        tolerance = [r["tolerance"] for r in model_rows]
+        over = [max(r["over_stderr"], 1e-18) for r in model_rows]
+        right.loglog(tolerance, over, "s-", label="model error / se (worst judged bin)")
+        right.axhline(1.0, color="red", lw=0.8, label="the render's noise")
+        right.set_xlabel("model tolerance (requested)")
+        right.set_ylabel("max |y(tol) − y(1e-7)| / se")
+        right.invert_xaxis()
+        right.legend(fontsize=7)
+    else:
+        right.set_axis_off()
+    figure.suptitle(f"{name}: convergence", fontsize=9)
+    return save_figure(figure, path, dpi=100)
+
+
+def _image_panel(figure, axis, image, title, *, vmin=0.0, vmax=1.0, cmap="gray"):
+    shown = axis.imshow(image, cmap=cmap, vmin=vmin, vmax=vmax, interpolation="nearest")
+    axis.set_title(title, fontsize=8)
+    axis.set_xticks([])
+    axis.set_yticks([])
+    return shown
+
+
+def plot_reconstructions(path: str | Path, name: str, truth: np.ndarray, panels: list) -> Path:
+    """The true image beside reconstructions, on one reflectance scale with its colour bar.
+
+    Parameters
+    ----------
+    panels : list of (str, numpy.ndarray, str)
+        (title, image, a note such as its PSNR) per reconstruction.
+    """
+    figure = new_figure(2.6 * (len(panels) + 1) + 0.6, 3.3)
+    axes = figure.subplots(1, len(panels) + 1)
+    shown = _image_panel(figure, axes[0], truth, "true image")
+    for axis, (title, image, note) in zip(axes[1:], panels):
+        _image_panel(figure, axis, image, f"{title}\n{note}")
+    figure.colorbar(shown, ax=list(axes), label="reflectance", shrink=0.8)
+    figure.suptitle(name, fontsize=9)
+    return save_figure(figure, path, dpi=100)
+
+
+def plot_reconstruction(path: str | Path, truth: np.ndarray, image: np.ndarray, *, title: str = "") -> Path:
+    """Truth, reconstruction and their difference, each with a colour bar."""
+    figure = new_figure(11.0, 3.6)
+    axes = figure.subplots(1, 3)
+    shown = _image_panel(figure, axes[0], truth, "scene reflectance (truth)")
+    _image_panel(figure, axes[1], image, "reconstruction (clipped to [0, 1] for display)")
+    figure.colorbar(shown, ax=list(axes[:2]), label="reflectance", shrink=0.85)
+    difference = image - truth
+    limit = float(np.max(np.abs(difference))) or 1.0
+    error = _image_panel(figure, axes[2], difference, "reconstruction − truth", vmin=-limit, vmax=limit,
+                         cmap="RdBu_r")
+    figure.colorbar(error, ax=axes[2], label="difference", shrink=0.85)
+    if title:
+        figure.suptitle(title, fontsize=9)
+    return save_figure(figure, path, dpi=100)
+
+
+_CRITERION_LABELS = {
+    "oracle": "||f_λ − f||² (squared image error)",
+    "gcv": "GCV(λ) = ||r||² / trace(I − H)²",
+    "lcurve": "L-curve curvature",
+    "discrepancy": "||r||² − m σ²",
+}
+
+
+def plot_criterion(path: str | Path, reconstruction, *, title: str = "") -> Path:
+    """The λ rule's criterion against λ with the chosen λ marked, beside the L-curve.
+
+    Parameters
+    ----------
+    reconstruction : analytic.Reconstruction
+        Its ``lambdas``, ``criterion``, ``residual_norms``, ``seminorms`` and ``lam``.
+    """
+    r = reconstruction
+    figure = new_figure(10.0, 3.9)
+    left, right = figure.subplots(1, 2)
+    finite = np.isfinite(r.criterion)
+    if np.any(finite):
+        if r.rule in ("oracle", "gcv") and np.all(r.criterion[finite] > 0):
+            left.loglog(r.lambdas, r.criterion, ".-")
+        else:
+            left.semilogx(r.lambdas, r.criterion, ".-")
+            if r.rule == "discrepancy":
+                left.axhline(0.0, color="0.5", lw=0.8)
+        left.set_ylabel(_CRITERION_LABELS.get(r.rule, "criterion"), fontsize=8)
+    else:
+        left.text(0.5, 0.5, f"λ given: {r.lam:.3g}", ha="center", transform=left.transAxes)
+    left.axvline(r.lam, color="C3", ls="--", label=f"chosen λ = {r.lam:.3g}")
+    left.set_xlabel("λ (weight of ||D f||², unit pixel spacing)", fontsize=8)
+    left.legend(fontsize=8)
+    left.set_title(f"rule: {r.rule}", fontsize=9)
+    right.loglog(r.residual_norms, np.maximum(r.seminorms, np.finfo(float).tiny), ".-", ms=3)
+    right.loglog([r.residual_norm], [max(r.seminorm, np.finfo(float).tiny)], "o", color="C3",
+                 label="chosen λ")
+    right.set_xlabel("||A f − y|| (units of y)", fontsize=8)
+    right.set_ylabel("||D f|| (reflectance per pixel²)", fontsize=8)
+    right.set_title("L-curve", fontsize=9)
+    right.legend(fontsize=8)
+    if title:
+        figure.suptitle(title, fontsize=9)
+    return save_figure(figure, path, dpi=110)
+
+
+def plot_conditioning(path: str | Path, table: list[dict], *, title: str = "") -> Path:
+    """Singular-value spectra (one curve per (W, T)) and effective rank against W.
+
+    Parameters
+    ----------
+    table : list of dict
+        Rows with ``extent``, ``period``, ``sigma``, ``singular_values`` and
+        ``effective_rank`` (:func:`analytic.conditioning.conditioning_table`).
+    """
+    figure = new_figure(11.0, 4.2)
+    left, right = figure.subplots(1, 2)
+    periods = sorted({row["period"] for row in table})
+    for i, period in enumerate(periods):
+        rows = sorted((r for r in table if r["period"] == period), key=lambda r: r["extent"])
+        for j, row in enumerate(rows):
+            left.semilogy(row["singular_values"], color=f"C{i}",
+                          alpha=0.4 + 0.6 * j / max(len(rows) - 1, 1), lw=1,
+                          label=f"T = {period:g} m, W = {row['extent']:g} m")
+        right.plot([r["extent"] for r in rows], [r["effective_rank"] for r in rows], "o-",
+                   color=f"C{i}", label=f"T = {period:g} m")
+    if table:
+        left.axhline(table[0]["sigma"], color="k", ls="--", lw=0.8, label=f"σ = {table[0]['sigma']:g}")
+    left.set_xlabel("index i", fontsize=8)
+    left.set_ylabel("singular value s_i of A (W m⁻¹ per unit reflectance)", fontsize=8)
+    left.legend(fontsize=6, ncol=2)
+    right.set_xlabel("array extent W (m)", fontsize=8)
+    right.set_ylabel("effective rank: #{s_i > σ}", fontsize=8)
+    right.legend(fontsize=8)
+    if title:
+        figure.suptitle(title, fontsize=9)
+    return save_figure(figure, path, dpi=110)
+
+
+def plot_panels(path: str | Path, rows: list[dict], *, attenuation: str, intensity: float,
+                illuminations: tuple = ("impulsive", "low-pass"), truth=None) -> Path:
+    """Figs. 7-8 style panel: impulsive (left block) and low-pass (right), rows T, columns W.
+
+    Each image is on a fixed [0, 1] grey scale (colour bar at the right) with
+    its PSNR (dB, data range 1) beneath it.
+    """
+    group = [r for r in rows if r["attenuation"] == attenuation and r["intensity"] == intensity]
+    periods = sorted({r["period"] for r in group})
+    extents = sorted({r["extent"] for r in group})
+    columns = len(illuminations) * len(extents) + (1 if truth is not None else 0)
+    figure = new_figure(1.9 * columns + 1.0, 2.3 * len(periods) + 0.6)
+    axes = np.atleast_2d(figure.subplots(len(periods), columns, squeeze=False))
+    table = {(r["illumination"], r["period"], r["extent"]): r for r in group}
+    shown = None
+    for i, period in enumerate(periods):
+        for block, name in enumerate(illuminations):
+            for j, extent in enumerate(extents):
+                axis = axes[i, block * len(extents) + j]
+                row = table[(name, period, extent)]
+                shown = _image_panel(figure, axis, np.clip(row["image"], 0, 1),
+                                     f"{name}\nT = {period:g}, W = {extent:g}")
+                axis.set_xlabel(f"{row['psnr']:.1f} dB", fontsize=7)
+        if truth is not None:
+            _image_panel(figure, axes[i, -1], truth, "true image")
+    if shown is not None:
+        figure.colorbar(shown, ax=axes.ravel().tolist(), label="reflectance", shrink=0.6)
+    figure.suptitle(f"oracle-λ reconstructions, {attenuation} attenuation, σ = {group[0]['sigma']:g}, "
+                    f"source {intensity:g} W/sr (PSNR beneath, data range 1)", fontsize=9)
+    return save_figure(figure, path, dpi=100)

@@ -13,18 +13,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from analytic.isochrone import LAMBERTIAN, make_frame, rectangle_range
 from analytic.reflectance import builtin_reflectance
 from analytic.scene import Illumination, Sampling, Scene
+from analytic.window import response_range
 
-__all__ = ["hard_cases", "response_range", "validation_suite"]
-
-
-def response_range(source, sensor, size: float) -> tuple[float, float]:
-    """(first, last) path length over the plane [0, L]², metres (exact: convex d)."""
-    frame = make_frame(np.asarray(source, float), np.asarray(sensor, float), LAMBERTIAN)
-    low, high = rectangle_range(frame, 0.0, size, 0.0, size)
-    return float(low), float(high)
+__all__ = ["hard_cases", "validation_suite"]
 
 
 def hard_cases(pixels: int = 10, waveform: str = "impulse") -> dict[str, Scene]:
@@ -61,10 +54,11 @@ def hard_cases(pixels: int = 10, waveform: str = "impulse") -> dict[str, Scene]:
     first = float(np.hypot(np.hypot(0.2, 0.1), 1.8))
     cases["first_arrival"] = scene("first_arrival", (0.5, 0.5, 1.0), [(0.7, 0.6, 0.8)],
                                    0.05, first - 0.05 + 1e-7, 30)
-    far_source, far_sensor = (0.5, 0.5, 400.0), (0.6, 0.45, 400.0)
-    low, high = response_range(far_source, far_sensor, 1.0)
+    far = scene("far", (0.5, 0.5, 400.0), [(0.6, 0.45, 400.0)], 1.0, 0.0, 1, m=6)
+    low, high = response_range(far)
     period = (high - low) / 1000.0
-    cases["far"] = scene("far", far_source, [far_sensor], period, low - 5 * period, 1020, m=6)
+    cases["far"] = far.replace(sampling=Sampling(bin_width_opl=period, start_opl=low - 5 * period,
+                                                 count=1020))
     return cases
 
 

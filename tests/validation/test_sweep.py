@@ -20,19 +20,12 @@ import signal
 import numpy as np
 import pytest
 
-from analytic.scene import SceneError, default_scene, scene_from_dict
-from transient.render import render, scene_fingerprint
-from validation.cli_sweep import add_commands
-from validation.sweep import (
-    ITEM_FILE,
-    STATE_FILE,
-    chunk_ranges,
-    default_scene_table,
-    load_sweep,
-    run_sweep,
-    sweep_client,
-    sweep_from_dict,
-)
+from analytic.scene import SceneError, default_scene
+from analytic.scene_file import scene_from_dict
+from transient.render import chunk_ranges, render, scene_fingerprint
+from validation.cli.sweep import add_commands
+from validation.sweep import ITEM_FILE, STATE_FILE, load_sweep, run_sweep, sweep_client, sweep_from_dict
+from validation.sweep.config import default_scene_table
 
 distributed = pytest.importorskip("distributed")
 

@@ -1,0 +1,82 @@
+"""The forward command: the contract's files, and one-line refusals with no files."""
+
+import json
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from analytic.io import read_transient
+from scene_files import GOOD, write_scene
+from validation.cli import main
+
+
+def _cli(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "validation.cli", *map(str, args)], capture_output=True,
+                          text=True, cwd=cwd, timeout=300)
+
+
+@pytest.mark.parametrize("change", [
+    ("size = 1.0", "size = 1.0\ncolour = 3"),
+    ("position = [0.5, 0.5, 1.0]", "position = [0.5, 0.5, -0.1]"),
+    ("count = 40", "count = 0"),
+])
+def test_bad_scene_exits_2_with_one_line_and_no_files(tmp_path, change):
+    path = write_scene(tmp_path, GOOD.replace(*change))
+    out = tmp_path / "out"
+    result = _cli("forward", path, "--out", out)
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in result.stderr
+    assert not out.exists()
+
+
+def test_missing_scene_file_exits_2(tmp_path, capsys):
+    assert main(["forward", str(tmp_path / "nope.toml"), "--out", str(tmp_path / "out")]) == 2
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1
+
+
+def test_forward_writes_the_contract_files(tmp_path):
+    text = GOOD + "\n[noise]\nsigma = 0.1\nseed = 3\n"
+    path = write_scene(tmp_path, text)
+    out = tmp_path / "out"
+    result = _cli("forward", path, "--out", out, "--quiet")
+    assert result.returncode == 0, result.stderr
+    names = {p.name for p in out.iterdir()}
+    assert names == {"transient.exr", "transient.npy", "meta.json", "transient_noisy.npy", "transient.png"}
+    y = np.load(out / "transient.npy")
+    assert y.shape == (1, 40) and y.dtype == np.float64 and y.max() > 0
+    np.testing.assert_allclose(read_transient(out / "transient.exr"), y, rtol=1e-6, atol=1e-12)
+    meta = json.loads((out / "meta.json").read_text())
+    assert meta["start_opl"] == 0.0 and meta["bin_width_opl"] == 0.1 and meta["attenuation"] == "lambertian"
+    assert meta["kind"] == "model" and meta["illumination"] == "impulse" and meta["window_share"] == 1.0
+    assert meta["noise"] == {"kind": "gaussian", "sigma": 0.1, "photons": 1000.0, "seed": 3}
+    import OpenEXR
+    with OpenEXR.File(str(out / "transient.exr")) as handle:
+        header = dict(handle.header())   # the header is a view that closes with the file
+    assert float(np.ravel(header["start_opl"])[0]) == 0.0 and float(np.ravel(header["bin_width_opl"])[0]) == 0.1
+    assert header["illumination"] == "impulse"
+    noisy = np.load(out / "transient_noisy.npy")
+    # σ = 0.1 noise: the residual's standard deviation within 4 standard errors of σ
+    residual = noisy - y
+    assert abs(residual.std() - 0.1) < 4 * 0.1 / math.sqrt(2 * residual.size)
+
+
+@pytest.mark.filterwarnings("default::analytic.window.WindowWarning")
+def test_a_window_that_cuts_the_response_warns_in_one_line(tmp_path, capsys):
+    path = write_scene(tmp_path, GOOD.replace("start = 0.0\ncount = 40", "start = 1.9\ncount = 3"))
+    assert main(["forward", str(path), "--out", str(tmp_path / "out"), "--quiet"]) == 0
+    warning = [line for line in capsys.readouterr().err.splitlines() if "warning" in line]
+    assert len(warning) == 1 and "% of the light" in warning[0]
+    assert json.loads((tmp_path / "out" / "meta.json").read_text())["window_share"] < 0.999
+
+
+def test_intensity_scales_the_model_exactly(tmp_path):
+    bright = GOOD.replace("position = [0.5, 0.5, 1.0]", "position = [0.5, 0.5, 1.0]\nintensity = 37.5")
+    for name, text in (("unit", GOOD), ("bright", bright)):
+        assert main(["forward", str(write_scene(tmp_path, text, f"{name}.toml")), "--out",
+                     str(tmp_path / name), "--quiet"]) == 0
+    unit, scaled = np.load(tmp_path / "unit" / "transient.npy"), np.load(tmp_path / "bright" / "transient.npy")
+    np.testing.assert_allclose(scaled, 37.5 * unit, rtol=1e-15, atol=0)

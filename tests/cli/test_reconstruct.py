@@ -1,0 +1,118 @@
+"""The reconstruct command: its files, metrics and figures, and its one-line refusals."""
+
+import json
+
+import numpy as np
+import pytest
+
+from analytic.io import read_transient, save_npy
+from analytic.noise import add_noise
+from analytic.scene_file import load_scene
+from analytic.system import forward
+from validation.cli import main
+
+SCENE = """
+[plane]
+pixels = 8
+[source]
+position = [0.5, 0.5, 1.0]
+[sensors]
+grid = [4, 4]
+extent = 2.0
+center = [0.5, 0.5, 1.0]
+[sampling]
+period = 0.05
+start = 1.9
+count = 40
+[noise]
+sigma = 0.001
+seed = 3
+"""
+
+
+@pytest.fixture
+def noisy_data(tmp_path):
+    scene_path = tmp_path / "scene.toml"
+    scene_path.write_text(SCENE)
+    scene = load_scene(scene_path)
+    save_npy(tmp_path / "y.npy", add_noise(forward(scene), scene.noise))
+    return scene_path, tmp_path / "y.npy"
+
+
+def test_reconstruct_command_writes_its_files(tmp_path, noisy_data):
+    scene_path, data = noisy_data
+    assert main(["reconstruct", str(scene_path), "--data", str(data), "--out", str(tmp_path / "r"),
+                 "--quiet"]) == 0
+    names = {p.name for p in (tmp_path / "r").iterdir()}
+    assert {"reconstruction.png", "reconstruction.exr", "reconstruction.npy", "metrics.json",
+            "criterion.png", "comparison.png", "report.md"} == names
+    metrics = json.loads((tmp_path / "r" / "metrics.json").read_text())
+    # the scene knows σ, so the data-driven default is the discrepancy principle
+    assert metrics["rule"] == "discrepancy" and metrics["data_range"] == 1.0
+    assert metrics["psnr"] > 20  # a uniform 0.5 plane at σ = 1e-3
+    image = read_transient(tmp_path / "r" / "reconstruction.exr")
+    assert np.allclose(image, np.load(tmp_path / "r" / "reconstruction.npy"), atol=1e-6)
+    report = (tmp_path / "r" / "report.md").read_text()
+    assert "comparison.png" in report and "criterion.png" in report
+    assert main(["reconstruct", str(scene_path), "--data", str(data), "--out", str(tmp_path / "tv"),
+                 "--lambda", "oracle", "--regularizer", "tv", "--quiet"]) == 0
+    tv = json.loads((tmp_path / "tv" / "metrics.json").read_text())
+    assert tv["method"] == "pdhg" and tv["psnr"] > 20
+
+
+def test_lambda_grid_options_set_the_searched_grid(tmp_path, noisy_data):
+    scene_path, data = noisy_data
+    assert main(["reconstruct", str(scene_path), "--data", str(data), "--out", str(tmp_path / "g"),
+                 "--lambda", "gcv", "--lambda-range", "1e-6", "1e-2", "--lambda-count", "9",
+                 "--quiet"]) == 0
+    metrics = json.loads((tmp_path / "g" / "metrics.json").read_text())
+    assert np.allclose(metrics["lambdas"], np.geomspace(1e-6, 1e-2, 9))
+
+
+@pytest.mark.parametrize("extra, words", [
+    (["--lambda", "best"], "--lambda"),
+    (["--lambda", "gcv", "--regularizer", "tv"], "--lambda gcv"),
+    (["--lambda", "-1"], "--lambda"),
+    (["--lambda-range", "1", "0.1"], "--lambda-range"),
+    (["--lambda-count", "5"], "--lambda-count"),
+    (["--regularizer", "tv", "--lambda", "oracle", "--method", "svd"], "--method"),
+])
+def test_bad_options_end_in_one_line_and_no_files(tmp_path, noisy_data, capsys, extra, words):
+    scene_path, data = noisy_data
+    with pytest.raises(SystemExit) if extra[1] in ("best", "-1") else _returns(2) as outcome:
+        outcome.value = main(["reconstruct", str(scene_path), "--data", str(data), "--out",
+                              str(tmp_path / "s"), *extra])
+    error = capsys.readouterr().err.strip().splitlines()
+    assert len(error) == 1 and words in error[0], error
+    assert not (tmp_path / "s").exists()
+
+
+def test_bad_data_and_a_missing_noise_level_end_in_one_line(tmp_path, noisy_data, capsys):
+    scene_path, data = noisy_data
+    assert main(["reconstruct", str(scene_path), "--data", str(tmp_path / "missing.npy"),
+                 "--out", str(tmp_path / "s")]) == 2
+    save_npy(tmp_path / "nan.npy", np.full((16, 40), np.nan))
+    assert main(["reconstruct", str(scene_path), "--data", str(tmp_path / "nan.npy"),
+                 "--out", str(tmp_path / "s")]) == 2
+    scene_path.write_text(SCENE.split("[noise]")[0])
+    assert main(["reconstruct", str(scene_path), "--data", str(data), "--out", str(tmp_path / "s"),
+                 "--lambda", "discrepancy"]) == 2
+    errors = capsys.readouterr().err.strip().splitlines()
+    assert len(errors) == 3 and "missing.npy" in errors[0] and "NaN" in errors[1]
+    assert "noise.sigma" in errors[2]
+    assert not (tmp_path / "s").exists()
+
+
+class _returns:
+    """Context that records a return value and checks it on exit (the twin of pytest.raises)."""
+
+    def __init__(self, expected):
+        self.expected = expected
+        self.value = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        assert exc[0] is None and self.value == self.expected, self.value
+        return False

@@ -1,0 +1,83 @@
+"""The cross-check harness: passes the right model, fails deliberately wrong ones, reports every figure."""
+
+import numpy as np
+import pytest
+
+from analytic.system import forward
+from transient.render import render
+from validation.compare import compare_transients
+from validation.harness import binned_contour_model, check_scene, data_driven_rule
+from validation.suite import hard_cases, validation_suite
+
+SPP = dict((scene.name, spp) for scene, spp in validation_suite())["outside"]   # the suite's count
+
+
+@pytest.fixture(scope="module")
+def outside():
+    """A suite scene (sensor outside the plane's footprint) rendered at the suite's sample count."""
+    scene = hard_cases(pixels=10)["outside"]
+    return scene, render(scene, spp=SPP, seed=0, progress=False)
+
+
+
+def test_right_model_passes(outside):
+    scene, result = outside
+    assert compare_transients(result.mean, result.stderr, forward(scene)).agrees
+
+
+
+def test_contour_form_with_coarea_factor_is_the_model(outside):
+    """Binning g_k(t) (contour form with 1/|∇d|) reproduces A f: the harness's wrong-model
+    builder is right when the factor is in."""
+    scene, _ = outside
+    model = forward(scene)
+    # fixed composite Gauss-Legendre across the kinks of g (pixel corners): ~1e-3
+    np.testing.assert_allclose(binned_contour_model(scene), model, atol=2e-3 * model.max())
+
+
+
+@pytest.mark.parametrize("wrong", ["no coarea factor", "half-bin shift", "missing cos θ_k"])
+def test_wrong_models_fail(outside, wrong):
+    scene, result = outside
+    model = forward(scene)
+    if wrong == "no coarea factor":
+        reference = binned_contour_model(scene, coarea=False)
+        reference *= np.linalg.norm(model) / np.linalg.norm(reference)   # shape only: same total
+    elif wrong == "half-bin shift":
+        sampling = scene.sampling
+        reference = forward(scene.replace(sampling=sampling.__class__(
+            bin_width_opl=sampling.bin_width_opl, start_opl=sampling.start_opl + sampling.bin_width_opl / 2, count=sampling.count)))
+    else:
+        reference = forward(scene.replace(attenuation="paper")) / np.pi
+        reference *= np.linalg.norm(model) / np.linalg.norm(reference)  # shape only
+    assert not compare_transients(result.mean, result.stderr, reference).agrees
+
+
+
+def test_check_scene_reports_every_figure():
+    scene = hard_cases(pixels=6)["colocated"]
+    check = check_scene(scene, spp=2**20, seed=1)
+    assert check.agreement.agrees
+    metrics = check.metrics
+    assert metrics["window_share"] == pytest.approx(1.0)
+    assert metrics["model_convergence"][-1]["over_stderr"] < 1e-2    # model ≪ noise
+    assert -0.75 < metrics["render_slope"] < -0.25
+    costs = metrics["simplifications"]
+    assert costs["paper_attenuation"] > 0.5 and costs["no_coarea_factor"] > 0.01
+    recon = metrics["reconstruction"]
+    assert recon["rule"] == "gcv" and recon["noise"] is None      # the scene is noiseless: GCV
+    for key in ("model", "render"):
+        assert set(recon[key]) == {"psnr", "ssim", "lambda"} and np.isfinite(recon[key]["psnr"])
+    assert np.isfinite(recon["oracle"]["psnr"]) and np.isfinite(recon["flat_psnr"])
+
+
+def test_data_driven_rule_uses_sigma_when_the_scene_knows_it():
+    from analytic.errors import SceneError
+    from analytic.scene import Noise, default_scene
+
+    assert data_driven_rule(default_scene()) == ("discrepancy", 0.1)
+    assert data_driven_rule(default_scene(noise=None)) == ("gcv", None)
+    assert data_driven_rule(default_scene(noise=Noise(kind="poisson"))) == ("gcv", None)
+    assert data_driven_rule(default_scene(), "lcurve") == ("lcurve", None)
+    with pytest.raises(SceneError, match="noise.sigma"):
+        data_driven_rule(default_scene(noise=None), "discrepancy")

@@ -1,0 +1,27 @@
+"""``diffuse-imaging bench``: speed against error of the model, the renderer and mitransient."""
+
+from __future__ import annotations
+
+from .common import add_quiet
+
+__all__ = ["add_commands", "command_bench"]
+
+
+def command_bench(args) -> int:
+    """Run the speed-against-error comparison; exit status 0."""
+    from analytic.io import output_folder
+    from validation.bench import speed_against_error
+
+    with output_folder(args.out) as out:
+        result = speed_against_error(out)
+    if not args.quiet:
+        print(result["markdown"])
+    return 0
+
+
+def add_commands(subparsers) -> None:
+    """Add ``bench``."""
+    bench = subparsers.add_parser("bench", help="speed against error of model, renderer, mitransient")
+    bench.add_argument("--out", required=True, help="output folder")
+    add_quiet(bench)
+    bench.set_defaults(run=command_bench)

@@ -1,0 +1,57 @@
+"""``diffuse-imaging forward``: the exact model's transient of a scene."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from .common import add_quiet, load_scene_argument, positive_float_type, show_progress
+
+__all__ = ["add_commands", "command_forward"]
+
+
+def command_forward(args) -> int:
+    """Model the noiseless transient (and a noisy one when the scene asks); exit status 0."""
+    from analytic.io import build_meta, output_folder, staged_writes, write_transient
+    from analytic.noise import add_noise
+    from analytic.system import system_matrix
+    from analytic.window import warn_if_cut, window_share
+
+    scene = load_scene_argument(args.scene)
+    if args.tolerance is not None:
+        scene = scene.replace(tolerance=args.tolerance)
+    share = window_share(scene)
+    warn_if_cut(scene, share)
+    with output_folder(args.out) as out:
+        started = time.perf_counter()
+        matrix = system_matrix(scene, progress=show_progress(args))
+        assembly = time.perf_counter() - started
+        y = (matrix @ scene.reflectance.ravel()).reshape(scene.sensor_count, scene.sampling.count)
+        noisy = add_noise(y, scene.noise) if scene.noise is not None else None
+        meta = build_meta(scene, kind="model",
+                          seed=scene.noise.seed if scene.noise is not None else None,
+                          window_share=share, nonzeros=int(matrix.nnz), assembly_seconds=assembly)
+        from validation.plots import plot_transients
+
+        with staged_writes():
+            write_transient(out, y, meta, noisy=noisy)
+            curves = {"model": y} if noisy is None else {"model": y, "model + noise": noisy}
+            plot_transients(out / "transient.png", scene.sampling, curves,
+                            title=f"{scene.name}: {meta['illumination']} illumination, "
+                                  f"{scene.attenuation} attenuation")
+    if not args.quiet:
+        print(f"forward: {scene.sensor_count} sensors x {scene.sampling.count} bins, "
+              f"A {matrix.shape[0]} x {matrix.shape[1]} with {matrix.nnz:,} non-zeros "
+              f"assembled in {assembly:.2f} s -> {Path(args.out)}")
+    return 0
+
+
+def add_commands(subparsers) -> None:
+    """Add ``forward``."""
+    forward = subparsers.add_parser("forward", help="model the noiseless transient y = A f")
+    forward.add_argument("scene", nargs="?", help="scene TOML (default: the built-in scene)")
+    forward.add_argument("--out", required=True, help="output folder")
+    forward.add_argument("--tolerance", type=positive_float_type("--tolerance"),
+                         help="relative accuracy of every entry of A (default: the scene's, 1e-6)")
+    add_quiet(forward)
+    forward.set_defaults(run=command_forward)

@@ -293,8 +293,11 @@ def save_json(path: str | Path, data: Any) -> Path:
 
 
 def save_text(path: str | Path, text: str, verify: Callable[[str], None] | None = None) -> Path:
-    """Save UTF-8 text (a report, a CSV), atomically, checking its length on disk."""
-    data = text.encode("utf-8")
+    """Save UTF-8 text (a report, a CSV), atomically, checking its length on disk.
+
+    File names that are not UTF-8 (held as surrogate escapes) are written back as their bytes.
+    """
+    data = text.encode("utf-8", "surrogateescape")
 
     def write(temporary):
         with open(temporary, "wb") as stream:

@@ -10,9 +10,10 @@ allocated. Reading and writing scene files is :mod:`analytic.scene_file`.
 Limits (each a clean error, not a silently wrong number):
 
 - every length and coordinate within ±``MAX_LENGTH`` (1e12 m) and every
-  positive length at least ``MIN_LENGTH`` (1e-9 m): beyond these, path
-  lengths and their differences leave the range where float64 resolves a
-  bin;
+  positive length at least ``MIN_LENGTH`` (1e-9 m), the source and sensors
+  at least ``MIN_HEIGHT`` (1e-9 m) above the plane: beyond these, path
+  lengths and their differences leave the range where float64 resolves the
+  response;
 - bins resolvable in float64: T ≥ 1e-12 × the largest |path length| of the
   window;
 - at most ``MAX_SENSORS`` sensors (the renderer compiles one deposit per
@@ -32,7 +33,8 @@ from .reflectance import builtin_reflectance
 from .resources import require_memory
 
 __all__ = ["SceneError", "Illumination", "Sampling", "Noise", "Scene", "default_scene", "sensor_grid",
-           "WAVEFORMS", "ATTENUATIONS", "NOISE_KINDS", "MAX_LENGTH", "MIN_LENGTH", "MAX_SENSORS"]
+           "WAVEFORMS", "ATTENUATIONS", "NOISE_KINDS", "MAX_LENGTH", "MIN_LENGTH", "MIN_HEIGHT", "MAX_SENSORS",
+           "DEFAULT_ARRAY"]
 
 WAVEFORMS = ("impulse", "square", "butterworth")
 ATTENUATIONS = ("lambertian", "paper")
@@ -42,6 +44,12 @@ NOISE_KINDS = ("gaussian", "poisson")
 MAX_LENGTH = 1e12
 #: Smallest positive length accepted (plane size, bin width), metres.
 MIN_LENGTH = 1e-9
+#: Smallest height of the source or a sensor above the plane, metres.
+MIN_HEIGHT = 1e-9
+#: Largest Gaussian noise σ: m σ² (the discrepancy rule's target) stays finite.
+MAX_SIGMA = 1e150
+#: Smallest relative accuracy of A's entries that float64 quadrature can reach.
+MIN_TOLERANCE = 1e-10
 #: Most sensors a scene may have.
 MAX_SENSORS = 1024
 #: Relative resolution a bin edge needs in float64 (T against |t|).
@@ -95,6 +103,9 @@ def _point(key: str, value: Any) -> np.ndarray:
     point = np.array([_number(f"{key}[{i}]", v, length=True) for i, v in enumerate(value)])
     if not point[2] > 0.0:
         raise SceneError(key, f"z = {point[2]} must be > 0 (strictly above the plane)")
+    if point[2] < MIN_HEIGHT:
+        raise SceneError(key, f"z = {point[2]:g} m is below the smallest height supported, {MIN_HEIGHT:g} m "
+                              f"(below it float64 path lengths cannot resolve the response under the point)")
     return point
 
 
@@ -144,8 +155,12 @@ class Illumination:
                                  f"does not apply to waveform = {self.waveform!r}")
             if name == "order":
                 object.__setattr__(self, name, _integer("illumination.order", value))
-            else:
-                object.__setattr__(self, name, _number(f"illumination.{name}", value, positive=True))
+                continue
+            number = _number(f"illumination.{name}", value, positive=True)
+            if name in ("width", "duration") and number < MIN_LENGTH:
+                raise SceneError(f"illumination.{name}", f"{number:g} m is below the smallest length "
+                                                         f"supported, {MIN_LENGTH:g} m")
+            object.__setattr__(self, name, number)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -203,23 +218,35 @@ class Noise:
     kind : {"gaussian", "poisson"}
         Additive i.i.d. Gaussian of standard deviation ``sigma``, or photon
         counting: Poisson(photons * y) / photons.
-    sigma : float
-        Gaussian standard deviation, in units of y. Default 0.1 (the paper's).
-    photons : float
-        Poisson scale: expected photon count per unit of y. Default 1000.
+    sigma : float, optional
+        Gaussian only: standard deviation, in units of y. Default 0.1 (the
+        paper's). None for ``poisson``.
+    photons : float, optional
+        Poisson only: expected photon count per unit of y. Default 1000.
+        None for ``gaussian``.
     seed : int
         Seed of the noise generator, 0 <= seed < 2^32.
     """
 
     kind: str = "gaussian"
-    sigma: float = 0.1
-    photons: float = 1000.0
+    sigma: float | None = None
+    photons: float | None = None
     seed: int = 0
 
     def __post_init__(self):
         _choice("noise.kind", self.kind, NOISE_KINDS)
-        object.__setattr__(self, "sigma", _number("noise.sigma", self.sigma, nonnegative=True))
-        object.__setattr__(self, "photons", _number("noise.photons", self.photons, positive=True))
+        own, other = ("sigma", "photons") if self.kind == "gaussian" else ("photons", "sigma")
+        if getattr(self, other) is not None:
+            raise SceneError(f"noise.{other}", f"does not apply to kind = {self.kind!r}")
+        if self.kind == "gaussian":
+            sigma = _number("noise.sigma", 0.1 if self.sigma is None else self.sigma, nonnegative=True)
+            if sigma > MAX_SIGMA:
+                raise SceneError("noise.sigma", f"{sigma:g} is beyond the {MAX_SIGMA:g} whose square "
+                                                f"stays finite")
+            object.__setattr__(self, "sigma", sigma)
+        else:
+            object.__setattr__(self, "photons", _number("noise.photons", 1000.0 if self.photons is None
+                                                        else self.photons, positive=True))
         object.__setattr__(self, "seed", _integer("noise.seed", self.seed, minimum=0,
                                                   maximum=_SEED_LIMIT - 1))
 
@@ -277,7 +304,7 @@ class Scene:
         size = _number("plane.size", self.size, positive=True, length=True)
         pixels = _integer("plane.pixels", self.pixels)
         # the image and a few copies of it (f, its DCT, a reconstruction): refuse before allocating
-        require_memory(4 * 8 * float(pixels) ** 2, f"plane.pixels = {pixels}",
+        require_memory(4 * 8 * pixels**2, f"plane.pixels = {pixels}",
                        "use fewer pixels")
         object.__setattr__(self, "size", size)
         object.__setattr__(self, "pixels", pixels)
@@ -314,13 +341,15 @@ class Scene:
         if not isinstance(self.sampling, Sampling):
             raise SceneError("sampling", "expected a Sampling")
         # y, its noisy copy, the render's mean, error and moments: K N doubles each
-        require_memory(8 * 8 * float(len(points)) * self.sampling.count,
+        require_memory(8 * 8 * len(points) * self.sampling.count,
                        f"{len(points)} sensors x sampling.count = {self.sampling.count} bins",
                        "use fewer bins (sampling.count) or sensors")
         _choice("model.attenuation", self.attenuation, ATTENUATIONS)
         tolerance = _number("model.tolerance", self.tolerance, positive=True)
-        if tolerance >= 0.1:
-            raise SceneError("model.tolerance", f"must be < 0.1, got {tolerance}")
+        if not MIN_TOLERANCE <= tolerance < 0.1:
+            raise SceneError("model.tolerance", f"must be in [{MIN_TOLERANCE:g}, 0.1), got {tolerance:g} "
+                                                f"(below {MIN_TOLERANCE:g} the quadrature meets float64's "
+                                                f"rounding and cannot converge)")
         object.__setattr__(self, "tolerance", tolerance)
         if self.noise is not None and not isinstance(self.noise, Noise):
             raise SceneError("noise", "expected a Noise or None")

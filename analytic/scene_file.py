@@ -156,8 +156,8 @@ def scene_to_tables(scene: Scene) -> dict:
     }
     if scene.noise is not None:
         noise = scene.noise
-        tables["noise"] = {"kind": noise.kind, "sigma": noise.sigma, "photons": noise.photons,
-                           "seed": noise.seed}
+        own = {"sigma": noise.sigma} if noise.kind == "gaussian" else {"photons": noise.photons}
+        tables["noise"] = {"kind": noise.kind, **own, "seed": noise.seed}
     return tables
 
 

@@ -39,7 +39,8 @@ def lambda_grid_of(args):
         return None
     minimum, maximum = args.lambda_range
     try:
-        return lambda_grid(minimum, maximum, args.lambda_count or DEFAULT_LAMBDA_COUNT)
+        count = DEFAULT_LAMBDA_COUNT if args.lambda_count is None else args.lambda_count
+        return lambda_grid(minimum, maximum, count)
     except ValueError as error:
         raise UsageError(f"--lambda-range/--lambda-count: {error}") from None
 

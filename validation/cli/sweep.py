@@ -23,9 +23,9 @@ def command_sweep(args) -> int:
     from analytic.io import output_folder
     from validation.sweep import load_sweep, run_sweep
 
-    sweep = load_sweep(args.sweep)   # SceneError (exit 2) before any output is written
     if args.workers is not None and not 1 <= args.workers <= 1024:
         raise UsageError(f"--workers: must be in [1, 1024], got {args.workers}")
+    sweep = load_sweep(args.sweep)   # SceneError (exit 2) before any output is written
     with output_folder(args.out) as out:
         result = run_sweep(sweep, out, scheduler=args.scheduler, workers=args.workers,
                            progress=show_progress(args))

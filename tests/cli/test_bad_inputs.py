@@ -1,0 +1,237 @@
+"""Every malformed or extreme input: exit status 2, one line naming the problem and no files,
+or a finite answer equal to an independent reference.
+
+The scene keys go through ``forward`` (in this process, for speed): each key
+gets wrong types, 0, negative values, -0.0, NaN, infinities, 5e-324, 1e308
+and huge integers. Legal extremes must give the brute-force reference of
+:mod:`brute_force` (midpoint samples, binned; ~1 % accurate).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from analytic.scene_file import load_scene
+from brute_force import binned_impulse_transient, path_length_range, sensor_totals
+from scene_files import GOOD, write_scene
+from validation.cli import main
+
+BAD_TYPES = {"text": '"x"', "bool": "true", "list": "[1, 2]", "table": "{ a = 1 }"}
+NUMBERS = {"zero": "0", "negative": "-1", "negative_zero": "-0.0", "nan": "nan", "inf": "inf",
+           "minus_inf": "-inf", "subnormal": "5e-324", "huge": "1e308",
+           "huge_integer": "9223372036854775807"}
+
+
+def _lines(key: str, value: str) -> tuple[str, str]:
+    """(TOML text, the key an error must name) with ``key`` set to ``value`` in GOOD."""
+    if key == "name":
+        return f"name = {value}\n" + GOOD, "name"
+    table, name = key.split(".")
+    if table == "noise":
+        kind = 'kind = "poisson"\n' if name == "photons" else ""
+        return GOOD + f"\n[noise]\n{kind}{name} = {value}\n", key
+    if table == "illumination" and name != "waveform":
+        waveform = "square" if name == "width" else "butterworth"
+        text = GOOD.replace('waveform = "impulse"', f'waveform = "{waveform}"\n{name} = {value}')
+        return text, key
+    section = f"[{table}]\n"
+    start = GOOD.index(section) + len(section)
+    end = GOOD.find("\n[", start)
+    body = GOOD[start:end if end > 0 else len(GOOD)]
+    entries = [line for line in body.strip().splitlines() if not line.startswith(f"{name} =")]
+    text = GOOD[:start] + "\n".join(entries + [f"{name} = {value}"]) + "\n" + GOOD[end if end > 0 else len(GOOD):]
+    return text, key
+
+
+# key -> the NUMBERS that are legal for it (everything else must be refused)
+LEGAL_NUMBERS = {
+    "plane.size": set(),
+    "plane.pixels": set(),
+    "plane.reflectance": {"zero", "negative_zero", "subnormal"},
+    "source.intensity": {"subnormal", "huge"},
+    "sampling.period": set(),
+    "sampling.start": {"zero", "negative", "negative_zero", "subnormal"},
+    "sampling.count": set(),
+    "model.tolerance": set(),
+    "illumination.width": {"huge"},
+    "noise.sigma": {"zero", "negative_zero", "subnormal", "huge_integer"},
+    "noise.photons": {"subnormal"},
+    "noise.seed": {"zero", "negative_zero"},
+    "sensors.extent": set(),
+}
+# keys that take a number, with a value that is legal (for the text-type cases' replacement)
+NUMERIC_KEYS = sorted(LEGAL_NUMBERS)
+
+CASES = []
+for key in NUMERIC_KEYS:
+    for label, value in BAD_TYPES.items():
+        if key == "plane.reflectance" and label == "text":
+            continue            # a string is an image path: tested with the files below
+        CASES.append((key, label, value, False))
+    for label, value in NUMBERS.items():
+        CASES.append((key, label, value, label in LEGAL_NUMBERS[key]))
+# points: each coordinate of the source and of a sensor
+for key, position in (("source.position", "[0.5, 0.5, {}]"), ("sensors.positions", "[[0.2, 0.7, {}]]")):
+    for label, value in NUMBERS.items():
+        legal = label in ("huge_integer",) and False
+        CASES.append((key, f"z_{label}", position.format(value), legal))
+    for label, value in {**BAD_TYPES, "short": "[0.5, 0.5]", "empty": "[]"}.items():
+        CASES.append((key, label, value, False))
+for label, value in {**BAD_TYPES, "unknown": '"laser"', "case": '"Impulse"'}.items():
+    CASES.append(("illumination.waveform", label, value, False))
+for label, value in {**BAD_TYPES, "unknown": '"phong"'}.items():
+    CASES.append(("model.attenuation", label, value, False))
+for label, value in {**BAD_TYPES, "unknown": '"uniform"'}.items():
+    CASES.append(("noise.kind", label, value, False))
+for label, value in {"number": "3", "bool": "true", "list": "[1]"}.items():
+    CASES.append(("name", label, value, False))
+for label, value in {"zero": "[0, 4]", "negative": "[-1, 4]", "huge": "[100000, 100000]",
+                     "one": "[4]", "float": "[1.5, 2]", "text": '"4x4"'}.items():
+    CASES.append(("sensors.grid", label, value, False))
+
+
+def _grid_text(value: str) -> str:
+    return GOOD.replace("positions = [[0.2, 0.7, 1.0]]", f"grid = {value}\ncenter = [0.5, 0.5, 1.0]")
+
+
+def _extent_text(value: str) -> str:
+    return GOOD.replace("positions = [[0.2, 0.7, 1.0]]", f"grid = [2, 2]\nextent = {value}\ncenter = [0.5, 0.5, 1.0]")
+
+
+def _scene_text(key: str, value: str) -> tuple[str, str]:
+    if key == "sensors.grid":
+        return _grid_text(value), "sensors.grid"
+    if key == "sensors.extent":
+        return _extent_text(value), "sensors.extent"
+    return _lines(key, value)
+
+
+def test_the_table_has_at_least_150_cases():
+    assert len(CASES) >= 150
+
+
+@pytest.mark.filterwarnings("default::analytic.window.WindowWarning")
+@pytest.mark.parametrize("key, label, value, legal", CASES,
+                         ids=[f"{key}={label}" for key, label, *_ in CASES])
+def test_scene_value(tmp_path, capsys, key, label, value, legal):
+    text, named = _scene_text(key, value)
+    path = write_scene(tmp_path, text)
+    out = tmp_path / "out"
+    status = main(["forward", str(path), "--out", str(out), "--quiet"])
+    error = [line for line in capsys.readouterr().err.splitlines() if "warning" not in line]
+    if not legal:
+        assert status == 2, f"{key} = {value} was accepted"
+        assert len(error) == 1 and error[0].startswith("diffuse-imaging: error:"), error
+        assert named.split("[")[0] in error[0], error[0]
+        assert not out.exists()
+        return
+    assert status == 0 and not error, error
+    y = np.load(out / "transient.npy")
+    assert np.all(np.isfinite(y))
+    _assert_matches_reference(load_scene(path), y)
+
+
+def _assert_matches_reference(scene, y):
+    low, high = path_length_range(scene)
+    edges = scene.sampling.edges
+    if scene.illumination.waveform == "impulse":
+        reference = binned_impulse_transient(scene)
+        scale = max(float(np.abs(reference).max()), np.finfo(float).tiny)
+        # a midpoint sample near a bin edge lands in the neighbouring bin: 3 % of the peak
+        np.testing.assert_allclose(y, reference, rtol=0, atol=3e-2 * scale)
+    elif edges[0] <= low and high + 1e3 < edges[-1] or scene.illumination.width == 1e308:
+        # the window holds every path (the huge square is flat over it): compare per-sensor totals
+        totals = y.sum(axis=1)
+        expected = sensor_totals(scene) if scene.illumination.width != 1e308 else None
+        if expected is not None:
+            np.testing.assert_allclose(totals, expected, rtol=1e-2)
+        else:
+            assert np.all(totals > 0)
+
+
+# ---------------------------------------------------------------- command-line values
+
+def _scene(tmp_path):
+    return str(write_scene(tmp_path))
+
+
+def _data(tmp_path):
+    data = tmp_path / "y.npy"
+    np.save(data, np.zeros((1, 40)))
+    return str(data)
+
+
+CLI_CASES = [
+    # (id, argv (with {scene}, {data}, {out}), words the one-line error must hold)
+    ("render spp missing", ["render", "{scene}", "--out", "{out}"], "--spp"),
+    ("render spp 0", ["render", "{scene}", "--spp", "0", "--out", "{out}"], "--spp"),
+    ("render spp 1", ["render", "{scene}", "--spp", "1", "--out", "{out}"], "--spp"),
+    ("render spp -5", ["render", "{scene}", "--spp", "-5", "--out", "{out}"], "--spp"),
+    ("render spp 2^70", ["render", "{scene}", "--spp", str(2**70), "--out", "{out}"], "--spp"),
+    ("render spp text", ["render", "{scene}", "--spp", "many", "--out", "{out}"], "--spp"),
+    ("render spp fraction", ["render", "{scene}", "--spp", "10.5", "--out", "{out}"], "--spp"),
+    ("render spp nan", ["render", "{scene}", "--spp", "nan", "--out", "{out}"], "--spp"),
+    ("render seed -1", ["render", "{scene}", "--spp", "64", "--seed", "-1", "--out", "{out}"], "--seed"),
+    ("render seed 2^32", ["render", "{scene}", "--spp", "64", "--seed", str(2**32), "--out", "{out}"], "--seed"),
+    ("render seed 2^64", ["render", "{scene}", "--spp", "64", "--seed", str(2**64), "--out", "{out}"], "--seed"),
+    ("render seed text", ["render", "{scene}", "--spp", "64", "--seed", "abc", "--out", "{out}"], "--seed"),
+    ("render out and resume", ["render", "{scene}", "--spp", "64", "--out", "{out}", "--resume", "{out}"],
+     "--resume"),
+    ("render variant bogus", ["render", "{scene}", "--spp", "64", "--variant", "scalar_rgb", "--out", "{out}"],
+     "variant"),
+    ("run spp 0", ["run", "{scene}", "--spp", "0", "--out", "{out}"], "--spp"),
+    ("run spp 1", ["run", "{scene}", "--spp", "1", "--out", "{out}"], "--spp"),
+    ("run spp -5", ["run", "{scene}", "--spp", "-5", "--out", "{out}"], "--spp"),
+    ("run seed 2^32", ["run", "{scene}", "--seed", str(2**32), "--out", "{out}"], "--seed"),
+    ("validate spp 0", ["validate", "{scene}", "--spp", "0", "--out", "{out}"], "--spp"),
+    ("validate spp 1", ["validate", "{scene}", "--spp", "1", "--out", "{out}"], "--spp"),
+    ("validate seed -1", ["validate", "{scene}", "--seed", "-1", "--out", "{out}"], "--seed"),
+    ("forward tolerance 0", ["forward", "{scene}", "--tolerance", "0", "--out", "{out}"], "--tolerance"),
+    ("forward tolerance -1", ["forward", "{scene}", "--tolerance", "-1", "--out", "{out}"], "--tolerance"),
+    ("forward tolerance nan", ["forward", "{scene}", "--tolerance", "nan", "--out", "{out}"], "--tolerance"),
+    ("forward tolerance 0.5", ["forward", "{scene}", "--tolerance", "0.5", "--out", "{out}"], "tolerance"),
+    ("forward no out", ["forward", "{scene}"], "--out"),
+    ("forward unknown flag", ["forward", "{scene}", "--out", "{out}", "--fast"], "--fast"),
+    ("no command", [], "COMMAND"),
+    ("unknown command", ["draw"], "draw"),
+    ("reconstruct lambda text", ["reconstruct", "{scene}", "--data", "{data}", "--out", "{out}", "--lambda",
+                                 "best"], "--lambda"),
+    ("reconstruct lambda 0", ["reconstruct", "{scene}", "--data", "{data}", "--out", "{out}", "--lambda", "0"],
+     "--lambda"),
+    ("reconstruct lambda inf", ["reconstruct", "{scene}", "--data", "{data}", "--out", "{out}", "--lambda",
+                                "inf"], "--lambda"),
+    ("reconstruct range reversed", ["reconstruct", "{scene}", "--data", "{data}", "--out", "{out}",
+                                    "--lambda-range", "1", "1e-3"], "--lambda-range"),
+    ("reconstruct range zero", ["reconstruct", "{scene}", "--data", "{data}", "--out", "{out}",
+                                "--lambda-range", "0", "1"], "--lambda-range"),
+    ("reconstruct count alone", ["reconstruct", "{scene}", "--data", "{data}", "--out", "{out}",
+                                 "--lambda-count", "4"], "--lambda-count"),
+    ("reconstruct count zero", ["reconstruct", "{scene}", "--data", "{data}", "--out", "{out}",
+                                "--lambda-range", "1e-3", "1", "--lambda-count", "0"], "--lambda"),
+    ("reconstruct discrepancy without noise", ["reconstruct", "{scene}", "--data", "{data}", "--out", "{out}",
+                                               "--lambda", "discrepancy"], "noise.sigma"),
+    ("reconstruct data missing", ["reconstruct", "{scene}", "--data", "{out}.npy", "--out", "{out}"],
+     "no such file"),
+    ("reconstruct tv gcv", ["reconstruct", "{scene}", "--data", "{data}", "--out", "{out}", "--regularizer",
+                            "tv", "--lambda", "gcv"], "tv"),
+    ("reconstruct method bogus", ["reconstruct", "{scene}", "--data", "{data}", "--out", "{out}", "--method",
+                                  "cholesky"], "--method"),
+    ("sweep file missing", ["sweep", "{out}.toml", "--out", "{out}"], "sweep file"),
+    ("sweep workers 0", ["sweep", "{scene}", "--workers", "0", "--out", "{out}"], "workers"),
+]
+
+
+@pytest.mark.parametrize("argv, words", [case[1:] for case in CLI_CASES], ids=[case[0] for case in CLI_CASES])
+def test_command_line_value(tmp_path, capsys, argv, words):
+    out = tmp_path / "out"
+    values = {"scene": _scene(tmp_path), "data": _data(tmp_path), "out": str(out)}
+    argv = [part.format(**values) for part in argv]
+    try:
+        status = main(argv)
+    except SystemExit as exit:        # argparse's own refusals
+        status = exit.code
+    error = capsys.readouterr().err.strip().splitlines()
+    assert status == 2, argv
+    assert len(error) == 1 and words in error[0], error
+    assert not out.exists()

@@ -94,7 +94,7 @@ def plot_transients(path: str | Path, sampling, transients: dict[str, np.ndarray
     columns = min(len(chosen), 4)
     rows = int(np.ceil(len(chosen) / columns))
     residual = bool(errors)
-    figure = new_figure(3.3 * columns, (3.4 if residual else 2.6) * rows + 0.4)
+    figure = new_figure(max(3.3 * columns, 5.0), (3.4 if residual else 2.6) * rows + 0.4)
     grid = figure.add_gridspec(rows * (2 if residual else 1), columns,
                                height_ratios=[3, 1] * rows if residual else None)
     for slot, k in enumerate(chosen):

@@ -40,8 +40,13 @@ def _row(check) -> str:
             f"{costs.get('no_coarea_factor', float('nan')):.3f} | {_reconstruction_cell(check)} |")
 
 
-def write_report(out: Path, checks: list, corner: dict | None = None, *, false_alarm: float = 1e-3) -> dict:
+def write_report(out: Path, checks: list, corner: dict | None = None, *, false_alarm: float = 1e-3,
+                 headline: bool = False) -> dict:
     """Write report.md, metrics.json and the figures for a list of SceneCheck (and the corner result).
+
+    With ``headline`` (one scene: the ``run`` command) metrics.json also holds
+    that scene's ``agreement``, ``window_share`` and ``reconstruction`` at its
+    top level (DESIGN.md section 5).
 
     Returns
     -------
@@ -108,6 +113,10 @@ def write_report(out: Path, checks: list, corner: dict | None = None, *, false_a
                         title="corner: one-bounce model against renders")
     metrics["all_agree"] = all(check.agreement.agrees for check in checks) and (
         corner is None or corner["one_bounce_agrees"])
+    if headline:
+        (check,) = checks
+        metrics.update({key: check.metrics[key] for key in ("agreement", "window_share", "reconstruction")
+                        if key in check.metrics})
     write_markdown(out / "report.md", lines)
     save_json(out / "metrics.json", metrics)
     return metrics

@@ -74,7 +74,7 @@ def command_run(args) -> int:
             write_transient(out / "render", check.render,
                             build_meta(scene, kind="render", samples=args.spp, seed=args.seed,
                                        window_share=share), stderr=check.stderr)
-            write_report(out, [check])
+            write_report(out, [check], headline=True)
     if not args.quiet:
         print(check.agreement.summary())
         recon = check.metrics.get("reconstruction", {})

@@ -24,7 +24,10 @@ from .config import Sweep
 from .index import finish_item, finished_row, write_index
 from .tasks import _identity, model_transient, render_chunk
 
-__all__ = ["SweepResult", "run_sweep", "sweep_client"]
+__all__ = ["SweepResult", "run_sweep", "sweep_client", "CONNECT_SECONDS"]
+
+#: How long to wait for a scheduler given by address.
+CONNECT_SECONDS = 10.0
 
 
 @dataclass(frozen=True)
@@ -83,7 +86,7 @@ def sweep_client(scheduler: str | None = None, workers: int | None = None) -> It
     if scheduler is not None:
         if workers is not None:
             raise ValueError("workers: only for a local cluster (the scheduler's cluster has its own)")
-        with Client(scheduler) as client:
+        with _connected(Client, scheduler) as client:
             yield client
         return
     workers = (os.cpu_count() or 1) if workers is None else int(workers)
@@ -92,6 +95,24 @@ def sweep_client(scheduler: str | None = None, workers: int | None = None) -> It
     with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
                       host="127.0.0.1", silence_logs=logging.ERROR) as cluster, \
             Client(cluster) as client:
+        yield client
+
+
+@contextlib.contextmanager
+def _connected(client_class, scheduler: str):
+    """A client of the scheduler at ``scheduler``, or one line saying why there is none."""
+    from analytic.errors import ResourceError
+
+    try:
+        client = client_class(scheduler, timeout=CONNECT_SECONDS)
+    except (OSError, TimeoutError) as error:
+        raise ResourceError(f"--scheduler {scheduler}: no Dask scheduler answered within "
+                            f"{CONNECT_SECONDS:g} s ({type(error).__name__}); start one there "
+                            f"(dask scheduler) or leave --scheduler out for a local cluster") from None
+    except (ValueError, TypeError) as error:
+        raise ResourceError(f"--scheduler {scheduler}: not a scheduler address ({error}); "
+                            f"give one such as tcp://host:8786") from None
+    with client:
         yield client
 
 

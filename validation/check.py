@@ -776,6 +776,9 @@ def check_transient(scene: Scene, data, *, stderr=None, shape_only: bool = False
 
     if judged_by == "shape":
         mask = (y_model != 0) | (data != 0)
+        if mask.sum() < 3 or not np.any(y_model != 0):
+            raise DataError("data: fewer than 3 bins with light, or none in the model; check the scene's "
+                            "sampling (start, period, count) against the data's")
         fit = fit_scale_offset(data, np.ones(shape), mask, model_at, scene.sampling.bin_width_opl)
         fitted = fit.scale * model_at(fit.offset_opl)
         relative, relative_fit = _relative_l2(data, y_model), _relative_l2(data, fitted)
@@ -787,8 +790,14 @@ def check_transient(scene: Scene, data, *, stderr=None, shape_only: bool = False
                            relative_fit, None, None, diagnosis, None, None, shape_tolerance, data, None,
                            y_model, fitted, edges)
 
-    as_given = _agreement(data, error, y_model, dof, false_alarm)
     mask = (error > 0) & (error < MAX_RELATIVE_STDERR * np.abs(data))
+    if mask.sum() < 3:
+        raise DataError(f"data: {int(mask.sum())} bin(s) with a standard error under "
+                        f"{MAX_RELATIVE_STDERR:g} of the value; render more samples to judge them")
+    if not np.any(y_model[mask] != 0):
+        raise DataError("scene: the model puts no light in the bins the data fill; check the scene's "
+                        "sampling (start, period, count) against the data's")
+    as_given = _agreement(data, error, y_model, dof, false_alarm)
     fit = fit_scale_offset(data, np.where(mask, error, 1.0), mask, model_at, scene.sampling.bin_width_opl,
                            replicas=replica_data)
     fitted = fit.scale * model_at(fit.offset_opl)

@@ -846,7 +846,8 @@ def plot_check_transients(path: str | Path, result: CheckResult, *, max_panels: 
     order = np.sort(order)
     columns = int(np.ceil(np.sqrt(len(order))))
     rows = int(np.ceil(len(order) / columns))
-    figure, axes = plt.subplots(rows, columns, figsize=(3.6 * columns, 2.7 * rows), squeeze=False)
+    figure, axes = plt.subplots(rows, columns, figsize=(max(3.6 * columns, 6.0), max(2.7 * rows, 3.8)),
+                                squeeze=False)
     centres = 0.5 * (result.edges[:-1] + result.edges[1:])
     fit = result.fit
     for panel, axis in enumerate(axes.flat):
@@ -905,7 +906,7 @@ def plot_check_z(path: str | Path, result: CheckResult) -> Path:
         verdict = "agrees" if agreement.agrees else "disagrees"
         axis.set_title(f"{label}: {verdict}, χ²/dof = {agreement.chi2_per_dof:.3g}, "
                        f"max |z| = {agreement.max_abs_z:.3g} (limit {agreement.z_threshold:.2f})", fontsize=9)
-        axis.set_ylabel("z", fontsize=9)
+        axis.set_ylabel("z (normal equivalent of t)" if result.dof is not None else "z", fontsize=9)
         axis.tick_params(labelsize=7)
     axes[1].set_xlabel(f"bin k·N + n (sensor-major, N = {bins})", fontsize=9)
     figure.tight_layout()

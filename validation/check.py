@@ -94,7 +94,9 @@ def _our_exr(path: Path, sampling: Sampling) -> np.ndarray:
 
     try:
         with OpenEXR.File(str(path)) as handle:
-            header = handle.header()
+            # Copies: the handle's header and pixels die with it.
+            header = {key: value for key, value in handle.header().items()
+                      if key in ("start_opl", "t0", "bin_width_opl", "period_opl", "T")}
             channels = handle.channels()
             if "Y" not in channels:
                 raise DataError(f"{path}: no channel Y (channels {sorted(channels)}); expected our "
@@ -475,16 +477,20 @@ def fit_scale_offset(data, sigma, mask, model_at, bin_width_opl: float, *, repli
     relative) only slows convergence, never moves the optimum. A coarse
     search over shifts of a quarter bin picks the starting δ.
 
-    Standard errors. Near the optimum θ̂ = θ + G (y_data - E y_data) with
-    G = (JᵀJ)⁻¹ Jᵀ diag(1/σ), J the whitened Jacobian. With replicas y_r,
-    cov θ̂ = Σ_r G(y_r - ȳ) (G(y_r - ȳ))ᵀ / (R (R - 1)) (the jackknife of
-    the linearised estimator; R - 1 degrees of freedom): it holds whatever
-    the correlation between bins. Without them only per-bin errors are
-    known and the sandwich estimate A⁻¹ B A⁻¹, A = JᵀJ,
-    B = D/(D - 2) Σ_i J_iᵀ J_i r_i² assumes independent bins. A Monte Carlo
-    renderer whose every sample lands in one bin has negatively correlated
-    neighbouring bins: then the offset's error from bins alone is too small
-    and the scale's too large; replicas give honest ones.
+    Standard errors. With replicas y_r: the delete-one jackknife,
+    cov θ̂ = (R - 1)/R Σ_r (θ̂_(r) - θ̄)(θ̂_(r) - θ̄)ᵀ, each θ̂_(r) one
+    Gauss–Newton step from θ̂ on the other R - 1 replicas' mean with their
+    own per-bin weights (the model and its slope at θ̂ are reused). It holds
+    whatever the correlation between bins, and it counts the noise of the
+    weights themselves, which come from the same replicas (a fixed-weight
+    formula would miss that the heaviest bins are those whose replicas
+    happened to lie close together). Without them only per-bin errors are
+    known: cov θ̂ = (JᵀJ)⁻¹ max(1, χ²_min / (D - 2)), exact for independent
+    bins with correct errors and inflated when the fit is worse than they
+    allow. A Monte Carlo renderer whose every sample lands in one bin has
+    negatively correlated neighbouring bins: then the offset's error from
+    bins alone is too small and the scale's too large; replicas give honest
+    ones.
     """
     data = np.asarray(data, dtype=np.float64)
     sigma = np.asarray(sigma, dtype=np.float64)
@@ -492,18 +498,29 @@ def fit_scale_offset(data, sigma, mask, model_at, bin_width_opl: float, *, repli
     jacobian = optimum.jacobian
     inverse = np.linalg.pinv(jacobian.T @ jacobian)
     if replicas is not None:
-        replicas = np.asarray(replicas, dtype=np.float64)
+        replicas = np.asarray(replicas, dtype=np.float64)[:, mask]       # (R, D)
         count = replicas.shape[0]
-        influence = inverse @ jacobian.T / optimum.sigma                # G: (2, D)
-        deviations = (replicas - replicas.mean(axis=0))[:, mask]         # (R, D)
-        moves = deviations @ influence.T                                 # (R, 2)
-        covariance = moves.T @ moves / (count * (count - 1))
+        if count < 3:
+            raise ValueError("replicas: the jackknife needs at least 3")
+        model = jacobian[:, 0] * optimum.sigma                           # y_model(t0 + δ̂), fitted bins
+        slope = jacobian[:, 1] * optimum.sigma / optimum.scale
+        estimates = np.empty((count, 2))
+        for r in range(count):
+            rest = np.delete(replicas, r, axis=0)
+            spread = rest.std(axis=0, ddof=1)
+            weight = np.divide(1.0, spread, out=np.zeros_like(spread), where=spread > 0)
+            left_out = np.column_stack([model * weight, optimum.scale * slope * weight])
+            step, *_ = np.linalg.lstsq(left_out, (rest.mean(axis=0) - optimum.scale * model) * weight,
+                                       rcond=None)
+            estimates[r] = (optimum.scale, optimum.offset) + step
+        deviations = estimates - estimates.mean(axis=0)
+        covariance = deviations.T @ deviations * (count - 1) / count
         method = "replicas"
     else:
         residual = optimum.residual
         size = residual.size
-        meat = (jacobian * residual[:, None] ** 2).T @ jacobian * (size / (size - 2))
-        covariance = inverse @ meat @ inverse
+        # Known errors: (JᵀJ)⁻¹, inflated when the fit is worse than they allow.
+        covariance = inverse * max(1.0, float(residual @ residual) / (size - 2))
         method = "bins"
     errors = np.sqrt(np.maximum(np.diag(covariance), 0.0))
     return Fit(scale=float(optimum.scale), scale_stderr=float(errors[0]), offset_opl=float(optimum.offset),
@@ -636,13 +653,19 @@ def _relative_l2(data, model) -> float:
 
 
 def _plus_minus(value: float, error: float, unit: str = "") -> str:
-    """'+1.55e-4 ± 0.10e-4 m': value and error with the error's last two digits, one exponent."""
+    """'+1.55e-4 ± 0.10e-4 m': value and error to the error's precision, one exponent."""
     magnitude = max(abs(value), error, np.finfo(float).tiny)
     exponent = int(math.floor(math.log10(magnitude)))
     if -2 <= exponent <= 2:
         exponent = 0
     factor = 10.0**exponent
-    decimals = max(0, 1 - int(math.floor(math.log10(error / factor)))) if error > 0 else 4
+    if error > 0:
+        # One significant digit of the error, two when it starts with 1 or 2.
+        leading = int(math.floor(math.log10(error / factor)))
+        digits = 2 if error / factor / 10.0**leading < 3 else 1
+        decimals = max(0, digits - 1 - leading)
+    else:
+        decimals = 4
     suffix = f"e{exponent}" if exponent else ""
     return f"{value / factor:+.{decimals}f}{suffix} ± {error / factor:.{decimals}f}{suffix}{unit}"
 
@@ -782,7 +805,7 @@ def check_transient(scene: Scene, data, *, stderr=None, shape_only: bool = False
         fit = fit_scale_offset(data, np.ones(shape), mask, model_at, scene.sampling.bin_width_opl)
         fitted = fit.scale * model_at(fit.offset_opl)
         relative, relative_fit = _relative_l2(data, y_model), _relative_l2(data, fitted)
-        agrees, agrees_fit = relative <= shape_tolerance, relative_fit <= shape_tolerance
+        agrees, agrees_fit = bool(relative <= shape_tolerance), bool(relative_fit <= shape_tolerance)
         diagnosis = ("judged by shape only (no errors given, no statistical test): "
                      + diagnose(fit, agrees=agrees, agrees_after_fit=agrees_fit,
                                 bin_width_opl=scene.sampling.bin_width_opl))
@@ -804,7 +827,7 @@ def check_transient(scene: Scene, data, *, stderr=None, shape_only: bool = False
     after = _agreement(data, error, fitted, dof, false_alarm)
     diagnosis = diagnose(fit, agrees=as_given.agrees, agrees_after_fit=after.agrees,
                          bin_width_opl=scene.sampling.bin_width_opl)
-    return CheckResult(as_given.agrees, as_given.chi2_per_dof, as_given.max_abs_z, fit, after.agrees,
+    return CheckResult(bool(as_given.agrees), as_given.chi2_per_dof, as_given.max_abs_z, fit, bool(after.agrees),
                        judged_by, replicas, dof, _relative_l2(data, y_model), _relative_l2(data, fitted),
                        after.chi2_per_dof, after.max_abs_z, diagnosis, as_given, after, None, data, error,
                        y_model, fitted, edges)

@@ -160,7 +160,9 @@ def test_a_single_transient_without_errors_is_refused(scene, model):
     with pytest.raises(DataError, match="without errors"):
         check_transient(scene, model, model=model)
     with pytest.raises(DataError, match="replicas carry their own error"):
-        check_transient(scene, np.stack([model, model]), stderr=np.ones_like(model), model=model)
+        check_transient(scene, np.stack([model] * 3), stderr=np.ones_like(model), model=model)
+    with pytest.raises(DataError, match="at least 3"):
+        check_transient(scene, np.stack([model, model]), model=model)
     with pytest.raises(DataError, match="shape"):
         check_transient(scene, model[:, :-1], shape_only=True, model=model)
     with pytest.raises(DataError, match="NaN"):

@@ -48,6 +48,10 @@ __all__ = ["DataError", "Fit", "CheckResult", "check_transient", "fit_scale_offs
 #: Bins are judged (and fitted) only where se < this x |y_data| (as compare_transients).
 MAX_RELATIVE_STDERR = 0.1
 
+# Relative accuracy of the model (the system matrix's default tolerance): a
+# fitted scale within it of 1, or an offset within it of a bin of 0, is none.
+_RESOLUTION = 1e-6
+
 #: Scale factors (data / model) that a known convention explains.
 KNOWN_SCALES = (
     (1.0, "reads the fluence, as the model"),
@@ -442,7 +446,7 @@ def _gauss_newton(data, sigma, mask, model_at, bin_width_opl: float, max_iterati
 
 
 def fit_scale_offset(data, sigma, mask, model_at, bin_width_opl: float, *, replicas=None,
-                     max_iterations: int = 30) -> Fit:
+                     sigma_known: bool = True, max_iterations: int = 30) -> Fit:
     """Weighted least-squares scale and time offset of data against a shiftable model.
 
     Parameters
@@ -460,6 +464,10 @@ def fit_scale_offset(data, sigma, mask, model_at, bin_width_opl: float, *, repli
     replicas : numpy.ndarray, optional
         ``(R, K, N)`` the independent replicas ``data`` is the mean of: the
         standard errors then come from their spread (see Notes).
+    sigma_known : bool
+        Whether ``sigma`` is each bin's true standard error (True) or only
+        relative weights, e.g. ones for a shape-only fit (False: the noise
+        level is estimated from the residuals). Refused False with replicas.
     max_iterations : int
         Gauss–Newton iterations at most.
 
@@ -489,11 +497,13 @@ def fit_scale_offset(data, sigma, mask, model_at, bin_width_opl: float, *, repli
     happened to lie close together). Without them only per-bin errors are
     known: cov θ̂ = (JᵀJ)⁻¹ max(1, χ²_min / (D - 2)), exact for independent
     bins with correct errors and inflated when the fit is worse than they
-    allow. A Monte Carlo renderer whose every sample lands in one bin has
+    allow; with ``sigma_known=False``, (JᵀJ)⁻¹ χ²_min / (D - 2). A Monte Carlo renderer whose every sample lands in one bin has
     negatively correlated neighbouring bins: then the offset's error from
     bins alone is too small and the scale's too large; replicas give honest
     ones.
     """
+    if replicas is not None and not sigma_known:
+        raise ValueError("sigma_known: replicas give each bin's error; refused False with them")
     data = np.asarray(data, dtype=np.float64)
     sigma = np.asarray(sigma, dtype=np.float64)
     optimum = _gauss_newton(data, sigma, mask, model_at, bin_width_opl, max_iterations)
@@ -521,8 +531,9 @@ def fit_scale_offset(data, sigma, mask, model_at, bin_width_opl: float, *, repli
     else:
         residual = optimum.residual
         size = residual.size
+        variance = float(residual @ residual) / (size - 2)
         # Known errors: (JᵀJ)⁻¹, inflated when the fit is worse than they allow.
-        covariance = inverse * max(1.0, float(residual @ residual) / (size - 2))
+        covariance = inverse * (max(1.0, variance) if sigma_known else variance)
         method = "bins"
     errors = np.sqrt(np.maximum(np.diag(covariance), 0.0))
     return Fit(scale=float(optimum.scale), scale_stderr=float(errors[0]), offset_opl=float(optimum.offset),
@@ -656,7 +667,9 @@ def _relative_l2(data, model) -> float:
 
 def _plus_minus(value: float, error: float, unit: str = "") -> str:
     """'+1.55e-4 ± 0.10e-4 m': value and error to the error's precision, one exponent."""
-    magnitude = max(abs(value), error, np.finfo(float).tiny)
+    if value == 0 and error == 0:
+        return f"+0 ± 0{unit}"
+    magnitude = max(abs(value), error)
     exponent = int(math.floor(math.log10(magnitude)))
     if -2 <= exponent <= 2:
         exponent = 0
@@ -694,11 +707,12 @@ def diagnose(fit: Fit, *, agrees: bool, agrees_after_fit: bool, bin_width_opl: f
     margin = max(3 * fit.scale_stderr, 0.01 * abs(fit.scale))
     factor, meaning = min(KNOWN_SCALES, key=lambda item: abs(math.log(abs(fit.scale) / item[0])))
     parts = []
-    if abs(fit.scale - factor) <= max(margin, 3 * fit.scale_stderr) and factor != 1.0:
+    # Differences under the model's own accuracy (_RESOLUTION) are no convention.
+    if abs(fit.scale - factor) <= margin and factor != 1.0:
         parts.append(f"a sensor that {meaning}")
-    elif abs(fit.scale - 1.0) > 3 * fit.scale_stderr:
+    elif abs(fit.scale - 1.0) > max(3 * fit.scale_stderr, _RESOLUTION):
         parts.append(f"y scaled by {fit.scale:.4g} (units or source intensity?)")
-    shifted = abs(fit.offset_opl) > 3 * fit.offset_stderr
+    shifted = abs(fit.offset_opl) > max(3 * fit.offset_stderr, _RESOLUTION * bin_width_opl)
     bins = fit.offset_opl / bin_width_opl
     if shifted and round(bins) != 0 and abs(bins - round(bins)) * bin_width_opl <= max(
             3 * fit.offset_stderr, 0.01 * bin_width_opl):
@@ -722,7 +736,7 @@ def check_transient(scene: Scene, data, *, stderr=None, shape_only: bool = False
     scene : Scene
         The scene the data were rendered (or measured) from.
     data : array_like
-        ``(K, N)`` one transient, or ``(R, K, N)`` R >= 2 independent
+        ``(K, N)`` one transient, or ``(R, K, N)`` R >= 3 independent
         replicas (e.g. renders with different seeds); units of y.
     stderr : array_like, optional
         ``(K, N)`` standard error of a single transient (units of y).
@@ -771,6 +785,9 @@ def check_transient(scene: Scene, data, *, stderr=None, shape_only: bool = False
     if not np.all(np.isfinite(data)):
         raise DataError("data: contains NaN or infinity; re-render or drop the replica")
     replicas = 1 if data.ndim == 2 else data.shape[0]
+    if replicas == 2:
+        raise DataError("data: two replicas give each bin's error one degree of freedom; give at least 3 "
+                        "(or one transient with its standard error)")
     if replicas > 1 and (stderr is not None or shape_only):
         raise DataError("replicas carry their own error: give neither stderr nor shape_only with them")
     if stderr is not None and shape_only:
@@ -804,7 +821,8 @@ def check_transient(scene: Scene, data, *, stderr=None, shape_only: bool = False
         if mask.sum() < 3 or not np.any(y_model != 0):
             raise DataError("data: fewer than 3 bins with light, or none in the model; check the scene's "
                             "sampling (start, period, count) against the data's")
-        fit = fit_scale_offset(data, np.ones(shape), mask, model_at, scene.sampling.bin_width_opl)
+        fit = fit_scale_offset(data, np.ones(shape), mask, model_at, scene.sampling.bin_width_opl,
+                               sigma_known=False)
         fitted = fit.scale * model_at(fit.offset_opl)
         relative, relative_fit = _relative_l2(data, y_model), _relative_l2(data, fitted)
         agrees, agrees_fit = bool(relative <= shape_tolerance), bool(relative_fit <= shape_tolerance)

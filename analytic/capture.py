@@ -264,7 +264,7 @@ def read_capture(path: str | Path) -> Capture:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no capture file at {path}")
-    name = path.name
+    name = str(path)
     try:
         handle = h5py.File(path, "r")
     except OSError as error:

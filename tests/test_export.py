@@ -80,6 +80,17 @@ def test_refusals(tmp_path):
     assert not any(tmp_path.iterdir())
 
 
+def test_export_command(tmp_path):
+    scene_file = write_scene_file(tmp_path, [[0.8, 0.3, 1.0]])
+    assert run_command("export", scene_file, "--format", "mitsuba", "--out", tmp_path / "ours") == 0
+    assert (tmp_path / "ours" / "scene.xml").is_file() and (tmp_path / "ours" / "reflectance.exr").is_file()
+    with pytest.raises(SceneError, match="--radius/--spp"):
+        run_command("export", scene_file, "--format", "mitsuba", "--radius", "0.01", "--out", tmp_path / "x")
+    with pytest.raises(SceneError, match="radius"):
+        run_command("export", scene_file, "--format", "mitransient", "--radius", "2", "--out", tmp_path / "x")
+    assert not (tmp_path / "x").exists()
+
+
 @pytest.mark.parametrize("illumination", [Illumination(waveform="impulse"), Illumination(waveform="square"),
                                           Illumination(waveform="butterworth", order=2)])
 def test_our_plugins_render_the_exported_scene_as_render_does(tmp_path, illumination):

@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import json
+import os
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
@@ -144,8 +145,13 @@ print(mitransient.__version__)
 
 
 def render_mitransient(xml, spp: int, seeds: int, out, mode: str = "stack") -> str:
+    from transient.backend import choose_libllvm, find_llvm_libraries
+
+    # The libLLVM our backend would choose: Dr.Jit aborts on LLVM <= 15 whoever calls it.
+    environment = os.environ | {"DRJIT_LIBLLVM_PATH": choose_libllvm(os.environ.get("DRJIT_LIBLLVM_PATH"),
+                                                                     find_llvm_libraries())}
     done = subprocess.run([sys.executable, "-c", _MITRANSIENT, "llvm_ad_mono", str(xml), str(spp), str(seeds),
-                           str(out), mode], capture_output=True, text=True, timeout=1200)
+                           str(out), mode], capture_output=True, text=True, timeout=1200, env=environment)
     assert done.returncode == 0, done.stderr[-3000:]
     return done.stdout.strip().splitlines()[-1]
 

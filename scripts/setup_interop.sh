@@ -1,0 +1,20 @@
+#!/usr/bin/env bash
+# The interoperability extras: tal (y-tal) in its own virtual environment. Idempotent.
+#
+# y-tal pins numpy<2 (through nptyping) and Pillow==10.3.0, which would
+# downgrade the project's own environment, so it lives in .venv-tal at the
+# repository root (ignored by git). The tests that read our HDF5 captures
+# back with tal.io.read_capture run .venv-tal/bin/python in a subprocess and
+# are skipped, saying why, when it is absent. mitransient installs into the
+# main environment (the `bench` extra) and needs nothing here.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+venv=.venv-tal
+if [ ! -x "$venv/bin/python" ]; then
+    python3 -m venv "$venv"
+fi
+if ! "$venv/bin/python" -c "import tal, h5py" >/dev/null 2>&1; then
+    "$venv/bin/python" -m pip install --quiet --disable-pip-version-check y-tal h5py
+fi
+"$venv/bin/python" -c "import tal, h5py"

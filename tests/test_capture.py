@@ -1,0 +1,232 @@
+"""transient.h5 in tal's HDF5 capture layout (analytic.capture), read back by tal itself.
+
+tal (y-tal) pins numpy < 2 and Pillow 10.3.0, so it lives in its own virtual
+environment, ``.venv-tal`` (``scripts/setup_interop.sh``); the tests that need
+it run ``.venv-tal/bin/python`` in a subprocess and are skipped when it is
+absent. The independent reference for our writer is tal's own reader
+(``tal.io.read_capture``) and tal's own backprojection, and for our reader a
+file written by tal's own writer (``tal.io.write_capture``).
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from analytic import capture as capture_module
+from analytic.capture import CaptureError, read_capture, write_capture
+from analytic.scene import Sampling, Scene, sensor_grid
+from analytic.system import forward
+from validation.check import DataError, read_data
+
+ROOT = Path(__file__).resolve().parents[1]
+TAL_PYTHON = ROOT / ".venv-tal" / "bin" / "python"
+needs_tal = pytest.mark.skipif(not TAL_PYTHON.is_file(),
+                               reason="tal's virtual environment .venv-tal is absent "
+                                      "(create it with scripts/setup_interop.sh)")
+
+
+def run_tal(code: str, *args) -> str:
+    """Run Python code in tal's environment; return its stdout."""
+    done = subprocess.run([str(TAL_PYTHON), "-c", code, *map(str, args)], capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    return done.stdout
+
+
+def small_capture(tmp_path, rng):
+    transient = rng.random((3, 7))
+    sensors = np.array([[0.2, 0.7, 1.0], [0.8, 0.15, 0.5], [0.1 + 0.2, 0.4, 0.9]])
+    path = write_capture(tmp_path / "transient.h5", transient, start_opl=1.2345678901234567,
+                         bin_width_opl=0.1, source=[0.5, 0.5, 1.0], sensors=sensors,
+                         scene_info={"scene": "small", "start_opl": 1.2345678901234567})
+    return path, transient, sensors
+
+
+def test_round_trip_is_exact(tmp_path, rng):
+    path, transient, sensors = small_capture(tmp_path, rng)
+    read = read_capture(path)
+    assert np.array_equal(read.transient, transient)
+    assert read.start_opl == 1.2345678901234567 and read.bin_width_opl == 0.1
+    assert np.array_equal(read.sensors, sensors)
+    assert np.array_equal(read.source, [0.5, 0.5, 1.0])
+    assert read.accounts_first_and_last_bounces is False
+    assert read.scene_info == {"scene": "small", "start_opl": 1.2345678901234567}
+    with h5py.File(path, "r") as handle:
+        assert handle["H"].shape == (7, 3)            # time first: T_Si
+        assert handle["H"].dtype == np.float64
+        assert h5py.check_enum_dtype(handle["H_format"].dtype)["T_Si"] == handle["H_format"][0] == 3
+
+
+def test_interrupted_write_keeps_the_previous_file(tmp_path, rng, monkeypatch):
+    path, transient, _ = small_capture(tmp_path, rng)
+    before = path.read_bytes()
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("disk full")
+    monkeypatch.setattr(capture_module, "_enum", broken)
+    with pytest.raises(RuntimeError, match="disk full"):
+        write_capture(path, 2 * transient, start_opl=0.0, bin_width_opl=0.1, source=[0.5, 0.5, 1.0],
+                      sensors=np.ones((3, 3)), scene_info={})
+    assert path.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["transient.h5"]   # no temporary left
+
+
+@pytest.mark.parametrize("arguments, name", [
+    (dict(sensors=np.ones((2, 3))), "sensors"),
+    (dict(source=[0.5, 0.5]), "source"),
+    (dict(bin_width_opl=0.0), "bin_width_opl"),
+])
+def test_bad_arguments_are_named(tmp_path, arguments, name):
+    values = dict(start_opl=0.0, bin_width_opl=0.1, source=[0.5, 0.5, 1.0], sensors=np.ones((3, 3)),
+                  scene_info={}) | arguments
+    with pytest.raises(ValueError, match=name):
+        write_capture(tmp_path / "t.h5", np.ones((3, 4)), **values)
+    assert not (tmp_path / "t.h5").exists()
+
+
+def test_files_that_are_not_captures_are_refused(tmp_path):
+    (tmp_path / "text.h5").write_text("not hdf5")
+    with pytest.raises(CaptureError, match="not a readable HDF5"):
+        read_capture(tmp_path / "text.h5")
+    with h5py.File(tmp_path / "empty.h5", "w") as handle:
+        handle["t_start"] = 0.0
+    with pytest.raises(CaptureError, match="no H"):
+        read_capture(tmp_path / "empty.h5")
+    with h5py.File(tmp_path / "lasers.h5", "w") as handle:
+        handle["H"] = np.ones((5, 2, 3))
+        handle.create_dataset("H_format", (1,), dtype=h5py.enum_dtype(capture_module.H_FORMATS, basetype="i"))
+        handle["H_format"][0] = capture_module.H_FORMATS["T_Li_Si"]
+        handle["t_start"], handle["delta_t"] = 0.0, 0.1
+    with pytest.raises(CaptureError, match="2 laser points"):
+        read_capture(tmp_path / "lasers.h5")
+    with pytest.raises(FileNotFoundError):
+        read_capture(tmp_path / "missing.h5")
+
+
+_TAL_READ = r"""
+import json, sys
+import numpy as np, tal
+data = tal.io.read_capture(sys.argv[1])
+np.save(sys.argv[2], data.H)
+print(json.dumps({"H_format": data.H_format.name, "sensor_grid_format": data.sensor_grid_format.name,
+                  "laser_grid_format": data.laser_grid_format.name, "delta_t": float(data.delta_t),
+                  "t_start": float(data.t_start), "sensor_grid_xyz": data.sensor_grid_xyz.tolist(),
+                  "laser_xyz": data.laser_xyz.tolist(), "laser_grid_xyz": data.laser_grid_xyz.tolist(),
+                  "accounts": bool(data.t_accounts_first_and_last_bounces), "scene_info": data.scene_info,
+                  "confocal": bool(data.is_confocal())}))
+"""
+
+
+@needs_tal
+def test_tal_reads_our_capture_back(tmp_path, rng):
+    path, transient, sensors = small_capture(tmp_path, rng)
+    seen = json.loads(run_tal(_TAL_READ, path, tmp_path / "H.npy").splitlines()[-1])
+    H = np.load(tmp_path / "H.npy")
+    assert H.dtype == np.float64 and np.array_equal(H, transient.T)
+    assert seen["t_start"] == 1.2345678901234567 and seen["delta_t"] == 0.1
+    assert (seen["H_format"], seen["sensor_grid_format"], seen["laser_grid_format"]) == ("T_Si", "N_3", "N_3")
+    assert np.array_equal(seen["sensor_grid_xyz"], sensors)
+    assert seen["laser_xyz"] == [0.5, 0.5, 1.0] and seen["laser_grid_xyz"] == [[0.5, 0.5, 1.0]]
+    assert seen["accounts"] is False and seen["confocal"] is False
+    assert seen["scene_info"] == {"scene": "small", "start_opl": 1.2345678901234567}
+
+
+_TAL_BACKPROJECT = r"""
+import sys
+import numpy as np, tal
+from tal.enums import CameraSystem, VolumeFormat
+data = tal.io.read_capture(sys.argv[1])
+data.t_accounts_first_and_last_bounces = sys.argv[2] == "True"
+pixels = int(sys.argv[3])
+centres = (np.arange(pixels) + 0.5) / pixels
+x, y = np.meshgrid(centres, 1.0 - centres)         # image row r lies at y = 1 - (r + 1/2) / M
+volume = np.stack([x, y, np.zeros_like(x)], axis=-1)
+image = tal.reconstruct.bp.solve(data, volume_xyz=volume, volume_format=VolumeFormat.X_Y_3,
+                                 camera_system=CameraSystem.DIRECT_LIGHT, progress=False)
+print(int(np.argmax(np.abs(np.asarray(image)))))
+"""
+
+
+@needs_tal
+def test_tal_backprojection_focuses_on_the_bright_pixel(tmp_path):
+    """Our path lengths are tal's d_2 + d_3 with the flag False (analytic.capture's docstring).
+
+    A plane dark but for one pixel: tal's backprojection of our capture
+    peaks on that pixel as written (flag False), and elsewhere when the
+    flag is forced True (tal then adds |sensor - sensor_xyz| to every path).
+    """
+    pixels, bright = 16, (4, 11)
+    image = np.zeros((pixels, pixels))
+    image[bright] = 1.0
+    scene = Scene(size=1.0, pixels=pixels, reflectance=image, source=(0.5, 0.5, 0.6),
+                  sensors=sensor_grid((6, 6), 1.0, (0.5, 0.5, 0.4)),
+                  sampling=Sampling(bin_width_opl=0.005, start_opl=0.7, count=200))
+    path = write_capture(tmp_path / "transient.h5", forward(scene), start_opl=0.7, bin_width_opl=0.005,
+                         source=scene.source, sensors=scene.sensors, scene_info={})
+    peak = int(run_tal(_TAL_BACKPROJECT, path, False, pixels).split()[-1])
+    assert np.unravel_index(peak, image.shape) == bright
+    wrong = int(run_tal(_TAL_BACKPROJECT, path, True, pixels).split()[-1])
+    assert np.unravel_index(wrong, image.shape) != bright
+
+
+_TAL_WRITE = r"""
+import sys
+import numpy as np, tal
+from tal.enums import GridFormat, HFormat
+from tal.io.capture_data import NLOSCaptureData
+H = np.load(sys.argv[2])
+grid = np.load(sys.argv[3])
+data = NLOSCaptureData()
+data.H, data.H_format = H, HFormat.T_Sx_Sy
+data.sensor_grid_xyz, data.sensor_grid_format = grid, GridFormat.X_Y_3
+data.sensor_xyz = np.array([0.5, 0.5, 1.0])
+data.laser_xyz = np.array([0.5, 0.5, 1.0])
+data.laser_grid_xyz, data.laser_grid_format = np.array([[[0.5, 0.5, 1.0]]]), GridFormat.X_Y_3
+data.delta_t, data.t_start, data.t_accounts_first_and_last_bounces = 0.05, 1.5, False
+data.scene_info = {"written_by": "tal"}
+tal.io.write_capture(sys.argv[1], data)
+"""
+
+
+@needs_tal
+def test_a_capture_written_by_tal_is_read_with_sensors_matched_by_position(tmp_path):
+    """tal's T_Sx_Sy grid flattens (x index, y index) row-major; the scene lists x fastest."""
+    scene = Scene(size=1.0, pixels=8, reflectance=0.5, source=(0.5, 0.5, 1.0),
+                  sensors=sensor_grid((3, 2), 0.6, (0.5, 0.5, 1.0)),
+                  sampling=Sampling(bin_width_opl=0.05, start_opl=1.5, count=30))
+    y = forward(scene)                                  # (6, 30), sensor k = j * 3 + i (x fastest)
+    grid = scene.sensors.reshape(2, 3, 3).transpose(1, 0, 2)   # (Sx, Sy, 3)
+    H = y.reshape(2, 3, 30).transpose(2, 1, 0)                 # (T, Sx, Sy)
+    np.save(tmp_path / "H.npy", H)
+    np.save(tmp_path / "grid.npy", grid)
+    run_tal(_TAL_WRITE, tmp_path / "tal.hdf5", tmp_path / "H.npy", tmp_path / "grid.npy")
+    read = read_capture(tmp_path / "tal.hdf5")
+    assert read.transient.shape == (6, 30) and read.start_opl == 1.5 and read.bin_width_opl == 0.05
+    assert read.scene_info == "written_by: tal\n"                 # tal's YAML, kept as text
+    assert not np.array_equal(read.sensors, scene.sensors)        # another order than the scene's
+    assert np.array_equal(read_data(tmp_path / "tal.hdf5", scene), y)  # put back in the scene's
+
+
+def test_data_reader_refuses_captures_of_another_scene(tmp_path, rng):
+    scene = Scene(size=1.0, pixels=4, reflectance=0.5, source=(0.5, 0.5, 1.0),
+                  sensors=[(0.2, 0.7, 1.0), (0.8, 0.15, 0.5)],
+                  sampling=Sampling(bin_width_opl=0.1, start_opl=1.0, count=7))
+    y = rng.random((2, 7))
+    kwargs = dict(bin_width_opl=0.1, source=scene.source, sensors=scene.sensors, scene_info={})
+    write_capture(tmp_path / "ok.h5", y, start_opl=1.0, **kwargs)
+    assert np.array_equal(read_data(tmp_path / "ok.h5", scene), y)
+    write_capture(tmp_path / "late.h5", y, start_opl=1.05, **kwargs)
+    with pytest.raises(DataError, match="time axis"):
+        read_data(tmp_path / "late.h5", scene)
+    write_capture(tmp_path / "moved.h5", y, start_opl=1.0, **(kwargs | {"sensors": scene.sensors + 0.01}))
+    with pytest.raises(DataError, match="no sensor of sensor_grid_xyz"):
+        read_data(tmp_path / "moved.h5", scene)
+    write_capture(tmp_path / "source.h5", y, start_opl=1.0, **(kwargs | {"source": [0.4, 0.5, 1.0]}))
+    with pytest.raises(DataError, match="laser_xyz"):
+        read_data(tmp_path / "source.h5", scene)

@@ -1,0 +1,329 @@
+"""validation.check: any transient judged against the exact model, its scale and offset fitted.
+
+The references are independent of the code under test: synthetic data made
+from the model at a known scale and start offset plus noise of known size
+(the fit must find them within its standard errors, and a wrong scene must
+stay in disagreement after it), our own Monte Carlo renderer (must agree as
+given), and files in every format a user brings (read back to the array
+written, or refused with a DataError naming the file).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from analytic.io import save_exr, write_transient
+from analytic.scene import Sampling, Scene
+from analytic.system import forward
+from transient.render import render
+from validation.check import (DataError, _agreement, check_transient, diagnose, read_data, read_stderr,
+                              write_check_report)
+from validation.cli_interop import add_commands
+
+START, WIDTH, COUNT = 1.7, 0.05, 24
+
+
+def small_scene(**changes) -> Scene:
+    """4 x 4 asymmetric image, two sensors at different heights, 24 bins around the light."""
+    image = np.arange(16, dtype=np.float64).reshape(4, 4) / 20.0
+    values = dict(name="small", size=1.0, pixels=4, reflectance=image, source=(0.5, 0.5, 1.0),
+                  sensors=[(0.8, 0.3, 1.0), (0.25, 0.7, 0.8)],
+                  sampling=Sampling(bin_width_opl=WIDTH, start_opl=START, count=COUNT))
+    return Scene(**(values | changes))
+
+
+def shifted(scene: Scene, offset: float) -> np.ndarray:
+    """The model with every bin edge moved by +offset: what data short by `offset` read."""
+    sampling = Sampling(bin_width_opl=WIDTH, start_opl=START + offset, count=COUNT)
+    return forward(scene.replace(sampling=sampling))
+
+
+def noisy_replicas(truth: np.ndarray, rng, replicas: int = 6) -> np.ndarray:
+    """Independent replicas: truth + Gaussian noise of 1 % of each bin plus a floor."""
+    sigma = 0.01 * np.abs(truth) + 1e-4 * np.max(truth)
+    return truth + sigma * rng.standard_normal((replicas,) + truth.shape)
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return small_scene()
+
+
+@pytest.fixture(scope="module")
+def model(scene):
+    return forward(scene)
+
+
+# ---------------------------------------------------------------- the fit against known truths
+
+def test_known_scale_and_offset_are_recovered(scene, model, rng):
+    scale, offset = 0.3, 0.012
+    data = noisy_replicas(scale * shifted(scene, offset), rng)
+    result = check_transient(scene, data, model=model)
+    assert not result.agrees and result.agrees_after_fit
+    assert result.judged_by == "replicas" and result.replicas == 6 and result.dof == 5
+    fit = result.fit
+    assert fit.stderr_from == "replicas" and fit.converged
+    assert abs(fit.scale - scale) < 3 * fit.scale_stderr
+    assert abs(fit.offset_opl - offset) < 3 * fit.offset_stderr
+    assert fit.offset_stderr < 0.05 * offset                      # the test has power
+    assert "path lengths short" in result.diagnosis
+
+
+def test_data_without_convention_errors_agree_as_given(scene, model, rng):
+    result = check_transient(scene, noisy_replicas(model, rng), model=model)
+    assert result.agrees and result.agrees_after_fit
+    assert abs(result.fit.scale - 1) < 3 * result.fit.scale_stderr
+    assert abs(result.fit.offset_opl) < 3 * result.fit.offset_stderr
+    assert result.diagnosis.startswith("agrees as given")
+
+
+def test_whole_bins_of_offset_are_named(scene, model, rng):
+    data = noisy_replicas(shifted(scene, 2 * WIDTH), rng)
+    result = check_transient(scene, data, model=model)
+    assert result.agrees_after_fit
+    assert abs(result.fit.offset_opl - 2 * WIDTH) < 3 * result.fit.offset_stderr
+    assert "off by +2 bin(s)" in result.diagnosis
+
+
+def test_a_wrong_scene_stays_in_disagreement_after_the_fit(scene, model, rng):
+    """Light from a sensor 5 cm away is no scale or offset of the right model's."""
+    moved = small_scene(sensors=[(0.85, 0.3, 1.0), (0.25, 0.7, 0.8)])
+    result = check_transient(scene, noisy_replicas(forward(moved), rng), model=model)
+    assert not result.agrees and not result.agrees_after_fit
+    assert "not a scale or time-offset convention" in result.diagnosis
+
+
+def test_one_transient_with_its_standard_error(scene, model, rng):
+    sigma = 0.01 * model + 1e-4 * model.max()
+    data = 0.5 * model + 0.5 * sigma * rng.standard_normal(model.shape)
+    result = check_transient(scene, data, stderr=0.5 * sigma, model=model)
+    assert result.judged_by == "stderr" and result.dof is None and result.fit.stderr_from == "bins"
+    assert not result.agrees and result.agrees_after_fit
+    assert abs(result.fit.scale - 0.5) < 3 * result.fit.scale_stderr
+    assert "y scaled by" in result.diagnosis
+
+
+def test_shape_only_judgement_says_so(scene, model):
+    result = check_transient(scene, 0.25 * model, shape_only=True, model=model)
+    assert result.judged_by == "shape" and result.chi2_per_dof is None
+    assert not result.agrees and result.agrees_after_fit
+    assert result.relative_l2 == pytest.approx(0.75) and result.relative_l2_after_fit < 1e-6
+    assert result.diagnosis.startswith("judged by shape only")
+    assert "1/4 of the fluence" in result.diagnosis
+
+
+def test_student_t_scores_keep_their_tail_probability(scene, model):
+    """z from R replicas maps to the normal z with the same tail: Φ⁻¹ of F_t, by scipy directly."""
+    stderr = np.full(model.shape, 1e-4)
+    t_scores = np.linspace(-6, 6, model.size).reshape(model.shape)
+    data = model + t_scores * stderr
+    agreement = _agreement(data, stderr, model, 3, 1e-3)
+    judged = np.isfinite(agreement.z)
+    expected = np.sign(t_scores) * stats.norm.isf(stats.t.sf(np.abs(t_scores), 3))
+    assert judged.sum() > 10
+    assert np.allclose(agreement.z[judged], expected[judged], rtol=1e-9, atol=1e-12)
+    gaussian = _agreement(data, stderr, model, None, 1e-3)
+    assert np.allclose(gaussian.z[judged], t_scores[judged])
+
+
+def test_diagnosis_of_an_irradiancemeter():
+    from validation.check import Fit
+
+    fit = Fit(0.2501, 0.0004, 1.55e-4, 0.1e-4, 3, True, "replicas")
+    text = diagnose(fit, agrees=False, agrees_after_fit=True, bin_width_opl=0.05)
+    assert text == ("agrees after scale 0.2501 ± 0.0004 and offset +1.55e-4 ± 0.10e-4 m: a sensor that "
+                    "reads 1/4 of the fluence and path lengths short (an irradiancemeter?).")
+
+
+# ---------------------------------------------------------------- our own renderer
+
+def test_our_render_passes_with_no_fit_needed(scene, model):
+    replicas = np.array([render(scene, spp=2**19, seed=seed, progress=False).mean for seed in range(6)])
+    result = check_transient(scene, replicas, model=model)
+    assert result.agrees and result.agrees_after_fit, result.summary()
+    assert abs(result.fit.scale - 1) < 3 * result.fit.scale_stderr
+    assert abs(result.fit.offset_opl) < 3 * result.fit.offset_stderr
+    single = render(scene, spp=2**20, seed=11, progress=False)
+    result = check_transient(scene, single.mean, stderr=single.stderr, model=model)
+    assert result.agrees, result.summary()
+
+
+# ---------------------------------------------------------------- what is refused
+
+def test_a_single_transient_without_errors_is_refused(scene, model):
+    with pytest.raises(DataError, match="without errors"):
+        check_transient(scene, model, model=model)
+    with pytest.raises(DataError, match="replicas carry their own error"):
+        check_transient(scene, np.stack([model] * 3), stderr=np.ones_like(model), model=model)
+    with pytest.raises(DataError, match="at least 3"):
+        check_transient(scene, np.stack([model, model]), model=model)
+    with pytest.raises(DataError, match="shape"):
+        check_transient(scene, model[:, :-1], shape_only=True, model=model)
+    with pytest.raises(DataError, match="NaN"):
+        check_transient(scene, np.full_like(model, np.nan), shape_only=True, model=model)
+
+
+@pytest.fixture
+def files(tmp_path, scene, model):
+    """Our forward output folder, and stray arrays in the other formats."""
+    out = tmp_path / "forward"
+    write_transient(out, model, {"start_opl": START, "period_opl": WIDTH, "samples": 0, "seed": 0,
+                                 "attenuation": "lambertian", "illumination": "impulse"})
+    return out
+
+
+def test_our_outputs_are_read_back(files, scene, model):
+    assert np.array_equal(read_data(files, scene), model)
+    assert np.array_equal(read_data(files / "transient.npy", scene), model)
+    assert np.allclose(read_data(files / "transient.exr", scene), model.astype(np.float32), rtol=0, atol=0)
+
+
+def test_wrong_time_axis_is_refused(tmp_path, scene, model):
+    out = tmp_path / "late"
+    write_transient(out, model, {"start_opl": START + WIDTH, "period_opl": WIDTH, "samples": 0, "seed": 0,
+                                 "attenuation": "lambertian", "illumination": "impulse"})
+    with pytest.raises(DataError, match="time axis"):
+        read_data(out / "transient.npy", scene)
+    save_exr(tmp_path / "wide.exr", model, {"t0": START, "T": 2 * WIDTH})
+    with pytest.raises(DataError, match="time axis"):
+        read_data(tmp_path / "wide.exr", scene)
+
+
+def test_wrong_shape_nan_and_unknown_formats_are_refused(tmp_path, scene, model):
+    np.save(tmp_path / "short.npy", model[:, :-1])
+    with pytest.raises(DataError, match=r"short.npy: shape \(2, 23\) does not match"):
+        read_data(tmp_path / "short.npy", scene)
+    np.save(tmp_path / "transposed.npy", model.T)
+    with pytest.raises(DataError, match="transposed"):
+        read_data(tmp_path / "transposed.npy", scene)
+    bad = model.copy()
+    bad[1, 3] = np.nan
+    np.save(tmp_path / "nan.npy", bad)
+    with pytest.raises(DataError, match="NaN"):
+        read_data(tmp_path / "nan.npy", scene)
+    (tmp_path / "data.csv").write_text("1,2\n")
+    with pytest.raises(DataError, match="unknown format"):
+        read_data(tmp_path / "data.csv", scene)
+    with pytest.raises(FileNotFoundError):
+        read_data(tmp_path / "missing.npy", scene)
+    np.save(tmp_path / "negative.npy", -np.ones_like(model))
+    with pytest.raises(DataError, match="negative"):
+        read_stderr(tmp_path / "negative.npy", scene)
+
+
+def test_mitransient_film_arrays(tmp_path, scene, model):
+    """mitransient's developed film: (height, width, bins, channels) per sensor, stacked per sensor."""
+    films = model[:, None, None, :, None].astype(np.float32)            # (K, 1, 1, N, 1)
+    np.save(tmp_path / "mono.npy", films)
+    assert np.array_equal(read_data(tmp_path / "mono.npy", scene), films[:, 0, 0, :, 0])
+    np.save(tmp_path / "rgb.npy", np.repeat(films, 3, axis=-1))
+    assert np.array_equal(read_data(tmp_path / "rgb.npy", scene), films[:, 0, 0, :, 0])
+    coloured = np.repeat(films, 3, axis=-1)
+    coloured[..., 0] *= 2
+    np.save(tmp_path / "coloured.npy", coloured)
+    with pytest.raises(DataError, match="colour channels differ"):
+        read_data(tmp_path / "coloured.npy", scene)
+    np.save(tmp_path / "one.npy", films[0])                               # one sensor of two
+    with pytest.raises(DataError, match="1 film"):
+        read_data(tmp_path / "one.npy", scene)
+    np.save(tmp_path / "camera.npy", np.zeros((2, 4, 4, COUNT, 1)))
+    with pytest.raises(DataError, match="4 x 4 pixels"):
+        read_data(tmp_path / "camera.npy", scene)
+
+
+def test_mitransient_frame_folder(tmp_path, model):
+    """mitransient.vis.save_frames: 000.exr, 001.exr, ... one 1 x 1 image (channel Y) per bin."""
+    one = small_scene(sensors=[(0.8, 0.3, 1.0)])
+    y = forward(one)
+    folder = tmp_path / "frames"
+    for n in range(COUNT):
+        save_exr(folder / f"{n:03d}.exr", y[:, n].reshape(1, 1))
+    assert np.allclose(read_data(folder, one), y.astype(np.float32), rtol=0, atol=0)
+    (folder / f"{COUNT:03d}.exr").write_bytes((folder / "000.exr").read_bytes())
+    with pytest.raises(DataError, match="shape"):
+        read_data(folder, one)
+
+
+# ---------------------------------------------------------------- the command
+
+def run_check(*argv) -> int:
+    parser = argparse.ArgumentParser()
+    add_commands(parser.add_subparsers(dest="command", required=True))
+    args = parser.parse_args(["check", *map(str, argv), "--quiet"])
+    return args.run(args)
+
+
+@pytest.fixture
+def scene_file(tmp_path):
+    image = np.arange(16, dtype=np.float64).reshape(4, 4) / 20.0
+    save_exr(tmp_path / "image.exr", image)
+    path = tmp_path / "small.toml"
+    path.write_text(f"""
+[plane]
+size = 1.0
+pixels = 4
+reflectance = "image.exr"
+[source]
+position = [0.5, 0.5, 1.0]
+[sensors]
+positions = [[0.8, 0.3, 1.0], [0.25, 0.7, 0.8]]
+[sampling]
+period = {WIDTH}
+start = {START}
+count = {COUNT}
+""")
+    return path
+
+
+def test_check_command_exit_status_and_report(tmp_path, scene_file, scene, model, rng):
+    paths = []
+    for r, replica in enumerate(noisy_replicas(model, rng)):
+        paths.append(tmp_path / f"replica_{r}.npy")
+        np.save(paths[-1], replica)
+    assert run_check(scene_file, "--data", *paths, "--out", tmp_path / "good") == 0
+    metrics = json.loads((tmp_path / "good" / "metrics.json").read_text())
+    assert metrics["agrees"] is True and metrics["agrees_after_fit"] is True
+    assert set(metrics["fit"]) >= {"scale", "scale_stderr", "offset_opl", "offset_stderr"}
+    assert {"chi2_per_dof", "max_abs_z"} <= set(metrics)
+    report = (tmp_path / "good" / "report.md").read_text()
+    assert "![check_transients.png](check_transients.png)" in report and "![check_z.png]" in report
+    assert (tmp_path / "good" / "check_transients.png").is_file() and (tmp_path / "good" / "check_z.png").is_file()
+
+    sigma = 0.0025 * model + 1e-6
+    np.save(tmp_path / "quarter.npy", 0.25 * model + sigma * rng.standard_normal(model.shape))
+    np.save(tmp_path / "sigma.npy", sigma)
+    assert run_check(scene_file, "--data", tmp_path / "quarter.npy", "--stderr", tmp_path / "sigma.npy",
+                     "--out", tmp_path / "quarter") == 1
+    assert json.loads((tmp_path / "quarter" / "metrics.json").read_text())["agrees_after_fit"] is True
+
+    assert run_check(scene_file, "--data", tmp_path / "quarter.npy", "--shape-only",
+                     "--out", tmp_path / "shape") == 1
+    assert "shape only" in (tmp_path / "shape" / "report.md").read_text()
+    assert not (tmp_path / "shape" / "check_z.png").exists()
+
+
+def test_check_command_refuses_bad_input(tmp_path, scene_file, model):
+    np.save(tmp_path / "y.npy", model)
+    with pytest.raises(DataError, match="without errors"):
+        run_check(scene_file, "--data", tmp_path / "y.npy", "--out", tmp_path / "out")
+    with pytest.raises(DataError, match="--stderr: give it with one --data"):
+        run_check(scene_file, "--data", tmp_path / "y.npy", tmp_path / "y.npy", "--stderr", tmp_path / "y.npy",
+                  "--out", tmp_path / "out")
+    np.save(tmp_path / "short.npy", model[:, 1:])
+    with pytest.raises(DataError, match="short.npy"):
+        run_check(scene_file, "--data", tmp_path / "short.npy", "--shape-only", "--out", tmp_path / "out")
+    assert not (tmp_path / "out").exists()                   # nothing written before the refusal
+
+
+def test_report_of_a_render_check(tmp_path, scene, model):
+    """write_check_report on its own: metrics.json written atomically with the section 5 keys."""
+    single = render(scene, spp=2**18, seed=3, progress=False)
+    result = check_transient(scene, single.mean, stderr=single.stderr, model=model)
+    metrics = write_check_report(tmp_path, result, scene_name="small", data_paths=["render"])
+    assert json.loads((tmp_path / "metrics.json").read_text()) == json.loads(json.dumps(metrics))

@@ -1,0 +1,225 @@
+"""transient.export: the scene as Mitsuba 3 XML, rendered by our plugins and by mitransient.
+
+References: for ``--format mitsuba``, the same scene built in memory by
+``transient.mitsuba_scene`` and rendered by :func:`transient.render.render`
+(same plugin, same seed: the same numbers up to the order of floating-point
+accumulation) and the exact model; for ``--format mitransient``, mitransient
+itself (in a subprocess, so that its plugins never load into this process)
+with the conventions read from Mitsuba's and mitransient's source: the
+irradiancemeter reads 1/4 of the fluence, and path lengths short by 2r/3 +
+Mitsuba's ``RayEpsilon`` (1500 x 2⁻²⁴ m).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import os
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import OpenEXR
+import pytest
+
+from analytic.io import save_exr
+from analytic.scene import Illumination, Sampling, Scene, SceneError
+from analytic.system import forward
+from transient.export import RADIUS, export_scene, plane_to_world_matrix
+from validation.cli_interop import add_commands
+from validation.compare import assert_transients_agree
+
+needs_mitransient = pytest.mark.skipif(importlib.util.find_spec("mitransient") is None,
+                                       reason="mitransient is not installed (pip install -e .[bench])")
+
+#: Mitsuba's math::RayEpsilon<float>: 1500 x Epsilon, Epsilon = 2^-24 (include/mitsuba/core/math.h).
+RAY_EPSILON = 1500 * 2.0**-24
+
+
+def small_scene(**changes) -> Scene:
+    image = np.arange(16, dtype=np.float64).reshape(4, 4) / 20.0      # asymmetric: catches flips
+    values = dict(name="small", size=1.0, pixels=4, reflectance=image, source=(0.5, 0.5, 1.0),
+                  sensors=[(0.8, 0.3, 1.0), (0.25, 0.7, 0.8)],
+                  sampling=Sampling(bin_width_opl=0.05, start_opl=1.7, count=24))
+    return Scene(**(values | changes))
+
+
+def test_files_and_texture(tmp_path):
+    scene = small_scene()
+    written = export_scene(scene, tmp_path, "mitsuba")
+    assert sorted(written) == ["README.md", "reflectance.exr", "scene.xml"]
+    with OpenEXR.File(str(tmp_path / "reflectance.exr")) as handle:
+        texture = np.array(handle.channels()["Y"].pixels)
+    assert np.array_equal(texture, np.flipud(scene.reflectance).astype(np.float32))   # row 0 at y = 0
+    root = ET.parse(tmp_path / "scene.xml").getroot()
+    integrator = root.find("integrator")
+    assert integrator.get("type") == "transient_opl"
+    values = {child.get("name"): child.get("value") for child in integrator}
+    assert values["bins"] == "24" and float(values["start_opl"]) == 1.7 and float(values["bin_width_opl"]) == 0.05
+    sensors = [s for s in root.findall("sensor")]
+    assert [s.get("type") for s in sensors] == ["omni_point", "omni_point"]
+    positions = [[float(v) for v in s.find("point").get("value").split(",")] for s in sensors]
+    assert np.array_equal(positions, scene.sensors)
+    texture = root.find("shape/bsdf/texture")
+    options = {child.get("name"): child.get("value") for child in texture}
+    assert options == {"filename": "reflectance.exr", "raw": "true", "filter_type": "nearest",
+                       "wrap_mode": "clamp"}
+
+
+def test_refusals(tmp_path):
+    with pytest.raises(SceneError, match="illumination.waveform"):
+        export_scene(small_scene(illumination=Illumination(waveform="square")), tmp_path, "mitransient")
+    with pytest.raises(ValueError, match="radius"):
+        export_scene(small_scene(), tmp_path, "mitransient", radius=0.9)      # reaches below the plane
+    with pytest.raises(ValueError, match="apply to format 'mitransient' only"):
+        export_scene(small_scene(), tmp_path, "mitsuba", radius=1e-3)
+    with pytest.raises(ValueError, match="format"):
+        export_scene(small_scene(), tmp_path, "pbrt")
+    assert not any(tmp_path.iterdir())
+
+
+def test_export_command(tmp_path):
+    scene_file = write_scene_file(tmp_path, [[0.8, 0.3, 1.0]])
+    assert run_command("export", scene_file, "--format", "mitsuba", "--out", tmp_path / "ours") == 0
+    assert (tmp_path / "ours" / "scene.xml").is_file() and (tmp_path / "ours" / "reflectance.exr").is_file()
+    with pytest.raises(SceneError, match="--radius/--spp"):
+        run_command("export", scene_file, "--format", "mitsuba", "--radius", "0.01", "--out", tmp_path / "x")
+    with pytest.raises(SceneError, match="radius"):
+        run_command("export", scene_file, "--format", "mitransient", "--radius", "2", "--out", tmp_path / "x")
+    assert not (tmp_path / "x").exists()
+
+
+@pytest.mark.parametrize("illumination", [Illumination(waveform="impulse"), Illumination(waveform="square"),
+                                          Illumination(waveform="butterworth", order=2)])
+def test_our_plugins_render_the_exported_scene_as_render_does(tmp_path, illumination):
+    from transient.backend import select_variant
+    from transient.mitsuba_scene import plane_to_world
+    from transient.render import render
+
+    # Coordinates that float32 would round: the XML must carry doubles.
+    scene = small_scene(illumination=illumination, source=(0.1 + 0.2 + 0.2, 0.5000000000000001, 1.0),
+                        sensors=[(0.8, 0.30000000000000004, 1.0), (0.25, 0.7, 0.8000000000000002)])
+    export_scene(scene, tmp_path, "mitsuba")
+    select_variant()
+    import mitsuba as mi
+
+    loaded = mi.load_file(str(tmp_path / "scene.xml"))
+    integrator = loaded.integrator()
+    assert np.array_equal([s.position for s in loaded.sensors()], scene.sensors)
+    assert np.array_equal(integrator.source_position, scene.source)
+    assert np.array_equal(integrator.plane_matrix, np.array(plane_to_world(scene.size).matrix).reshape(4, 4))
+    assert np.array_equal(plane_to_world_matrix(scene.size), integrator.plane_matrix)
+    reference = render(scene, spp=2**20, seed=7, progress=False)
+    assert integrator.waveform.description == integrator_description(scene)
+    sums, squares = integrator.render_transient(loaded, seed=7, first_sample=0, sample_count=2**20)
+    # Same plugin, same samples: equal up to the order of the parallel float64 accumulation.
+    assert np.allclose(sums / 2**20, reference.mean, rtol=1e-12, atol=1e-15 * reference.mean.max())
+    assert_transients_agree(sums / 2**20, reference.stderr, forward(scene))
+
+
+def integrator_description(scene: Scene) -> str:
+    from analytic.waveforms import make_waveform
+
+    return make_waveform(scene.illumination, scene.sampling.bin_width_opl).description
+
+
+# Renders an exported mitransient scene in a fresh process: K films per seed, stacked.
+_MITRANSIENT = r"""
+import sys
+import numpy as np, mitsuba as mi
+mi.set_variant(sys.argv[1])
+import mitransient
+xml, spp, seeds, out = sys.argv[2], int(sys.argv[3]), int(sys.argv[4]), sys.argv[5]
+scene = mi.load_file(xml, spp=spp)
+for seed in range(seeds):
+    films = [np.array(mi.render(scene, sensor=k, seed=seed)[1]) for k in range(len(scene.sensors()))]
+    if sys.argv[6] == "frames":
+        mitransient.vis.save_frames(films[0], f"{out}/frames_{seed}")      # (1, 1, N, C): one sensor
+    else:
+        np.save(f"{out}/render_{seed}.npy", np.stack(films))
+print(mitransient.__version__)
+"""
+
+
+def render_mitransient(xml, spp: int, seeds: int, out, mode: str = "stack") -> str:
+    from transient.backend import choose_libllvm, find_llvm_libraries
+
+    # The libLLVM our backend would choose: Dr.Jit aborts on LLVM <= 15 whoever calls it.
+    environment = os.environ | {"DRJIT_LIBLLVM_PATH": choose_libllvm(os.environ.get("DRJIT_LIBLLVM_PATH"),
+                                                                     find_llvm_libraries())}
+    done = subprocess.run([sys.executable, "-c", _MITRANSIENT, "llvm_ad_mono", str(xml), str(spp), str(seeds),
+                           str(out), mode], capture_output=True, text=True, timeout=1200, env=environment)
+    assert done.returncode == 0, done.stderr[-3000:]
+    return done.stdout.strip().splitlines()[-1]
+
+
+def run_command(*argv) -> int:
+    parser = argparse.ArgumentParser()
+    add_commands(parser.add_subparsers(dest="command", required=True))
+    args = parser.parse_args([*map(str, argv), "--quiet"])
+    return args.run(args)
+
+
+def write_scene_file(tmp_path, sensors) -> Path:
+    image = np.arange(16, dtype=np.float64).reshape(4, 4) / 20.0
+    save_exr(tmp_path / "image.exr", image)
+    path = tmp_path / "small.toml"
+    path.write_text(f"""name = "small"
+[plane]
+size = 1.0
+pixels = 4
+reflectance = "image.exr"
+[source]
+position = [0.5, 0.5, 1.0]
+[sensors]
+positions = {json.dumps(sensors)}
+[sampling]
+period = 0.05
+start = 1.7
+count = 24
+""")
+    return path
+
+
+@needs_mitransient
+def test_mitransient_renders_of_the_exported_scene_check_after_the_fit(tmp_path):
+    """The README's round trip: export, render in mitransient, check.
+
+    Raw mitransient output disagrees as given; the fit finds the
+    irradiancemeter's conventions (scale 1/4, offset 2r/3 + RayEpsilon) and
+    agrees after them.
+    """
+    scene_file = write_scene_file(tmp_path, [[0.8, 0.3, 1.0], [0.25, 0.7, 0.8]])
+    assert run_command("export", scene_file, "--format", "mitransient", "--out", tmp_path / "xml") == 0
+    replicas = 8
+    render_mitransient(tmp_path / "xml" / "scene.xml", 2**21, replicas, tmp_path)
+    films = [tmp_path / f"render_{seed}.npy" for seed in range(replicas)]
+    assert np.load(films[0]).shape == (2, 1, 1, 24, 1)
+    status = run_command("check", scene_file, "--data", *films, "--out", tmp_path / "check")
+    metrics = json.loads((tmp_path / "check" / "metrics.json").read_text())
+    assert status == 1 and metrics["agrees"] is False
+    fit = metrics["fit"]
+    assert abs(fit["scale"] / 0.25 - 1) < 0.02
+    assert abs(fit["scale"] - 0.25) < 3 * fit["scale_stderr"]
+    known = 2 * RADIUS / 3 + RAY_EPSILON
+    assert abs(fit["offset_opl"] - known) < 3 * fit["offset_stderr"]
+    assert fit["offset_stderr"] < 0.2 * known                                  # the offset is resolved
+    assert metrics["agrees_after_fit"] is True
+    assert "irradiancemeter" in metrics["diagnosis"]
+
+
+@needs_mitransient
+def test_mitransient_save_frames_folders_are_replicas(tmp_path):
+    """mitransient.vis.save_frames writes 000.exr ... per bin: one sensor's film, one folder per seed."""
+    scene_file = write_scene_file(tmp_path, [[0.8, 0.3, 1.0]])
+    assert run_command("export", scene_file, "--format", "mitransient", "--out", tmp_path / "xml") == 0
+    render_mitransient(tmp_path / "xml" / "scene.xml", 2**20, 4, tmp_path, mode="frames")
+    folders = [tmp_path / f"frames_{seed}" for seed in range(4)]
+    assert len(list(folders[0].glob("*.exr"))) == 24
+    status = run_command("check", scene_file, "--data", *folders, "--out", tmp_path / "check")
+    metrics = json.loads((tmp_path / "check" / "metrics.json").read_text())
+    assert status == 1 and metrics["agrees_after_fit"] is True
+    assert abs(metrics["fit"]["scale"] / 0.25 - 1) < 0.02

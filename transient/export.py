@@ -1,0 +1,306 @@
+"""A scene as a Mitsuba 3 XML file, for our plugins or for mitransient.
+
+``export_scene(scene, out_dir, format)`` writes into ``out_dir``:
+
+- ``reflectance.exr``: the reflectance image as one float32 channel ``Y``,
+  flipped top to bottom (a bitmap's row 0 lies at v = 0, the plane's
+  y = 0 edge; the image's row 0 is its top, DESIGN.md section 1), read by
+  a ``bitmap`` texture with ``filter_type = nearest`` and ``raw = true``
+  (no colour conversion), exactly as :func:`transient.mitsuba_scene.scene_dict`
+  builds it in memory;
+- ``scene.xml``: the plane (``rectangle`` scaled by L/2 and moved to
+  (L/2, L/2, 0), ``diffuse`` BSDF), the point source (intensity 1 W/sr) and
+
+  * ``format="mitsuba"``: our ``transient_opl`` integrator (bins,
+    start_opl, bin_width_opl, waveform and its parameters, the plane's
+    transform and the source position in double precision) and one
+    ``omni_point`` sensor per scene sensor, in order: loaded after
+    :func:`transient.backend.select_variant`, it renders the same y as
+    :func:`transient.render.render`;
+  * ``format="mitransient"``: mitransient's ``transient_path`` integrator
+    (``max_depth`` 2: one bounce) and, per scene sensor, a small
+    ``sphere`` (``null`` BSDF) carrying an ``irradiancemeter`` with a 1 x 1
+    ``transient_hdr_film`` (temporal_bins, start_opl, bin_width_opl of the
+    scene) and an ``independent`` sampler of ``$spp`` samples;
+- ``README.md``: how to render it and ``check`` the result.
+
+What mitransient's irradiancemeter reads (Mitsuba 3's
+``src/sensors/irradiancemeter.cpp``): the irradiance averaged over the
+sphere's surface, which for a small sphere is a quarter of the fluence rate
+our point sensors read; its rays start on the sphere's surface, moved a
+further ``math::RayEpsilon`` (1500 x 2⁻²⁴ m = 8.94e-5 m in float variants)
+along the ray, so path lengths come out short by 2r/3 (the mean of r cos θ
+over cosine-distributed directions) + 8.94e-5 m. ``diffuse-imaging check``
+finds exactly these as scale 1/4 and a positive offset.
+
+No Mitsuba import is needed to write the files.
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+
+from analytic.io import atomic_write, save_exr
+from analytic.scene import Scene, SceneError
+from analytic.waveforms import make_waveform
+
+__all__ = ["export_scene", "FORMATS", "RADIUS", "SPP", "plane_to_world_matrix"]
+
+FORMATS = ("mitsuba", "mitransient")
+
+#: Default irradiancemeter sphere radius, metres (as validation/bench.py uses).
+RADIUS = 1e-3
+
+#: Default samples per irradiancemeter for mitransient (``$spp`` in the XML).
+SPP = 2**20
+
+# Plugin names of this package (transient/integrator.py, transient/sensor.py); kept
+# here as strings so that exporting never imports Mitsuba.
+_INTEGRATOR = "transient_opl"
+_SENSOR = "omni_point"
+
+
+def plane_to_world_matrix(size: float) -> np.ndarray:
+    """4 x 4 transform of the local rectangle [-1, 1]² onto [0, L]² x {0}, float64.
+
+    Parameters
+    ----------
+    size : float
+        Plane side L, metres.
+
+    Notes
+    -----
+    translate(L/2, L/2, 0) · scale(L/2, L/2, 1), the matrix of
+    :func:`transient.mitsuba_scene.plane_to_world`.
+    """
+    half = 0.5 * float(size)
+    return np.array([[half, 0.0, 0.0, half], [0.0, half, 0.0, half], [0.0, 0.0, 1.0, 0.0],
+                     [0.0, 0.0, 0.0, 1.0]])
+
+
+def _number(value) -> str:
+    """Shortest text that reads back as the same double."""
+    return repr(float(value))
+
+
+def _add(parent, tag: str, name: str | None = None, **attributes) -> ET.Element:
+    if name is not None:
+        attributes = {"name": name, **attributes}
+    return ET.SubElement(parent, tag, {key: str(value) for key, value in attributes.items()})
+
+
+def _point(parent, name: str, point) -> ET.Element:
+    return _add(parent, "point", name, value=", ".join(_number(v) for v in point))
+
+
+def _transform(parent, name: str, matrix: np.ndarray) -> ET.Element:
+    element = _add(parent, "transform", name)
+    _add(element, "matrix", value=" ".join(_number(v) for v in np.asarray(matrix).ravel()))
+    return element
+
+
+def _plane(root, scene: Scene) -> None:
+    shape = _add(root, "shape", type="rectangle", id="plane")
+    _transform(shape, "to_world", plane_to_world_matrix(scene.size))
+    bsdf = _add(shape, "bsdf", type="diffuse")
+    texture = _add(bsdf, "texture", "reflectance", type="bitmap")
+    _add(texture, "string", "filename", value="reflectance.exr")
+    _add(texture, "boolean", "raw", value="true")
+    _add(texture, "string", "filter_type", value="nearest")
+    _add(texture, "string", "wrap_mode", value="clamp")
+
+
+def _source(root, scene: Scene) -> None:
+    emitter = _add(root, "emitter", type="point", id="source")
+    _point(emitter, "position", scene.source)
+    # The model's y is per unit source intensity (scene_dict renders intensity 1 too).
+    _add(emitter, "float", "intensity", value="1.0")
+
+
+def _our_integrator(root, scene: Scene) -> None:
+    sampling, illumination = scene.sampling, scene.illumination
+    integrator = _add(root, "integrator", type=_INTEGRATOR)
+    _add(integrator, "integer", "bins", value=int(sampling.count))
+    _add(integrator, "float", "start_opl", value=_number(sampling.start_opl))
+    _add(integrator, "float", "bin_width_opl", value=_number(sampling.bin_width_opl))
+    _add(integrator, "string", "waveform", value=illumination.waveform)
+    # The plugin resolves defaults against bin_width_opl as the scene does
+    # (make_waveform), so the scene's own fields give the same pulse.
+    if illumination.waveform == "square":
+        width = make_waveform(illumination, sampling.bin_width_opl).duration
+        _add(integrator, "float", "pulse_width", value=_number(width))
+    elif illumination.waveform == "butterworth":
+        for name in ("cutoff", "duration"):
+            value = getattr(illumination, name)
+            if value is not None:
+                _add(integrator, "float", name, value=_number(value))
+        if illumination.order is not None:
+            _add(integrator, "integer", "order", value=int(illumination.order))
+    _transform(integrator, "plane_to_world", plane_to_world_matrix(scene.size))
+    _point(integrator, "source_position", scene.source)
+
+
+def _our_sensors(root, scene: Scene) -> None:
+    for k, position in enumerate(scene.sensors):
+        sensor = _add(root, "sensor", type=_SENSOR, id=f"sensor_{k:06d}")
+        _point(sensor, "position", position)
+        film = _add(sensor, "film", type="hdrfilm")
+        _add(film, "integer", "width", value=1)
+        _add(film, "integer", "height", value=1)
+        _add(film, "string", "pixel_format", value="luminance")
+
+
+def _mitransient(root, scene: Scene, radius: float) -> None:
+    integrator = _add(root, "integrator", type="transient_path")
+    _add(integrator, "integer", "max_depth", value=2)   # emitter -> plane -> sensor: one bounce
+    sampling = scene.sampling
+    for k, position in enumerate(scene.sensors):
+        sphere = _add(root, "shape", type="sphere", id=f"sensor_{k:06d}")
+        _point(sphere, "center", position)
+        _add(sphere, "float", "radius", value=_number(radius))
+        _add(sphere, "bsdf", type="null")
+        sensor = _add(sphere, "sensor", type="irradiancemeter")
+        sampler = _add(sensor, "sampler", type="independent")
+        _add(sampler, "integer", "sample_count", value="$spp")
+        # Mitsuba (3.7+) merges identical objects when loading, and an irradiancemeter
+        # belongs to one shape only: a seed per sensor keeps them distinct.
+        _add(sampler, "integer", "seed", value=k)
+        film = _add(sensor, "film", type="transient_hdr_film")
+        _add(film, "integer", "width", value=1)
+        _add(film, "integer", "height", value=1)
+        _add(film, "integer", "temporal_bins", value=int(sampling.count))
+        _add(film, "float", "start_opl", value=_number(sampling.start_opl))
+        _add(film, "float", "bin_width_opl", value=_number(sampling.bin_width_opl))
+        _add(film, "rfilter", type="box")
+
+
+_README = {
+    "mitsuba": """# {name}: Mitsuba 3 scene for diffuse-imaging's plugins
+
+`scene.xml` + `reflectance.exr`: {sensors} `omni_point` sensor(s), {bins} bins of {width} m from
+start_opl = {start} m (path length, c = 1), `transient_opl` integrator. Render it with the plugins
+registered (the variant chosen by diffuse-imaging):
+
+```python
+from transient.backend import select_variant
+select_variant()
+import mitsuba as mi
+scene = mi.load_file("scene.xml")
+sums, squares = scene.integrator().render_transient(scene, seed=0, first_sample=0, sample_count=2**22)
+y = sums / 2**22          # (K, N), the same estimate as `diffuse-imaging render`
+```
+""",
+    "mitransient": """# {name}: Mitsuba 3 scene for mitransient
+
+`scene.xml` + `reflectance.exr`: {sensors} irradiancemeter sphere(s) of radius {radius} m, one per
+sensor in the scene's order, each with a 1 x 1 `transient_hdr_film` of {bins} bins of {width} m from
+start_opl = {start} m; `transient_path` integrator, impulse illumination. Render every sensor and
+save them stacked, one file per seed (independent replicas):
+
+```python
+import numpy as np, mitsuba as mi
+mi.set_variant("llvm_ad_mono")
+import mitransient
+scene = mi.load_file("scene.xml", spp=2**22)
+for seed in range(8):
+    films = [np.array(mi.render(scene, sensor=k, seed=seed)[1]) for k in range(len(scene.sensors()))]
+    np.save(f"render_{{seed}}.npy", np.stack(films))      # (K, 1, 1, N, 1)
+```
+
+then judge them against the exact model:
+
+    diffuse-imaging check SCENE.toml --data render_*.npy --out check
+
+Expect a disagreement as given and agreement after scale 1/4 (the irradiancemeter reads the mean
+irradiance over its sphere, a quarter of the fluence) and offset +{offset:.4g} m (rays start on the
+sphere's surface, 2r/3 = {two_thirds:.4g} m closer on average, plus Mitsuba's ray epsilon 8.94e-5 m).
+""",
+}
+
+
+def export_scene(scene: Scene, out_dir: str | Path, format: str, *, radius: float | None = None,
+                 spp: int | None = None) -> dict[str, Path]:
+    """Write ``scene.xml``, ``reflectance.exr`` and ``README.md`` for Mitsuba 3, atomically.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene. Its attenuation is not written: a Mitsuba scene renders
+        physical (``lambertian``) transport.
+    out_dir : str or Path
+        Output folder (created).
+    format : {"mitsuba", "mitransient"}
+        Our ``transient_opl`` and ``omni_point`` plugins, or mitransient's
+        ``transient_path`` with an irradiancemeter sphere per sensor.
+    radius : float, optional
+        ``mitransient`` only (refused otherwise): irradiancemeter sphere
+        radius, metres, below every sensor's height. Default :data:`RADIUS`.
+    spp : int, optional
+        ``mitransient`` only (refused otherwise): default samples per
+        sensor (``$spp``, overridden by ``mi.load_file(path, spp=...)``).
+        Default :data:`SPP`.
+
+    Returns
+    -------
+    dict
+        File name -> path written.
+
+    Raises
+    ------
+    ValueError
+        Unknown format, a bad radius or spp, or either given for ``mitsuba``.
+    SceneError
+        ``mitransient`` with a waveform other than the impulse
+        (``illumination.waveform``): its point emitter emits a Dirac pulse.
+
+    Notes
+    -----
+    A sample of bin n holds the light whose path length
+    |p_s - x| + |x - p_k| lies in [start_opl + n T, start_opl + (n + 1) T).
+    """
+    if format not in FORMATS:
+        raise ValueError(f"format: must be one of {', '.join(FORMATS)}, got {format!r}")
+    if format == "mitsuba" and (radius is not None or spp is not None):
+        raise ValueError("radius, spp: apply to format 'mitransient' only (our omni_point sensors are "
+                         "points; render_transient takes the sample count)")
+    radius = RADIUS if radius is None else float(radius)
+    spp = SPP if spp is None else int(spp)
+    if format == "mitransient":
+        if scene.illumination.waveform != "impulse":
+            raise SceneError("illumination.waveform", f"mitransient renders an impulse only, not "
+                             f"{scene.illumination.waveform!r}; export with format 'mitsuba'")
+        lowest = float(np.min(scene.sensors[:, 2]))
+        if not (0.0 < radius < lowest):
+            raise ValueError(f"radius: must lie in (0, {lowest:g}) m (below the lowest sensor's height), "
+                             f"got {radius:g}")
+        if spp < 1:
+            raise ValueError(f"spp: must be >= 1, got {spp}")
+    out_dir = Path(out_dir)
+    root = ET.Element("scene", version="3.0.0")
+    if format == "mitransient":
+        _add(root, "default", "spp", value=spp)
+        _mitransient(root, scene, radius)
+    else:
+        _our_integrator(root, scene)
+    _plane(root, scene)
+    _source(root, scene)
+    if format == "mitsuba":
+        _our_sensors(root, scene)
+    ET.indent(root)
+    text = ('<?xml version="1.0" encoding="utf-8"?>\n'
+            f"<!-- {scene.name}: exported by diffuse-imaging for {format}; lengths in metres, "
+            f"time as optical path length (c = 1) -->\n" + ET.tostring(root, encoding="unicode") + "\n")
+    written = {}
+    # Image row 0 is the top (y = L); a bitmap's row 0 is v = 0 (y = 0).
+    texture = np.ascontiguousarray(np.flipud(scene.reflectance), dtype=np.float32)
+    written["reflectance.exr"] = save_exr(out_dir / "reflectance.exr", texture)
+    written["scene.xml"] = atomic_write(out_dir / "scene.xml", lambda temporary: Path(temporary).write_text(text))
+    sampling = scene.sampling
+    readme = _README[format].format(name=scene.name, sensors=scene.sensor_count, bins=sampling.count,
+                                    width=sampling.bin_width_opl, start=sampling.start_opl, radius=radius,
+                                    offset=2 * radius / 3 + 1500 * 2.0**-24, two_thirds=2 * radius / 3)
+    written["README.md"] = atomic_write(out_dir / "README.md", lambda temporary: Path(temporary).write_text(readme))
+    return written

@@ -52,7 +52,8 @@ from typing import Any
 
 import numpy as np
 
-from .io import atomic_write
+from .errors import DataError
+from .io import _json_default, atomic_write
 
 __all__ = ["Capture", "CaptureError", "write_capture", "read_capture", "H_FORMATS", "GRID_FORMATS",
            "VOLUME_FORMATS", "ACCOUNTS_FIRST_AND_LAST_BOUNCES"]
@@ -72,7 +73,7 @@ _TAL_KEYS = ("H", "H_format", "sensor_xyz", "sensor_grid_xyz", "sensor_grid_norm
              "delta_t", "t_start", "t_accounts_first_and_last_bounces", "scene_info")
 
 
-class CaptureError(ValueError):
+class CaptureError(DataError):
     """An HDF5 file that is not a usable tal capture; the message names the file and the problem."""
 
 
@@ -192,7 +193,8 @@ def write_capture(path: str | Path, transient, *, start_opl: float, bin_width_op
             handle["t_accounts_first_and_last_bounces"] = ACCOUNTS_FIRST_AND_LAST_BOUNCES
             handle["scene_info"] = info
             handle.flush()
-        # Read it back before it may replace a good file.
+
+    def verify(temporary):
         with h5py.File(temporary, "r") as handle:
             keys = set(handle.keys())
             if keys != set(_TAL_KEYS):
@@ -201,17 +203,7 @@ def write_capture(path: str | Path, transient, *, start_opl: float, bin_width_op
                 raise OSError(f"{path}: H reads back as {handle['H'].shape} {handle['H'].dtype}")
             if float(handle["t_start"][()]) != start_opl or float(handle["delta_t"][()]) != bin_width_opl:
                 raise OSError(f"{path}: the time axis does not read back")
-    return atomic_write(path, write)
-
-
-def _json_default(value):
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, Path):
-        return str(value)
-    raise TypeError(f"scene_info: not JSON serialisable: {type(value).__name__}")
+    return atomic_write(path, write, verify)
 
 
 def _value(handle, key: str):

@@ -33,7 +33,7 @@ import numpy as np
 from .errors import DataError, ResourceError
 
 __all__ = ["atomic_write", "staged_writes", "output_folder", "save_npy", "save_json", "save_text",
-           "save_exr", "save_png_image", "write_transient", "read_transient", "build_meta",
+           "save_exr", "save_png_image", "write_transient", "read_transient", "read_exr", "build_meta",
            "remove_temporaries", "LOCK_FILE", "UNITS"]
 
 #: Held (flock) by the command writing a folder; holds its process id.
@@ -470,6 +470,9 @@ def write_transient(out_dir: str | Path, transient: np.ndarray, meta: dict[str, 
                     stderr: np.ndarray | None = None, noisy: np.ndarray | None = None) -> dict[str, Path]:
     """Write ``transient.{npy,exr,h5}``, ``meta.json`` (+ ``stderr.npy``, ``transient_noisy.npy``), together.
 
+    ``transient.h5`` is tal's HDF5 capture (:mod:`analytic.capture`), readable
+    by ``tal.io.read_capture``, with the metadata as its ``scene_info``.
+
     Parameters
     ----------
     out_dir : str or Path
@@ -491,6 +494,8 @@ def write_transient(out_dir: str | Path, transient: np.ndarray, meta: dict[str, 
         Name -> path of every file written. The files are renamed into place
         together (see :func:`staged_writes`).
     """
+    from .capture import write_capture   # capture imports this module
+
     out_dir = Path(out_dir)
     transient = np.asarray(transient, dtype=np.float64)
     if transient.shape != (meta["sensors"], meta["bins"]):
@@ -505,12 +510,50 @@ def write_transient(out_dir: str | Path, transient: np.ndarray, meta: dict[str, 
             written["transient_noisy.npy"] = save_npy(out_dir / "transient_noisy.npy",
                                                       np.asarray(noisy, dtype=np.float64))
         written["transient.exr"] = save_exr(out_dir / "transient.exr", transient, meta)
+        written["transient.h5"] = write_capture(out_dir / "transient.h5", transient,
+                                                start_opl=meta["start_opl"],
+                                                bin_width_opl=meta["bin_width_opl"], source=meta["source"],
+                                                sensors=meta["sensor_positions"],
+                                                scene_info=_finite_or_null(meta))
         written["meta.json"] = save_json(out_dir / "meta.json", meta)
     return written
 
 
+def read_exr(path: str | Path) -> tuple[np.ndarray, dict]:
+    """The ``Y`` channel of an EXR as float64 and its header, numbers as Python floats and ints.
+
+    Raises
+    ------
+    DataError
+        Unreadable, or without a ``Y`` channel.
+    """
+    import OpenEXR
+
+    path = Path(path)
+    try:
+        with OpenEXR.File(str(path)) as handle:   # copies: header and pixels die with the handle
+            channels = handle.channels()
+            if "Y" not in channels:
+                raise DataError(f"{path}: EXR has no channel Y (found {', '.join(sorted(channels))}); "
+                                f"expected one of ours (width = bins, height = sensors)")
+            pixels = np.array(channels["Y"].pixels, dtype=np.float64)
+            header = {key: _header_value(value) for key, value in handle.header().items()}
+    except DataError:
+        raise
+    except Exception as error:  # the binding raises RuntimeError and others for a bad file
+        raise DataError(f"{path}: cannot read it as an EXR ({type(error).__name__}: {error})") from None
+    return pixels, header
+
+
+def _header_value(value):
+    """EXR doubles come back as 1-element arrays: give the number itself."""
+    if isinstance(value, np.ndarray):
+        return float(value.ravel()[0]) if value.size == 1 else value.copy()
+    return value
+
+
 def read_transient(path: str | Path) -> np.ndarray:
-    """Read a transient from ``.npy`` or ``.exr`` (channel ``Y``), or from a folder holding them.
+    """Read a transient from ``.npy``, ``.exr`` (channel ``Y``) or tal's ``.h5``, or from a folder holding them.
 
     Returns
     -------
@@ -531,17 +574,16 @@ def read_transient(path: str | Path) -> np.ndarray:
         if path.suffix == ".npy":
             data = np.load(path, allow_pickle=False)
         elif path.suffix == ".exr":
-            import OpenEXR
-            with OpenEXR.File(str(path)) as handle:   # copy: the pixels die with the handle
-                channels = handle.channels()
-                if "Y" not in channels:
-                    raise DataError(f"{path}: EXR has no channel Y (found {', '.join(sorted(channels))})")
-                data = np.array(channels["Y"].pixels, dtype=np.float64)
+            data, _ = read_exr(path)
+        elif path.suffix in (".h5", ".hdf5"):
+            from .capture import read_capture   # capture imports this module
+
+            data = read_capture(path).transient
         else:
-            raise DataError(f"{path}: expected a .npy or .exr transient")
+            raise DataError(f"{path}: expected a .npy, .exr or .h5 (tal capture) transient")
     except DataError:
         raise
-    except Exception as error:  # NumPy and OpenEXR raise many types for a bad file
+    except Exception as error:  # NumPy raises many types for a bad file
         raise DataError(f"{path}: cannot read it ({type(error).__name__}: {error})") from None
     if not np.issubdtype(np.asarray(data).dtype, np.number):
         raise DataError(f"{path}: holds {np.asarray(data).dtype} values, not numbers")

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Install everything diffuse-imaging needs on a fresh Debian/Ubuntu machine. Idempotent.
+# Install everything diffuse-imaging and its tests need on a fresh Debian/Ubuntu machine. Idempotent.
 #
 # Dr.Jit's LLVM backend (the renderer's CPU path) aborts with the system's
 # LLVM 15 ("Cannot select: fmaximum"); LLVM 19 from Debian works, so it is
@@ -15,3 +15,5 @@ if ! ldconfig -p 2>/dev/null | grep -Eq 'libLLVM(-(1[6-9]|[2-9][0-9])\.so|\.so\.
     DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq libllvm19 >/dev/null
 fi
 python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ignore -e ".[test]"
+# tal (y-tal) pins numpy < 2: it gets its own environment, used by the tests that read our HDF5 with it
+bash scripts/setup_interop.sh

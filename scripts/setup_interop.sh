@@ -15,6 +15,10 @@ if [ ! -x "$venv/bin/python" ]; then
     python3 -m venv "$venv"
 fi
 if ! "$venv/bin/python" -c "import tal, h5py" >/dev/null 2>&1; then
-    "$venv/bin/python" -m pip install --quiet --disable-pip-version-check y-tal h5py
+    # pip's notes on this machine's local indexes go to a log, shown only if the install fails
+    log=$(mktemp)
+    "$venv/bin/python" -m pip install --quiet --disable-pip-version-check y-tal h5py 2>"$log" \
+        || { cat "$log" >&2; rm -f "$log"; exit 1; }
+    rm -f "$log"
 fi
 "$venv/bin/python" -c "import tal, h5py"

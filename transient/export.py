@@ -9,7 +9,7 @@
   (no colour conversion), exactly as :func:`transient.mitsuba_scene.scene_dict`
   builds it in memory;
 - ``scene.xml``: the plane (``rectangle`` scaled by L/2 and moved to
-  (L/2, L/2, 0), ``diffuse`` BSDF), the point source (intensity 1 W/sr) and
+  (L/2, L/2, 0), ``diffuse`` BSDF), the point source (the scene's intensity, W/sr) and
 
   * ``format="mitsuba"``: our ``transient_opl`` integrator (bins,
     start_opl, bin_width_opl, waveform and its parameters, the plane's
@@ -43,7 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
-from analytic.io import atomic_write, save_exr
+from analytic.io import save_exr, save_text, staged_writes
 from analytic.scene import Scene, SceneError
 from analytic.waveforms import make_waveform
 
@@ -116,8 +116,8 @@ def _plane(root, scene: Scene) -> None:
 def _source(root, scene: Scene) -> None:
     emitter = _add(root, "emitter", type="point", id="source")
     _point(emitter, "position", scene.source)
-    # The model's y is per unit source intensity (scene_dict renders intensity 1 too).
-    _add(emitter, "float", "intensity", value="1.0")
+    # The source's peak radiant intensity, W/sr: y scales with it exactly.
+    _add(emitter, "float", "intensity", value=repr(float(scene.intensity)))
 
 
 def _our_integrator(root, scene: Scene) -> None:
@@ -296,11 +296,12 @@ def export_scene(scene: Scene, out_dir: str | Path, format: str, *, radius: floa
     written = {}
     # Image row 0 is the top (y = L); a bitmap's row 0 is v = 0 (y = 0).
     texture = np.ascontiguousarray(np.flipud(scene.reflectance), dtype=np.float32)
-    written["reflectance.exr"] = save_exr(out_dir / "reflectance.exr", texture)
-    written["scene.xml"] = atomic_write(out_dir / "scene.xml", lambda temporary: Path(temporary).write_text(text))
-    sampling = scene.sampling
-    readme = _README[format].format(name=scene.name, sensors=scene.sensor_count, bins=sampling.count,
-                                    width=sampling.bin_width_opl, start=sampling.start_opl, radius=radius,
-                                    offset=2 * radius / 3 + 1500 * 2.0**-24, two_thirds=2 * radius / 3)
-    written["README.md"] = atomic_write(out_dir / "README.md", lambda temporary: Path(temporary).write_text(readme))
+    with staged_writes():
+        written["reflectance.exr"] = save_exr(out_dir / "reflectance.exr", texture)
+        written["scene.xml"] = save_text(out_dir / "scene.xml", text)
+        sampling = scene.sampling
+        readme = _README[format].format(name=scene.name, sensors=scene.sensor_count, bins=sampling.count,
+                                        width=sampling.bin_width_opl, start=sampling.start_opl, radius=radius,
+                                        offset=2 * radius / 3 + 1500 * 2.0**-24, two_thirds=2 * radius / 3)
+        written["README.md"] = save_text(out_dir / "README.md", readme)
     return written

@@ -38,12 +38,12 @@ from pathlib import Path
 import numpy as np
 from scipy import special, stats
 
+from analytic.errors import DataError
 from analytic.scene import Sampling, Scene
 from validation.compare import Agreement, compare_transients
 
-__all__ = ["DataError", "Fit", "CheckResult", "check_transient", "fit_scale_offset", "read_data",
-           "read_stderr", "diagnose", "write_check_report", "plot_check_transients", "plot_check_z",
-           "KNOWN_SCALES", "MAX_RELATIVE_STDERR"]
+__all__ = ["Fit", "CheckResult", "check_transient", "fit_scale_offset", "read_data",
+           "read_stderr", "diagnose", "write_check_report", "KNOWN_SCALES", "MAX_RELATIVE_STDERR"]
 
 #: Bins are judged (and fitted) only where se < this x |y_data| (as compare_transients).
 MAX_RELATIVE_STDERR = 0.1
@@ -62,10 +62,6 @@ KNOWN_SCALES = (
     (0.25 / math.pi, "reads radiance averaged over directions (fluence / 4π)"),
     (4.0 * math.pi, "reads 4π times the fluence"),
 )
-
-
-class DataError(ValueError):
-    """A data file that cannot be judged: one line saying what, where and how to fix it."""
 
 
 # --------------------------------------------------------------------------- readers
@@ -88,32 +84,17 @@ def _meta_time_axis(path: Path, sampling: Sampling) -> None:
         meta = json.loads(meta_path.read_text())
     except (OSError, json.JSONDecodeError):
         return   # not ours: nothing to compare
-    width = next((meta[k] for k in ("bin_width_opl", "period_opl") if k in meta), None)
+    width = meta.get("bin_width_opl")
     if "start_opl" in meta and width is not None:
         _time_axis(f"{path} (meta.json)", float(meta["start_opl"]), float(width), sampling)
 
 
 def _our_exr(path: Path, sampling: Sampling) -> np.ndarray:
-    import OpenEXR
+    from analytic.io import read_exr
 
-    try:
-        with OpenEXR.File(str(path)) as handle:
-            # Copies: the handle's header and pixels die with it.
-            header = {key: value for key, value in handle.header().items()
-                      if key in ("start_opl", "t0", "bin_width_opl", "period_opl", "T")}
-            channels = handle.channels()
-            if "Y" not in channels:
-                raise DataError(f"{path}: no channel Y (channels {sorted(channels)}); expected our "
-                                f"transient.exr (width = bins, height = sensors)")
-            data = np.array(channels["Y"].pixels, dtype=np.float64)
-    except DataError:
-        raise
-    except Exception as error:   # OpenEXR raises bare exceptions for unreadable files
-        raise DataError(f"{path}: not a readable EXR ({error})") from None
-    start = next((header[k] for k in ("start_opl", "t0") if k in header), None)
-    width = next((header[k] for k in ("bin_width_opl", "period_opl", "T") if k in header), None)
-    if start is not None and width is not None:
-        _time_axis(str(path), float(start), float(width), sampling)
+    data, header = read_exr(path)
+    if "start_opl" in header and "bin_width_opl" in header:
+        _time_axis(str(path), float(header["start_opl"]), float(header["bin_width_opl"]), sampling)
     return data
 
 
@@ -853,114 +834,11 @@ def check_transient(scene: Scene, data, *, stderr=None, shape_only: bool = False
                        y_model, fitted, edges)
 
 
-# --------------------------------------------------------------------------- report and figures
-#
-# The plots below are to move into validation/plots.py; matplotlib is
-# imported inside each function so that the CLI starts fast.
-
-def _pyplot():
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    return plt
-
-
-def plot_check_transients(path: str | Path, result: CheckResult, *, max_panels: int = 9) -> Path:
-    """Data (with one-standard-error bars) against the model as given and after the fit.
-
-    Parameters
-    ----------
-    path : str or Path
-        PNG to write (atomically).
-    result : CheckResult
-        What :func:`check_transient` returned.
-    max_panels : int
-        At most this many sensors, those with the largest |z| as given first.
-    """
-    from analytic.io import save_figure
-
-    plt = _pyplot()
-    sensors = result.data.shape[0]
-    if result.as_given is not None:
-        worst = np.nan_to_num(np.abs(result.as_given.z), nan=-1.0).max(axis=1)
-        order = np.argsort(-worst, kind="stable")[:max_panels]
-    else:
-        order = np.arange(min(sensors, max_panels))
-    order = np.sort(order)
-    columns = int(np.ceil(np.sqrt(len(order))))
-    rows = int(np.ceil(len(order) / columns))
-    figure, axes = plt.subplots(rows, columns, figsize=(max(3.6 * columns, 6.0), max(2.7 * rows, 3.8)),
-                                squeeze=False)
-    centres = 0.5 * (result.edges[:-1] + result.edges[1:])
-    fit = result.fit
-    for panel, axis in enumerate(axes.flat):
-        if panel >= len(order):
-            axis.axis("off")
-            continue
-        k = int(order[panel])
-        axis.stairs(result.model[k], result.edges, color="C0", label="model as given")
-        axis.stairs(result.fitted_model[k], result.edges, color="C1", ls="--",
-                    label=f"{fit.scale:.4g} × model(t0 {fit.offset_opl:+.3g} m)")
-        if result.stderr is not None:
-            axis.errorbar(centres, result.data[k], yerr=result.stderr[k], fmt=".", ms=3, color="k",
-                          elinewidth=0.8, label="data ± se")
-        else:
-            axis.plot(centres, result.data[k], ".", ms=3, color="k", label="data (no errors)")
-        axis.set_title(f"sensor {k}", fontsize=8)
-        axis.tick_params(labelsize=7)
-    handles, labels = axes.flat[0].get_legend_handles_labels()
-    figure.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, 0.94), ncol=3, fontsize=7,
-                  frameon=False)
-    figure.supxlabel("path length t (m, c = 1)", fontsize=9)
-    figure.supylabel("y_k[n]", fontsize=9)
-    shown = "" if len(order) == sensors else f" ({len(order)} of {sensors} sensors, worst first)"
-    figure.suptitle(f"data against the model{shown}", fontsize=10)
-    figure.tight_layout(rect=(0, 0, 1, 0.9))
-    return save_figure(figure, path)
-
-
-def plot_check_z(path: str | Path, result: CheckResult) -> Path:
-    """z by bin (sensor-major), as given and after the fit, with the max-|z| limits.
-
-    Parameters
-    ----------
-    path : str or Path
-        PNG to write (atomically).
-    result : CheckResult
-        A result judged with errors (not by shape only).
-    """
-    from analytic.io import save_figure
-
-    if result.as_given is None:
-        raise ValueError("result: judged by shape only, it has no z to plot")
-    plt = _pyplot()
-    figure, axes = plt.subplots(2, 1, figsize=(8, 4.6), sharex=True)
-    bins = result.data.shape[1]
-    for axis, agreement, label in ((axes[0], result.as_given, "as given"),
-                                   (axes[1], result.after_fit, "after the fit")):
-        z = agreement.z.ravel()
-        index = np.arange(z.size)
-        finite = np.isfinite(z)
-        axis.plot(index[finite], z[finite], ".", ms=3, color="C0" if agreement.agrees else "C3")
-        for sign in (-1, 1):
-            axis.axhline(sign * agreement.z_threshold, color="0.4", ls=":", lw=0.8)
-        for k in range(1, result.data.shape[0]):
-            axis.axvline(k * bins - 0.5, color="0.85", lw=0.6)
-        limit = max(agreement.z_threshold * 1.3, float(np.max(np.abs(z[finite]))) * 1.05 if finite.any() else 1)
-        axis.set_ylim(-limit, limit)
-        verdict = "agrees" if agreement.agrees else "disagrees"
-        axis.set_title(f"{label}: {verdict}, χ²/dof = {agreement.chi2_per_dof:.3g}, "
-                       f"max |z| = {agreement.max_abs_z:.3g} (limit {agreement.z_threshold:.2f})", fontsize=9)
-        axis.set_ylabel("z (normal equivalent of t)" if result.dof is not None else "z", fontsize=9)
-        axis.tick_params(labelsize=7)
-    axes[1].set_xlabel(f"bin k·N + n (sensor-major, N = {bins})", fontsize=9)
-    figure.tight_layout()
-    return save_figure(figure, path)
-
+# --------------------------------------------------------------------------- the report
 
 def write_check_report(out: str | Path, result: CheckResult, *, scene_name: str = "",
                        data_paths=()) -> dict:
-    """Write report.md (embedding its figures), metrics.json and the PNGs into ``out``.
+    """Write report.md (embedding its figures), metrics.json and the PNGs into ``out``, together.
 
     Parameters
     ----------
@@ -978,17 +856,12 @@ def write_check_report(out: str | Path, result: CheckResult, *, scene_name: str 
     dict
         The metrics written to metrics.json.
     """
-    from analytic.io import atomic_write, save_json
+    from analytic.io import save_json, staged_writes
+    from validation.plots import plot_check_transients, plot_check_z
+    from validation.report import write_markdown
 
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     metrics = result.as_dict() | {"scene": scene_name, "data": [str(p) for p in data_paths]}
-    save_json(out / "metrics.json", metrics)
-    plot_check_transients(out / "check_transients.png", result)
-    figures = ["check_transients.png"]
-    if result.as_given is not None:
-        plot_check_z(out / "check_z.png", result)
-        figures.append("check_z.png")
     fit = result.fit
     lines = [f"# check: {scene_name or 'scene'}", ""]
     if data_paths:
@@ -1001,9 +874,8 @@ def write_check_report(out: str | Path, result: CheckResult, *, scene_name: str 
                   f"| as given | {result.relative_l2:.3e} |",
                   f"| after the fit | {result.relative_l2_after_fit:.3e} |"]
     else:
-        source = (f"{result.replicas} independent replicas (z ~ Student's t, {result.dof} dof, mapped to "
-                  f"its standard-normal equivalent)" if result.judged_by == "replicas"
-                  else "the standard error given with the data")
+        source = (f"{result.replicas} independent replicas (z ~ Student's t, {result.dof} dof)"
+                  if result.judged_by == "replicas" else "the standard error given with the data")
         given, after = result.as_given, result.after_fit
         low, high = given.chi2_interval
         lines += [f"Per-bin error from {source}. Thresholds: χ²/dof in [{low:.3f}, {high:.3f}] and max |z| ≤ "
@@ -1019,6 +891,12 @@ def write_check_report(out: str | Path, result: CheckResult, *, scene_name: str 
               f"| offset_opl (m, add to the data's start_opl) | {fit.offset_opl:+.6g} | {fit.offset_stderr:.2g} |",
               "", f"Gauss–Newton: {fit.iterations} iteration(s), "
               f"{'converged' if fit.converged else 'NOT converged'}.", ""]
-    lines += [f"![{name}]({name})" for name in figures]
-    atomic_write(out / "report.md", lambda temporary: Path(temporary).write_text("\n".join(lines) + "\n"))
+    with staged_writes():
+        save_json(out / "metrics.json", metrics)
+        plot_check_transients(out / "check_transients.png", result)
+        lines += ["![data against the model](check_transients.png)", ""]
+        if result.as_given is not None:
+            plot_check_z(out / "check_z.png", result)
+            lines += ["![z by bin, as given and after the fit](check_z.png)", ""]
+        write_markdown(out / "report.md", lines)
     return metrics

@@ -16,7 +16,7 @@ from analytic.io import atomic_write
 
 __all__ = ["save_figure", "new_figure", "plot_transients", "plot_z_map", "plot_convergence",
            "plot_reconstructions", "plot_reconstruction", "plot_criterion", "plot_conditioning",
-           "plot_panels", "NANOSECONDS_PER_METRE", "Y_LABEL"]
+           "plot_panels", "plot_check_transients", "plot_check_z", "NANOSECONDS_PER_METRE", "Y_LABEL"]
 
 #: Light travels 1 m of path in 3.3356 ns.
 NANOSECONDS_PER_METRE = 1e9 / 299_792_458.0
@@ -351,3 +351,88 @@ def plot_panels(path: str | Path, rows: list[dict], *, attenuation: str, intensi
     figure.suptitle(f"oracle-λ reconstructions, {attenuation} attenuation, σ = {group[0]['sigma']:g}, "
                     f"source {intensity:g} W/sr (PSNR beneath, data range 1)", fontsize=9)
     return save_figure(figure, path, dpi=100)
+
+
+def plot_check_transients(path: str | Path, result: CheckResult, *, max_panels: int = 9) -> Path:
+    """Data (with one-standard-error bars) against the model as given and after the fit.
+
+    Parameters
+    ----------
+    path : str or Path
+        PNG to write (atomically).
+    result : CheckResult
+        What :func:`check_transient` returned.
+    max_panels : int
+        At most this many sensors, those with the largest |z| as given first.
+    """
+    sensors = result.data.shape[0]
+    if result.as_given is not None:
+        worst = np.nan_to_num(np.abs(result.as_given.z), nan=-1.0).max(axis=1)
+        order = np.argsort(-worst, kind="stable")[:max_panels]
+    else:
+        order = np.arange(min(sensors, max_panels))
+    order = np.sort(order)
+    columns = int(np.ceil(np.sqrt(len(order))))
+    rows = int(np.ceil(len(order) / columns))
+    figure = new_figure(max(3.6 * columns, 6.0), max(2.8 * rows, 3.8) + 0.5)
+    axes = np.atleast_2d(figure.subplots(rows, columns, squeeze=False))
+    centres = 0.5 * (result.edges[:-1] + result.edges[1:])
+    fit = result.fit
+    for panel, axis in enumerate(axes.flat):
+        if panel >= len(order):
+            axis.axis("off")
+            continue
+        k = int(order[panel])
+        axis.stairs(result.model[k], result.edges, color="C0", label="model as given")
+        axis.stairs(result.fitted_model[k], result.edges, color="C1", ls="--",
+                    label=f"{fit.scale:.4g} × model(t0 {fit.offset_opl:+.3g} m)")
+        if result.stderr is not None:
+            axis.errorbar(centres, result.data[k], yerr=result.stderr[k], fmt=".", ms=3, color="k",
+                          elinewidth=0.8, label="data ± se")
+        else:
+            axis.plot(centres, result.data[k], ".", ms=3, color="k", label="data (no errors)")
+        axis.set_title(f"sensor {k}", fontsize=8)
+        axis.tick_params(labelsize=7)
+    handles, labels = axes.flat[0].get_legend_handles_labels()
+    figure.legend(handles, labels, loc="outside upper center", ncol=3, fontsize=7, frameon=False)
+    figure.supxlabel("path length (m)", fontsize=9)
+    figure.supylabel(Y_LABEL, fontsize=9)
+    shown = "" if len(order) == sensors else f" ({len(order)} of {sensors} sensors, worst first)"
+    figure.suptitle(f"data against the model{shown}", fontsize=10)
+    return save_figure(figure, path)
+
+
+def plot_check_z(path: str | Path, result: CheckResult) -> Path:
+    """z by bin (sensor-major), as given and after the fit, with the max-|z| limits.
+
+    Parameters
+    ----------
+    path : str or Path
+        PNG to write (atomically).
+    result : CheckResult
+        A result judged with errors (not by shape only).
+    """
+    if result.as_given is None:
+        raise ValueError("result: judged by shape only, it has no z to plot")
+    figure = new_figure(8.0, 4.8)
+    axes = figure.subplots(2, 1, sharex=True)
+    bins = result.data.shape[1]
+    for axis, agreement, label in ((axes[0], result.as_given, "as given"),
+                                   (axes[1], result.after_fit, "after the fit")):
+        z = agreement.z.ravel()
+        index = np.arange(z.size)
+        finite = np.isfinite(z)
+        axis.plot(index[finite], z[finite], ".", ms=3, color="C0" if agreement.agrees else "C3")
+        for sign in (-1, 1):
+            axis.axhline(sign * agreement.z_threshold, color="0.4", ls=":", lw=0.8)
+        for k in range(1, result.data.shape[0]):
+            axis.axvline(k * bins - 0.5, color="0.85", lw=0.6)
+        limit = max(agreement.z_threshold * 1.3, float(np.max(np.abs(z[finite]))) * 1.05 if finite.any() else 1)
+        axis.set_ylim(-limit, limit)
+        verdict = "agrees" if agreement.agrees else "disagrees"
+        axis.set_title(f"{label}: {verdict}, χ²/dof = {agreement.chi2_per_dof:.3g}, "
+                       f"max |z| = {agreement.max_abs_z:.3g} (limit {agreement.z_threshold:.2f})", fontsize=9)
+        axis.set_ylabel("z (normal equivalent of t)" if result.dof is not None else "z", fontsize=9)
+        axis.tick_params(labelsize=7)
+    axes[1].set_xlabel(f"bin k·N + n (sensor-major, N = {bins})", fontsize=9)
+    return save_figure(figure, path)

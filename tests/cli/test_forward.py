@@ -45,10 +45,12 @@ def test_forward_writes_the_contract_files(tmp_path):
     result = _cli("forward", path, "--out", out, "--quiet")
     assert result.returncode == 0, result.stderr
     names = {p.name for p in out.iterdir()}
-    assert names == {"transient.exr", "transient.npy", "meta.json", "transient_noisy.npy", "transient.png"}
+    assert names == {"transient.exr", "transient.npy", "transient.h5", "meta.json", "transient_noisy.npy",
+                     "transient.png"}
     y = np.load(out / "transient.npy")
     assert y.shape == (1, 40) and y.dtype == np.float64 and y.max() > 0
     np.testing.assert_allclose(read_transient(out / "transient.exr"), y, rtol=1e-6, atol=1e-12)
+    assert np.array_equal(read_transient(out / "transient.h5"), y)
     meta = json.loads((out / "meta.json").read_text())
     assert meta["start_opl"] == 0.0 and meta["bin_width_opl"] == 0.1 and meta["attenuation"] == "lambertian"
     assert meta["kind"] == "model" and meta["illumination"] == "impulse" and meta["window_share"] == 1.0

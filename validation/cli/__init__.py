@@ -24,7 +24,7 @@ __all__ = ["main", "build_parser", "UsageError"]
 
 def build_parser() -> OneLineParser:
     """The ``diffuse-imaging`` parser with every command."""
-    from . import bench, checks, model, reconstruct, render, sweep
+    from . import bench, checks, interop, model, reconstruct, render, sweep
 
     parser = OneLineParser(
         prog="diffuse-imaging",
@@ -32,7 +32,7 @@ def build_parser() -> OneLineParser:
                     "rendering, cross-check, reconstruction. Lengths in metres, time as optical "
                     "path length in metres (c = 1).")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for module in (model, render, checks, reconstruct, sweep, bench):
+    for module in (model, render, checks, reconstruct, sweep, bench, interop):
         module.add_commands(commands)
     return parser
 

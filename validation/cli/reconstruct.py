@@ -168,7 +168,7 @@ def add_commands(subparsers) -> None:
         "reconstruct", help="recover the image from a transient (Laplacian-regularised LS)")
     command.add_argument("scene", nargs="?", help="scene TOML (default: the built-in scene)")
     command.add_argument("--data", required=True,
-                         help="transient .npy or .exr, (K, N), e.g. from `forward` or `render`")
+                         help="transient .npy, .exr or tal .h5, (K, N), e.g. from `forward` or `render`")
     command.add_argument("--out", required=True, help="output folder")
     add_lambda_options(command, default="auto")
     command.add_argument("--method", choices=("auto", "svd", "lsqr"),

@@ -10,20 +10,20 @@ written, or refused with a DataError naming the file).
 
 from __future__ import annotations
 
-import argparse
 import json
 
 import numpy as np
 import pytest
 from scipy import stats
 
-from analytic.io import save_exr, write_transient
+from analytic.errors import DataError
+from analytic.io import build_meta, save_exr, write_transient
 from analytic.scene import Sampling, Scene
 from analytic.system import forward
 from transient.render import render
-from validation.check import (DataError, _agreement, check_transient, diagnose, read_data, read_stderr,
+from validation.check import (_agreement, check_transient, diagnose, read_data, read_stderr,
                               write_check_report)
-from validation.cli_interop import add_commands
+from validation.cli import main
 
 START, WIDTH, COUNT = 1.7, 0.05, 24
 
@@ -173,8 +173,7 @@ def test_a_single_transient_without_errors_is_refused(scene, model):
 def files(tmp_path, scene, model):
     """Our forward output folder, and stray arrays in the other formats."""
     out = tmp_path / "forward"
-    write_transient(out, model, {"start_opl": START, "period_opl": WIDTH, "samples": 0, "seed": 0,
-                                 "attenuation": "lambertian", "illumination": "impulse"})
+    write_transient(out, model, build_meta(scene, kind="model"))
     return out
 
 
@@ -186,11 +185,11 @@ def test_our_outputs_are_read_back(files, scene, model):
 
 def test_wrong_time_axis_is_refused(tmp_path, scene, model):
     out = tmp_path / "late"
-    write_transient(out, model, {"start_opl": START + WIDTH, "period_opl": WIDTH, "samples": 0, "seed": 0,
-                                 "attenuation": "lambertian", "illumination": "impulse"})
+    late = scene.replace(sampling=Sampling(bin_width_opl=WIDTH, start_opl=START + WIDTH, count=COUNT))
+    write_transient(out, model, build_meta(late, kind="model"))
     with pytest.raises(DataError, match="time axis"):
         read_data(out / "transient.npy", scene)
-    save_exr(tmp_path / "wide.exr", model, {"t0": START, "T": 2 * WIDTH})
+    save_exr(tmp_path / "wide.exr", model, {"start_opl": START, "bin_width_opl": 2 * WIDTH})
     with pytest.raises(DataError, match="time axis"):
         read_data(tmp_path / "wide.exr", scene)
 
@@ -253,10 +252,7 @@ def test_mitransient_frame_folder(tmp_path, model):
 # ---------------------------------------------------------------- the command
 
 def run_check(*argv) -> int:
-    parser = argparse.ArgumentParser()
-    add_commands(parser.add_subparsers(dest="command", required=True))
-    args = parser.parse_args(["check", *map(str, argv), "--quiet"])
-    return args.run(args)
+    return main(["check", *map(str, argv), "--quiet"])
 
 
 @pytest.fixture
@@ -292,7 +288,7 @@ def test_check_command_exit_status_and_report(tmp_path, scene_file, scene, model
     assert set(metrics["fit"]) >= {"scale", "scale_stderr", "offset_opl", "offset_stderr"}
     assert {"chi2_per_dof", "max_abs_z"} <= set(metrics)
     report = (tmp_path / "good" / "report.md").read_text()
-    assert "![check_transients.png](check_transients.png)" in report and "![check_z.png]" in report
+    assert "(check_transients.png)" in report and "(check_z.png)" in report
     assert (tmp_path / "good" / "check_transients.png").is_file() and (tmp_path / "good" / "check_z.png").is_file()
 
     sigma = 0.0025 * model + 1e-6
@@ -308,16 +304,16 @@ def test_check_command_exit_status_and_report(tmp_path, scene_file, scene, model
     assert not (tmp_path / "shape" / "check_z.png").exists()
 
 
-def test_check_command_refuses_bad_input(tmp_path, scene_file, model):
+def test_check_command_refuses_bad_input_in_one_line(tmp_path, scene_file, model, capsys):
     np.save(tmp_path / "y.npy", model)
-    with pytest.raises(DataError, match="without errors"):
-        run_check(scene_file, "--data", tmp_path / "y.npy", "--out", tmp_path / "out")
-    with pytest.raises(DataError, match="--stderr: give it with one --data"):
-        run_check(scene_file, "--data", tmp_path / "y.npy", tmp_path / "y.npy", "--stderr", tmp_path / "y.npy",
-                  "--out", tmp_path / "out")
     np.save(tmp_path / "short.npy", model[:, 1:])
-    with pytest.raises(DataError, match="short.npy"):
-        run_check(scene_file, "--data", tmp_path / "short.npy", "--shape-only", "--out", tmp_path / "out")
+    for argv, words in (((tmp_path / "y.npy",), "without errors"),
+                        ((tmp_path / "y.npy", tmp_path / "y.npy", "--stderr", tmp_path / "y.npy"),
+                         "--stderr: give it with one --data"),
+                        ((tmp_path / "short.npy", "--shape-only"), "short.npy")):
+        assert run_check(scene_file, "--data", *argv, "--out", tmp_path / "out") == 2
+        error = capsys.readouterr().err.strip().splitlines()
+        assert len(error) == 1 and words in error[0], error
     assert not (tmp_path / "out").exists()                   # nothing written before the refusal
 
 

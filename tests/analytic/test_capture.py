@@ -22,9 +22,10 @@ from analytic import capture as capture_module
 from analytic.capture import CaptureError, read_capture, write_capture
 from analytic.scene import Sampling, Scene, sensor_grid
 from analytic.system import forward
-from validation.check import DataError, read_data
+from analytic.errors import DataError
+from validation.check import read_data
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 TAL_PYTHON = ROOT / ".venv-tal" / "bin" / "python"
 needs_tal = pytest.mark.skipif(not TAL_PYTHON.is_file(),
                                reason="tal's virtual environment .venv-tal is absent "

@@ -27,12 +27,18 @@ from analytic.scene import Sampling, Scene
 from analytic.waveforms import make_waveform
 
 __all__ = ["plane_to_world", "scene_dict", "load_scene", "corner_scene_dict", "wall_to_world",
-           "mitransient_scene_dict", "mitransient_planes", "irradiancemeter_correction", "METER_RADIUS"]
+           "mitransient_scene_dict", "mitransient_planes", "irradiancemeter_correction", "METER_RADIUS",
+           "RAY_EPSILON"]
 
 #: Radius of mitransient's irradiancemeter spheres, metres. The meter's
 #: reading differs from the point value at its centre by a relative
 #: (4/3) r / d to first order (1.3e-4 at d = 1 m).
 METER_RADIUS = 1e-4
+
+#: Mitsuba's ``math::RayEpsilon`` for single-precision variants
+#: (``Epsilon<float> * 1500``, Epsilon = 2^-24): the irradiancemeter starts
+#: its rays this far off its shape. mitransient runs on float32 variants.
+RAY_EPSILON = 1500 * 2.0**-24
 
 _FILM = {"type": "hdrfilm", "width": 1, "height": 1, "pixel_format": "luminance"}
 
@@ -91,8 +97,10 @@ def _sampling_entries(sampling: Sampling) -> dict:
 def _sensors(positions) -> dict:
     from .sensor import PLUGIN_NAME as SENSOR
 
-    # Zero-padded keys keep Mitsuba's sensor order equal to the scene's.
-    return {f"sensor_{k:06d}": {"type": SENSOR, "position": [float(v) for v in position], "film": dict(_FILM)}
+    # Zero-padded keys keep Mitsuba's sensor order equal to the scene's; a
+    # distinct sampler seed keeps the parser from merging two sensors at one place.
+    return {f"sensor_{k:06d}": {"type": SENSOR, "position": [float(v) for v in position], "film": dict(_FILM),
+                                "sampler": {"type": "independent", "seed": k}}
             for k, position in enumerate(np.asarray(positions, dtype=np.float64))}
 
 
@@ -186,7 +194,7 @@ def irradiancemeter_correction(radius: float = METER_RADIUS) -> tuple[float, flo
     offset_opl : float
         Metres of path length.
     """
-    return 4.0, 2.0 * float(radius) / 3.0 + float(mi.math.RayEpsilon)
+    return 4.0, 2.0 * float(radius) / 3.0 + RAY_EPSILON
 
 
 def mitransient_scene_dict(*, planes: list[dict], source, sensors, sampling: Sampling, max_depth: int,
@@ -225,8 +233,10 @@ def mitransient_scene_dict(*, planes: list[dict], source, sensors, sampling: Sam
         entries[f"meter_{k:06d}"] = {
             "type": "sphere", "center": [float(v) for v in centre], "radius": float(radius),
             "bsdf": {"type": "null"},
+            # A distinct sampler seed per meter: Mitsuba's parser merges identical
+            # dictionaries into one object, and a sensor can sit on one shape only.
             "sensor": {"type": "irradiancemeter", "film": dict(film),
-                       "sampler": {"type": "independent", "sample_count": int(samples)}}}
+                       "sampler": {"type": "independent", "sample_count": int(samples), "seed": k}}}
     return entries
 
 

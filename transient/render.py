@@ -41,7 +41,7 @@ from analytic.waveforms import make_waveform
 
 from .chunks import MAX_SAMPLES, Chunk, ReplicaAccumulator, ReplicaLayout
 
-__all__ = ["RenderResult", "RenderStateError", "render", "scene_fingerprint", "sigterm_as_interrupt",
+__all__ = ["RenderResult", "RenderStateError", "render", "render_loaded", "scene_fingerprint", "sigterm_as_interrupt",
            "DEFAULT_CHUNK", "FIRST_CHUNK", "STATE_FILE", "STATE_FORMAT", "MAX_SAMPLES"]
 
 #: Largest chunk, samples: one fused kernel of this width keeps memory flat
@@ -226,6 +226,37 @@ def _chunks(start: int, end: int, largest: int):
         count = min(size, end - first)
         yield Chunk(index, first, count)
         first, index, size = first + count, index + 1, min(2 * size, largest)
+
+
+def render_loaded(loaded, *, spp: int, seed: int = 0, replicas: int | None = None,
+                  chunk_size: int = DEFAULT_CHUNK) -> RenderResult:
+    """Render an already loaded Mitsuba scene of one of our integrators (no files, no resume).
+
+    For scenes that are not an :class:`analytic.scene.Scene` (the corner of
+    ``transient.mitsuba_scene.corner_scene_dict``), rendered with the same
+    replicas and chunks as :func:`render`.
+
+    Parameters
+    ----------
+    loaded : mitsuba.Scene
+        Loaded with ``transient_opl`` or ``transient_opl_path``.
+    spp, seed, replicas, chunk_size
+        As for :func:`render`.
+    """
+    import mitsuba as mi
+
+    _check_arguments(spp, seed, chunk_size, replicas)
+    layout = ReplicaLayout.for_samples(int(spp), replicas)
+    integrator = loaded.integrator()
+    shape = (len(loaded.sensors()), int(integrator.bins))
+    accumulator = ReplicaAccumulator(layout, shape)
+    started = time.perf_counter()
+    for chunk in _chunks(0, layout.samples, int(chunk_size)):
+        accumulator.add(chunk, integrator.render_chunk(loaded, seed=int(seed), layout=layout, first=chunk.first,
+                                                       count=chunk.count))
+    return RenderResult(mean=accumulator.mean(), stderr=accumulator.stderr(), samples=accumulator.samples,
+                        seed=int(seed), variant=mi.variant(), seconds=time.perf_counter() - started,
+                        replicas=accumulator.completed, dof=accumulator.dof)
 
 
 def _check_arguments(spp, seed, chunk_size, replicas):

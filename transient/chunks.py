@@ -26,8 +26,9 @@ The chunk-level API, for a renderer loop or a distributed sweep::
 
 Memory: the accumulator holds four ``(K, N)`` float64 arrays plus the
 chunks that arrived ahead of their turn; a chunk's sums are
-``(replicas it touches, K, N)``, at most ``min(R, ⌈C / n⌉ + 1)`` rows of
-replicas for chunks of C samples.
+``(replicas it touches, K, N)``, and the kernel's histogram
+``(ReplicaLayout.histogram_rows, K, N)`` (at most R rows; on the LLVM
+backend one private copy per thread when it has at most 2^20 entries).
 """
 
 from __future__ import annotations
@@ -81,6 +82,17 @@ class ReplicaLayout:
     def samples(self) -> int:
         """S = R n."""
         return self.replicas * self.size
+
+    @property
+    def histogram_rows(self) -> int:
+        """Replica rows of a chunk's histogram: enough for any chunk (<= 2^31 samples), the same for all.
+
+        A histogram of one size for every chunk of a render keeps its
+        compiled kernel the same (the size is baked into the scatter); it
+        holds ``histogram_rows x K x N`` float64: all R replicas unless
+        replicas are longer than 2^31 / (R - 2) samples.
+        """
+        return min(self.replicas, 2 + -(-2**31 // self.size))
 
     @classmethod
     def for_samples(cls, samples: int, replicas: int | None = None) -> "ReplicaLayout":

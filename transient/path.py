@@ -201,7 +201,7 @@ class TransientPathIntegrator(mi.SamplingIntegrator):
                                       F64(0.0)))
             sensor_lengths.append(distance)
 
-        histogram = dr.zeros(mi.Float64, rows * K * N)
+        histogram = dr.zeros(mi.Float64, layout.histogram_rows * K * N)
         settings = dict(bins=N, start_opl=self.start_opl, bin_width_opl=self.bin_width_opl,
                         terms=self.waveform.terms, taps=self.waveform.bins_touched(self.bin_width_opl),
                         mode=reduce_mode())
@@ -240,7 +240,7 @@ class TransientPathIntegrator(mi.SamplingIntegrator):
             travelled = travelled + F64(following.t)
             vertex, bsdf = following, following.bsdf()
         dr.eval(histogram)
-        return np.array(histogram, dtype=np.float64).reshape(rows, K, N)
+        return np.array(histogram, dtype=np.float64).reshape(-1, K, N)[:rows]
 
 
 mi.register_integrator(PLUGIN_NAME, lambda props: TransientPathIntegrator(props))

@@ -451,7 +451,7 @@ class TransientPlaneIntegrator(mi.SamplingIntegrator):
         shares = [opaque_f64((bounds[t + 1] - bounds[t]) / size) for t in range(len(plan))]
         weight_scale = intensity * math.pi * reflectance / self._mixture(plan, shares, x, y)
 
-        histogram = dr.zeros(mi.Float64, rows * K * N)
+        histogram = dr.zeros(mi.Float64, layout.histogram_rows * K * N)
         mode = reduce_mode()
         taps = self.waveform.bins_touched(self.bin_width_opl)
         terms = self.waveform.terms
@@ -465,7 +465,7 @@ class TransientPlaneIntegrator(mi.SamplingIntegrator):
                     mi.Bool(True), bins=N, start_opl=self.start_opl, bin_width_opl=self.bin_width_opl,
                     terms=terms, taps=taps, mode=mode)
         dr.eval(histogram)
-        return np.array(histogram, dtype=np.float64).reshape(rows, K, N)
+        return np.array(histogram, dtype=np.float64).reshape(-1, K, N)[:rows]
 
     def _warp(self, plan, technique, u, v):
         """The plane point of (u, v) under each sample's technique."""

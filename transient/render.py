@@ -164,11 +164,16 @@ def _load_state(out_dir: Path, identity: dict, layout: ReplicaLayout, shape) -> 
         raise RenderStateError(f"resume: no {STATE_FILE} in {out_dir}: nothing to resume; "
                                f"render without --resume")
     try:
-        with np.load(path, allow_pickle=False) as saved:
-            stored = json.loads(str(saved["identity"]))
-            progress = {"done": int(saved["done"]), "completed": int(saved["completed"]),
-                        **{name: np.array(saved[name], dtype=np.float64) for name in _STATE_ARRAYS}}
-            checksum = str(saved["checksum"])
+        # Open the file here: np.load leaks its own handle on a file that is not an archive.
+        with open(path, "rb") as stream:
+            saved = np.load(stream, allow_pickle=False)
+            if not isinstance(saved, np.lib.npyio.NpzFile):
+                raise ValueError("a single array, not an archive")
+            with saved:
+                stored = json.loads(str(saved["identity"]))
+                progress = {"done": int(saved["done"]), "completed": int(saved["completed"]),
+                            **{name: np.array(saved[name], dtype=np.float64) for name in _STATE_ARRAYS}}
+                checksum = str(saved["checksum"])
     except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile) as error:
         reason = " ".join(str(error).split()) or type(error).__name__
         raise RenderStateError(f"resume: {path} is not a readable render state ({reason[:120]}); {fresh}") \

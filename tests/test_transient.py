@@ -13,9 +13,7 @@ power to catch the errors it is meant for.
 
 from __future__ import annotations
 
-import json
 import os
-import signal
 import subprocess
 import sys
 
@@ -27,7 +25,7 @@ from analytic.scene import Illumination, Sampling, Scene
 from analytic.system import forward
 from transient import backend
 from transient.backend import BackendError, choose_libllvm, find_llvm_libraries, llvm_version_of
-from transient.render import STATE_FILE, render, render_loaded
+from transient.render import render, render_loaded
 from validation.compare import combined_dof, compare_transients
 from validation.suite import hard_cases, validation_suite
 

@@ -225,7 +225,7 @@ def techniques(source, sensors, width: float, height: float, strategy: str = "mi
         for sensor in peaked]
 
 
-def block_bounds(shares, replica_size: int) -> list[int]:
+def _block_bounds(shares, replica_size: int) -> list[int]:
     """First sample index of each technique's block in a replica, and n at the end.
 
     Block t holds round(n Σ_{s<t} share_s) ... : every technique with a
@@ -430,7 +430,7 @@ class TransientPlaneIntegrator(mi.SamplingIntegrator):
         rng = sample_stream(opaque_u32(seed), mi.UInt32(index), mi.UInt32(index >> 32))
         replica, in_replica = replica_of(mi.Float64(lane) + opaque_f64(first - first_replica * size),
                                          opaque_f64(size))
-        bounds = block_bounds([t.share for t in plan], size)
+        bounds = _block_bounds([t.share for t in plan], size)
         technique = mi.UInt32(0)                                      # which technique draws x
         block_start = opaque_u32(0)                                   # its block in the replica
         block_size = opaque_u32(bounds[1] - bounds[0])

@@ -1,14 +1,24 @@
-"""Unbiasedness and N^-1/2 convergence of the renderer against the exact model.
+"""Convergence, calibration and tails of the renderer against the exact model, hard geometry included.
 
-    python benchmarks/convergence_render.py --out out/convergence [--max-power 32] [--precision-power 34]
+    python benchmarks/convergence_render.py --out out/convergence [--min-power 16] [--max-power 26]
 
-For the default scene and the 1 m plane of bench_render.py, renders 2^20,
-2^22, ..., 2^max-power samples (independent seeds), judges each against the
-analytic 'lambertian' model with validation.compare (DESIGN.md section 6),
-and fits log(relative L2 error) against log(samples): an unbiased renderer
-gives slope -1/2. A last render of 2^precision-power samples on the plane
-checks that float64 accumulation loses nothing at that count (it must still
-agree). Writes results.json and convergence.png in --out; prints a table.
+For the 1 m plane of the bench, the default scene, a source 1e-3 m above
+the plane, a sensor 1e-3 m above it, and the suite's ``low`` case (both),
+each with the stratified sampler (what ``render`` uses) and with
+independent points (the unstratified rate), renders 2^min ... 2^max
+samples with several seeds and reports:
+
+- the RMS over seeds of the relative L2 error and the fitted slope of
+  log(error) against log(samples) with its standard error (an unbiased
+  unstratified estimator gives -1/2; stratification gives down to -3/4
+  where the integrand has edges);
+- calibration: RMS error over the RMS of the predicted error
+  sqrt(Σ se²) / ||y|| (1 when the replicas' standard errors are honest);
+- tails: the excess kurtosis of the standardised replica means pooled
+  over the judged bins (about 0 for normal replica means; a heavy-tailed
+  estimator gives large values) and the largest |z| of the replica means.
+
+Writes results.json and convergence.png in --out; prints a table.
 """
 
 from __future__ import annotations
@@ -16,79 +26,125 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from bench_render import plane_scene  # noqa: E402
-
-from analytic.io import save_json  # noqa: E402
-from analytic.scene import default_scene  # noqa: E402
-from analytic.system import forward  # noqa: E402
-from transient.render import render  # noqa: E402
-from validation.compare import compare_transients  # noqa: E402
+from analytic.io import save_json
+from analytic.scene import Sampling, Scene, default_scene
+from analytic.system import QuadratureWarning, forward
+from transient.backend import select_variant
+from transient.chunks import ChunkPlan, ReplicaLayout
+from validation.bench import plane_scene
+from validation.suite import hard_cases, response_range
 
 
-def run(scene, samples, seed):
+def low_scene(which: str) -> Scene:
+    """The bench's 1 m plane with the source (or the sensor) 1e-3 m above it."""
+    source, sensor = (0.5, 0.5, 1.0), (0.8, 0.3, 1.0)
+    if which == "source":
+        source = (0.3, 0.4, 1e-3)
+    else:
+        sensor = (0.7, 0.6, 1e-3)
+    low, high = response_range(source, sensor, 1.0)
+    count = 40
+    period = (high - low) / (count - 4)
+    return Scene(name=f"low {which}", size=1.0, pixels=10, reflectance=hard_cases(pixels=10)["low"].reflectance,
+                 source=source, sensors=[sensor],
+                 sampling=Sampling(bin_width_opl=period, start_opl=low - 2 * period, count=count))
+
+
+def replica_means(loaded, layout: ReplicaLayout, seed: int) -> tuple[np.ndarray, float]:
+    """``(R, K, N)`` replica means of one render, and its wall time in seconds."""
+    integrator = loaded.integrator()
+    shape = (len(loaded.sensors()), integrator.bins)
+    sums = np.zeros((layout.replicas,) + shape)
     started = time.perf_counter()
-    result = render(scene, spp=samples, seed=seed, progress=False)
-    model = forward(scene)
-    agreement = compare_transients(result.mean, result.stderr, model)
-    return {"scene": scene.name, "samples": samples, "seed": seed,
-            "seconds": time.perf_counter() - started, "relative_l2": agreement.relative_l2,
-            "chi2_per_dof": agreement.chi2_per_dof, "max_abs_z": agreement.max_abs_z,
-            "z_threshold": agreement.z_threshold, "bins": agreement.bins, "agrees": agreement.agrees}
+    for chunk in ChunkPlan(layout, 2**22):
+        part = integrator.render_chunk(loaded, seed=seed, layout=layout, first=chunk.first, count=chunk.count)
+        rows = chunk.replicas(layout)
+        sums[rows.start:rows.stop] += part
+    return sums / layout.size, time.perf_counter() - started
 
 
-def fit_slope(rows):
+def measure(scene: Scene, sampler: str, powers, seeds: int) -> dict:
+    from transient.mitsuba_scene import load_scene
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadratureWarning)
+        model = forward(scene)
+    norm = float(np.linalg.norm(model))
+    loaded = load_scene(scene, sampler=sampler)
+    replica_means(loaded, ReplicaLayout.for_samples(2**12), 0)      # compile
+    rows = []
+    for power in powers:
+        errors, predicted, seconds, standardised, largest = [], [], [], [], 0.0
+        for s in range(seeds):
+            means, elapsed = replica_means(loaded, ReplicaLayout.for_samples(2**power), 100 * power + s)
+            replicas = means.shape[0]
+            mean = means.mean(axis=0)
+            spread = means.std(axis=0, ddof=1)
+            judged = spread > 0
+            se = spread / np.sqrt(replicas)
+            judged &= se < 0.1 * np.abs(mean)
+            errors.append(np.linalg.norm(mean - model) / norm)
+            predicted.append(np.linalg.norm(se) / norm)
+            seconds.append(elapsed)
+            if judged.any():
+                u = (means[:, judged] - mean[judged]) / spread[judged]
+                standardised.append(u.ravel())
+                z = (means[:, judged] - model[judged]) / spread[judged]
+                largest = max(largest, float(np.max(np.abs(z))))
+        pooled = np.concatenate(standardised) if standardised else np.zeros(1)
+        rows.append({"samples": 2**power, "rms_error": float(np.sqrt(np.mean(np.square(errors)))),
+                     "rms_predicted": float(np.sqrt(np.mean(np.square(predicted)))),
+                     "seconds": float(np.mean(seconds)),
+                     "replica_excess_kurtosis": float(np.mean(pooled**4) - 3.0),
+                     "replica_max_abs_z": largest})
     x = np.log([r["samples"] for r in rows])
-    y = np.log([r["relative_l2"] for r in rows])
+    y = np.log([r["rms_error"] for r in rows])
+    slope, intercept = np.polyfit(x, y, 1)
     design = np.column_stack([x, np.ones_like(x)])
-    coefficients, residual, *_ = np.linalg.lstsq(design, y, rcond=None)
-    dof = max(len(x) - 2, 1)
-    sigma2 = float(residual[0]) / dof if len(residual) else 0.0
-    covariance = sigma2 * np.linalg.inv(design.T @ design)
-    return float(coefficients[0]), float(np.sqrt(covariance[0, 0]))
+    sigma2 = float(np.sum((y - design @ [slope, intercept]) ** 2)) / max(len(x) - 2, 1)
+    slope_error = float(np.sqrt(sigma2 * np.linalg.inv(design.T @ design)[0, 0]))
+    return {"scene": scene.name, "sampler": sampler, "rows": rows, "slope": float(slope),
+            "slope_error": slope_error, "decades": float(np.log10(rows[-1]["samples"] / rows[0]["samples"]))}
 
 
-def main():
+def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default="out/convergence")
-    parser.add_argument("--min-power", type=int, default=20)
-    parser.add_argument("--max-power", type=int, default=32)
-    parser.add_argument("--precision-power", type=int, default=34)
-    args = parser.parse_args()
+    parser.add_argument("--min-power", type=int, default=16)
+    parser.add_argument("--max-power", type=int, default=26)
+    parser.add_argument("--seeds", type=int, default=4)
+    parser.add_argument("--scenes", default="plane,default,low source,low sensor,low",
+                        help="comma-separated: plane, default, low source, low sensor, low")
+    parser.add_argument("--samplers", default="stratified,independent")
+    args = parser.parse_args(argv)
+    select_variant()
+    builders = {"plane": plane_scene, "default": lambda: default_scene(noise=None),
+                "low source": lambda: low_scene("source"), "low sensor": lambda: low_scene("sensor"),
+                "low": lambda: hard_cases(pixels=10)["low"]}
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    results = {"series": {}, "slopes": {}}
-    print("| scene | samples | seconds | rel. L2 | χ²/dof | max abs z (limit) | verdict |")
+    powers = range(args.min_power, args.max_power + 1, 2)
+    results = []
+    print("| scene | sampler | slope (± se) over decades | error at 2^max | calibration | excess kurtosis | max abs z |")
     print("|---|---|---|---|---|---|---|")
-    for scene in (default_scene(noise=None), plane_scene()):
-        rows = []
-        for power in range(args.min_power, args.max_power + 1, 2):
-            row = run(scene, 2**power, seed=100 + power)
-            rows.append(row)
-            print(f"| {scene.name} | 2^{power} | {row['seconds']:.1f} | {row['relative_l2']:.3e} | "
-                  f"{row['chi2_per_dof']:.3f} | {row['max_abs_z']:.2f} ({row['z_threshold']:.2f}) | "
-                  f"{'agree' if row['agrees'] else 'DISAGREE'} |", flush=True)
-        slope, error = fit_slope(rows)
-        results["series"][scene.name] = rows
-        results["slopes"][scene.name] = {"slope": slope, "standard_error": error,
-                                         "decades": np.log10(rows[-1]["samples"] / rows[0]["samples"])}
-    if args.precision_power:
-        row = run(plane_scene(), 2**args.precision_power, seed=7)
-        results["precision"] = row
-        print(f"| {row['scene']} | 2^{args.precision_power} | {row['seconds']:.1f} | "
-              f"{row['relative_l2']:.3e} | {row['chi2_per_dof']:.3f} | {row['max_abs_z']:.2f} "
-              f"({row['z_threshold']:.2f}) | {'agree' if row['agrees'] else 'DISAGREE'} |", flush=True)
-    print()
-    for name, fit in results["slopes"].items():
-        print(f"{name}: relative L2 ∝ N^({fit['slope']:.3f} ± {fit['standard_error']:.3f}) "
-              f"over {fit['decades']:.1f} decades")
-    save_json(out / "results.json", results)
+    for name in args.scenes.split(","):
+        for sampler in args.samplers.split(","):
+            result = measure(builders[name](), sampler, powers, args.seeds)
+            results.append(result)
+            last = result["rows"][-1]
+            kurtosis = max(r["replica_excess_kurtosis"] for r in result["rows"])
+            print(f"| {name} | {sampler} | {result['slope']:.3f} ± {result['slope_error']:.3f} over "
+                  f"{result['decades']:.1f} | {last['rms_error']:.2e} | "
+                  f"{last['rms_error'] / last['rms_predicted']:.2f} | {kurtosis:.2f} | "
+                  f"{max(r['replica_max_abs_z'] for r in result['rows']):.1f} |", flush=True)
+            save_json(out / "results.json", {"powers": list(powers), "seeds": args.seeds, "results": results})
     _plot(out / "convergence.png", results)
+    return 0
 
 
 def _plot(path, results):
@@ -96,21 +152,21 @@ def _plot(path, results):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    figure, axis = plt.subplots(figsize=(5, 3.6))
-    for name, rows in results["series"].items():
-        samples = np.array([r["samples"] for r in rows], float)
-        errors = np.array([r["relative_l2"] for r in rows])
-        fit = results["slopes"][name]
-        axis.loglog(samples, errors, "o", label=f"{name}: slope {fit['slope']:.3f}")
-        axis.loglog(samples, errors[0] * (samples / samples[0]) ** -0.5, ":", color="grey")
+    from analytic.io import save_figure
+
+    figure, axis = plt.subplots(figsize=(6, 4))
+    for result in results:
+        samples = np.array([r["samples"] for r in result["rows"]], float)
+        errors = np.array([r["rms_error"] for r in result["rows"]])
+        style = "o-" if result["sampler"] == "stratified" else "s:"
+        axis.loglog(samples, errors, style, label=f"{result['scene']}, {result['sampler']}: {result['slope']:.2f}")
     axis.set_xlabel("samples N")
-    axis.set_ylabel("relative L2 error vs exact model")
-    axis.legend(fontsize=8)
-    axis.set_title("renderer convergence (dotted: N^-1/2)", fontsize=9)
+    axis.set_ylabel("RMS relative L2 error vs exact model")
+    axis.legend(fontsize=6)
+    axis.set_title("renderer convergence (slopes of log error against log N)", fontsize=9)
     figure.tight_layout()
-    figure.savefig(path, dpi=110)
-    plt.close(figure)
+    save_figure(figure, path)
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

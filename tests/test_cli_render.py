@@ -3,8 +3,10 @@
 import glob
 import json
 import os
+import signal
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
@@ -41,25 +43,53 @@ def test_render_command_writes_files_that_agree_with_forward(tmp_path):
     assert {"transient.exr", "transient.npy", "stderr.npy", "meta.json"} <= names
     meta = json.loads((tmp_path / "r" / "meta.json").read_text())
     assert meta["samples"] == 2**20 and meta["seed"] == 3 and meta["attenuation"] == "lambertian"
+    assert meta["replicas"] == 32 and meta["dof"] == 31
     result = _cli("forward", scene_path, "--out", tmp_path / "f", "--quiet")
     assert result.returncode == 0, result.stderr
     agreement = compare_transients(np.load(tmp_path / "r" / "transient.npy"),
                                    np.load(tmp_path / "r" / "stderr.npy"),
-                                   np.load(tmp_path / "f" / "transient.npy"))
+                                   np.load(tmp_path / "f" / "transient.npy"), dof=meta["dof"])
     assert agreement.agrees, agreement.summary()
 
 
-def test_resume_continues_to_the_same_numbers(tmp_path):
+def test_terminated_render_resumes_to_the_same_numbers(tmp_path):
+    """SIGTERM after the first checkpoint: exit 130 with the state kept; --resume finishes it."""
     scene_path = tmp_path / "scene.toml"
     scene_path.write_text(SCENE)
-    whole = _cli("render", scene_path, "--spp", 2**19, "--seed", 9, "--out", tmp_path / "whole", "--quiet")
-    half = _cli("render", scene_path, "--spp", 2**18, "--seed", 9, "--out", tmp_path / "part", "--quiet")
-    assert whole.returncode == 0 and half.returncode == 0
-    resumed = _cli("render", scene_path, "--spp", 2**19, "--seed", 9, "--resume", tmp_path / "part", "--quiet")
+    samples = 2**24
+    whole = _cli("render", scene_path, "--spp", samples, "--seed", 9, "--out", tmp_path / "whole", "--quiet")
+    assert whole.returncode == 0, whole.stderr
+    child = subprocess.Popen([sys.executable, "-m", "validation.cli", "render", str(scene_path), "--spp",
+                              str(samples), "--seed", "9", "--out", str(tmp_path / "part"), "--quiet"],
+                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while not (tmp_path / "part" / "render_state.npz").exists() and child.poll() is None:
+        assert time.monotonic() < deadline
+        time.sleep(0.02)
+    child.send_signal(signal.SIGTERM)
+    _, errors = child.communicate(timeout=120)
+    if child.returncode == 0:
+        pytest.skip("the render finished before the signal arrived")
+    assert child.returncode == 130, errors
+    resumed = _cli("render", scene_path, "--spp", samples, "--seed", 9, "--resume", tmp_path / "part", "--quiet")
     assert resumed.returncode == 0, resumed.stderr
     np.testing.assert_allclose(np.load(tmp_path / "part" / "transient.npy"),
                                np.load(tmp_path / "whole" / "transient.npy"), rtol=1e-12, atol=0)
-    assert json.loads((tmp_path / "part" / "meta.json").read_text())["samples"] == 2**19
+    assert json.loads((tmp_path / "part" / "meta.json").read_text())["samples"] == samples
+
+
+def test_render_on_a_missing_cuda_device_is_one_backend_error(tmp_path):
+    import drjit as dr
+
+    from transient.backend import select_variant
+
+    select_variant()
+    if dr.has_backend(dr.JitBackend.CUDA):
+        pytest.skip("a CUDA device is present")
+    result = _cli("render", "--spp", 1000, "--variant", "cuda_ad_mono", "--out", tmp_path / "r")
+    assert result.returncode == 2, result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1 and "CUDA" in result.stderr
+    assert not (tmp_path / "r").exists()
 
 
 @pytest.mark.skipif(not glob.glob("/usr/lib/*/libLLVM-15.so*"), reason="no LLVM 15 here to refuse")
@@ -75,5 +105,5 @@ def test_default_scene_render_agrees_with_model():
     from transient.render import render
     scene = default_scene(noise=None)
     result = render(scene, spp=2**21, seed=2, progress=False)
-    agreement = compare_transients(result.mean, result.stderr, forward(scene))
+    agreement = compare_transients(result.mean, result.stderr, forward(scene), dof=result.dof)
     assert agreement.agrees, agreement.summary()

@@ -1,19 +1,19 @@
 """The Mitsuba transient renderer against the exact analytic model.
 
-Agreement is judged per bin by z = (y_mc - y_model) / se_mc (DESIGN.md
-section 6, validation.compare): over the bins with enough samples, χ²/dof
-must lie inside the two-sided band and max |z| below the Šidák threshold,
-the two together at false-alarm rate 1e-3. Every render
-uses a fixed seed, so each test is deterministic; the false-alarm rate says
-how unlucky a seed would have to be. Deliberately wrong models must fail the
-same check, which shows it has the power to catch the errors it is meant for.
+Agreement is judged per bin (DESIGN.md section 6, validation.compare): the
+render's standard error comes from its 32 independent replicas, so each
+z is Student's t with 31 degrees of freedom mapped to a normal score; over
+the bins with enough samples, χ²/dof must lie inside the two-sided band
+and max |z| below the Šidák threshold, the two together at false-alarm
+rate 1e-3. Every render uses a fixed seed, so each test is deterministic;
+the false-alarm rate says how unlucky a seed would have to be.
+Deliberately wrong models must fail the same check, which shows it has the
+power to catch the errors it is meant for.
 """
 
 from __future__ import annotations
 
-import json
 import os
-import signal
 import subprocess
 import sys
 
@@ -25,8 +25,9 @@ from analytic.scene import Illumination, Sampling, Scene
 from analytic.system import forward
 from transient import backend
 from transient.backend import BackendError, choose_libllvm, find_llvm_libraries, llvm_version_of
-from transient.render import STATE_FILE, render, scene_fingerprint, standard_error
-from validation.compare import compare_transients
+from transient.render import render, render_loaded
+from validation.compare import combined_dof, compare_transients
+from validation.suite import hard_cases, validation_suite
 
 FALSE_ALARM = 1e-3
 
@@ -36,10 +37,18 @@ def model(scene: Scene) -> np.ndarray:
     return forward(scene)
 
 
-def agreement(mean, stderr, reference):
+def agreement(mean, stderr, reference, dof):
     """(χ²/dof, max |z|, bins judged, passes) by validation.compare (DESIGN.md section 6)."""
-    result = compare_transients(mean, stderr, reference, false_alarm=FALSE_ALARM)
+    result = compare_transients(mean, stderr, reference, dof=dof, false_alarm=FALSE_ALARM)
     return result.chi2_per_dof, result.max_abs_z, result.bins, result.agrees
+
+
+@pytest.fixture(scope="module")
+def mitsuba():
+    backend.select_variant()
+    import mitsuba
+
+    return mitsuba
 
 
 @pytest.fixture(scope="module")
@@ -67,10 +76,11 @@ def rendered(scene):
 
 
 def test_render_agrees_with_model(scene, rendered):
-    chi2_per_dof, largest, dof, passes = agreement(rendered.mean, rendered.stderr, model(scene))
+    chi2_per_dof, largest, dof, passes = agreement(rendered.mean, rendered.stderr, model(scene), rendered.dof)
     assert dof >= 50
     assert passes, f"chi2/dof {chi2_per_dof:.3f}, max|z| {largest:.2f} over {dof} bins"
     assert rendered.samples == 2**22 and rendered.seed == 11
+    assert rendered.replicas == 32 and rendered.dof == 31
     assert rendered.mean.dtype == np.float64 and rendered.stderr.dtype == np.float64
 
 
@@ -81,8 +91,8 @@ def test_wrong_model_fails(scene, rendered, wrong):
         reference = model(scene.replace(attenuation="paper"))
     elif wrong == "half-bin shift":
         sampling = scene.sampling
-        shifted = Sampling(bin_width_opl=sampling.bin_width_opl, start_opl=sampling.start_opl + sampling.bin_width_opl / 2,
-                           count=sampling.count)
+        shifted = Sampling(bin_width_opl=sampling.bin_width_opl,
+                           start_opl=sampling.start_opl + sampling.bin_width_opl / 2, count=sampling.count)
         reference = model(scene.replace(sampling=shifted))
     elif wrong == "mirrored image":
         # Row 0 at the bottom instead of the top.
@@ -90,8 +100,23 @@ def test_wrong_model_fails(scene, rendered, wrong):
     else:
         # paper = lambertian x π / cos θ_k; undo the π: only the cosine is missing.
         reference = model(scene.replace(attenuation="paper")) / np.pi
-    *_, passes = agreement(rendered.mean, rendered.stderr, reference)
+    *_, passes = agreement(rendered.mean, rendered.stderr, reference, rendered.dof)
     assert not passes
+
+
+@pytest.mark.parametrize("estimator", [{"strategy": "source"}, {"strategy": "area"},
+                                       {"strategy": "mis", "sampler": "independent"}])
+def test_every_strategy_and_sampler_agrees_with_model(scene, estimator):
+    result = render(scene, spp=2**20, seed=31, progress=False, estimator=estimator)
+    chi2_per_dof, largest, dof, passes = agreement(result.mean, result.stderr, model(scene), result.dof)
+    assert passes, f"{estimator}: chi2/dof {chi2_per_dof:.3f}, max|z| {largest:.2f} over {dof} bins"
+
+
+def test_stratification_beats_independent_points(scene):
+    """Same samples, same estimator: jittered cells give a far smaller error than independent points."""
+    stratified = render(scene, spp=2**20, seed=32, progress=False)
+    independent = render(scene, spp=2**20, seed=32, progress=False, estimator={"sampler": "independent"})
+    assert np.linalg.norm(stratified.stderr) < 0.25 * np.linalg.norm(independent.stderr)
 
 
 def test_single_pixel_lights_only_its_path_lengths():
@@ -131,12 +156,11 @@ def test_single_pixel_lights_only_its_path_lengths():
 @pytest.mark.parametrize("waveform", ["square", "butterworth"])
 def test_illuminations_agree_with_model(scene, waveform):
     shaped = scene.replace(illumination=Illumination(waveform=waveform))
-    result = render(shaped, spp=2**21, seed=12, progress=False)
-    chi2_per_dof, largest, dof, passes = agreement(result.mean, result.stderr, model(shaped))
+    result = render(shaped, spp=2**20, seed=12, progress=False)
+    chi2_per_dof, largest, dof, passes = agreement(result.mean, result.stderr, model(shaped), result.dof)
     assert passes, f"{waveform}: chi2/dof {chi2_per_dof:.3f}, max|z| {largest:.2f} over {dof} bins"
     # A response one bin late must be caught.
-    *_, shifted_passes = agreement(result.mean, result.stderr,
-                                   np.roll(model(shaped), 1, axis=1))
+    *_, shifted_passes = agreement(result.mean, result.stderr, np.roll(model(shaped), 1, axis=1), result.dof)
     assert not shifted_passes
 
 
@@ -158,37 +182,103 @@ def test_far_plane_bins_exactly():
                   sampling=Sampling(bin_width_opl=period, start_opl=length.min() - 20 * period, count=1040))
     result = render(scene, spp=2**24, seed=13, progress=False)
     reference = model(scene)
-    chi2_per_dof, largest, dof, passes = agreement(result.mean, result.stderr, reference)
+    chi2_per_dof, largest, dof, passes = agreement(result.mean, result.stderr, reference, result.dof)
     assert dof >= 950
     assert passes, f"chi2/dof {chi2_per_dof:.3f}, max|z| {largest:.2f} over {dof} bins"
     # Light lands only where the model has light.
     assert np.all(reference[result.mean > 0] > 0)
 
 
+@pytest.mark.parametrize("name", [scene.name for scene, _ in validation_suite()
+                                  if scene.name in hard_cases()])
+def test_hard_cases_agree_at_the_suite_counts(name):
+    scene, spp = next((s, n) for s, n in validation_suite() if s.name == name)
+    result = render(scene, spp=spp, seed=41, progress=False)
+    chi2_per_dof, largest, dof, passes = agreement(result.mean, result.stderr, model(scene), result.dof)
+    assert passes, f"{name}: chi2/dof {chi2_per_dof:.3f}, max|z| {largest:.2f} over {dof} bins"
+
+
+def test_low_source_and_sensors_have_bounded_weights(mitsuba):
+    """Source and sensors 1e-3 above the plane: no sample weighs much more than the mean.
+
+    Replicas of 4 independent samples (2 by the source's solid angle, 1 by
+    each sensor's) bound every sample's weight by 4 x its replica's mean.
+    With multiple importance sampling the largest replica mean stays within
+    a few times the mean; by area (or by the source alone) a sample near a
+    sensor's foot weighs thousands of times the mean: the heavy tail.
+    """
+    from transient.chunks import ReplicaLayout
+    from transient.mitsuba_scene import load_scene
+
+    scene = hard_cases(pixels=10)["low"].replace(sampling=Sampling(bin_width_opl=100.0, start_opl=0.0, count=1))
+    layout = ReplicaLayout(2**16, 4)
+
+    def peak_over_mean(**estimator):
+        loaded = load_scene(scene, sampler="independent", **estimator)
+        means = loaded.integrator().render_chunk(loaded, seed=3, layout=layout, first=0,
+                                                 count=layout.samples)[:, :, 0] / layout.size
+        return means.max(axis=0) / means.mean(axis=0)
+
+    assert np.all(peak_over_mean() < 10)
+    assert np.all(peak_over_mean(strategy="area") > 1e3)
+    assert np.any(peak_over_mean(strategy="source") > 1e3)
+
+
+def test_one_compiled_kernel_serves_every_chunk_seed_and_sample_count(mitsuba, scene):
+    """Seeds, offsets, replica sizes and technique blocks reach the kernel as opaque values."""
+    import drjit as dr
+
+    render(scene, spp=2**17, seed=1, progress=False)                   # compiles
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        dr.kernel_history()
+        render(scene, spp=3 * 2**17 + 5, seed=2, progress=False, chunk_size=2**16)
+        render(scene, spp=2**18, seed=3, progress=False)
+        # Scene loading launches its own small kernels (4096 lanes); the chunks are the others.
+        launches = [k for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT and k["size"] not in (1, 4096)]
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    assert len(launches) >= 8 and len({k["hash"] for k in launches}) == 1
+
+
 # -- general path: several shapes, visibility, interreflection -------------
 
 
 def _render_dict(mitsuba, entries: dict, samples: int, seed: int):
-    """Load a Mitsuba scene dict and return (mean, stderr) of a transient_opl render."""
-    loaded = mitsuba.load_dict(entries)
-    sums, squares = loaded.integrator().render_transient(loaded, seed=seed, first_sample=0,
-                                                        sample_count=samples)
-    return sums / samples, standard_error(sums, squares, samples)
+    """Load a Mitsuba scene dict and render it (mean, stderr, dof from the replicas)."""
+    return render_loaded(mitsuba.load_dict(entries), spp=samples, seed=seed)
 
 
-def test_general_path_matches_model_on_the_plane(mitsuba, scene, rendered):
-    """The general estimator (area sampling over all shapes, shadow rays, next-event
-    estimation) on the single-plane scene: same answer as the model, and as
-    the single-plane estimator up to noise."""
-    from transient.mitsuba_scene import scene_dict
-
-    entries = scene_dict(scene)
+def _general(entries: dict, **changes) -> dict:
+    """The same scene for transient_opl_path (the single-plane keys dropped)."""
     general = {key: value for key, value in entries["integrator"].items()
                if key not in ("plane_to_world", "source_position")}
-    entries["integrator"] = dict(general, max_depth=3)   # a plane cannot see itself
-    mean, stderr = _render_dict(mitsuba, entries, 2**22, 21)
-    chi2_per_dof, largest, dof, passes = agreement(mean, stderr, model(scene))
+    return dict(entries, integrator=dict(general, type="transient_opl_path", **changes))
+
+
+def test_general_path_matches_model_on_the_plane(mitsuba, scene):
+    """The general estimator (area sampling over all shapes, shadow rays, next-event
+    estimation) on the single-plane scene: same answer as the model."""
+    from transient.mitsuba_scene import scene_dict
+
+    result = _render_dict(mitsuba, _general(scene_dict(scene), max_depth=3), 2**22, 21)   # a plane cannot see itself
+    chi2_per_dof, largest, dof, passes = agreement(result.mean, result.stderr, model(scene), result.dof)
     assert dof >= 50
+    assert passes, f"chi2/dof {chi2_per_dof:.3f}, max|z| {largest:.2f} over {dof} bins"
+
+
+def test_general_path_bins_float32_lengths_right_at_100_times_their_error(mitsuba):
+    """Bins 100 times the stated float32 path-length error, over a window inside the response."""
+    from transient.mitsuba_scene import scene_dict
+    from transient.path import path_length_error
+
+    source, sensor = np.array([0.5, 0.5, 1.0]), np.array([0.8, 0.3, 1.0])
+    error = path_length_error(2.5, 1.0, 1)
+    window = Sampling(bin_width_opl=100 * error, start_opl=2.2, count=120)
+    scene = Scene(size=1.0, pixels=1, reflectance=0.5, source=source, sensors=[sensor], sampling=window)
+    result = _render_dict(mitsuba, _general(scene_dict(scene)), 2**24, 25)
+    chi2_per_dof, largest, dof, passes = agreement(result.mean, result.stderr, model(scene), result.dof)
+    assert error < 2e-6 and dof >= 100
     assert passes, f"chi2/dof {chi2_per_dof:.3f}, max|z| {largest:.2f} over {dof} bins"
 
 
@@ -198,26 +288,11 @@ CORNER_ALBEDO = 0.5
 CORNER_SAMPLING = Sampling(bin_width_opl=0.1, start_opl=0.6, count=30)
 
 
-def _corner(mitsuba, max_depth: int) -> dict:
+def _corner(max_depth: int) -> dict:
     """Floor [0,1]² x {0} (normal +z) and wall {0} x [0,1]² (normal +x), albedo 0.5."""
-    film = {"type": "hdrfilm", "width": 1, "height": 1, "pixel_format": "luminance"}
-    # Local x -> world y, local y -> world z, local z (the normal) -> world x.
-    wall = np.array([[0, 0, 0.5, 0], [0.5, 0, 0, 0.5], [0, 0.5, 0, 0.5], [0, 0, 0, 1.0]])
-    entries = {
-        "type": "scene",
-        "integrator": {"type": "transient_opl", "bins": CORNER_SAMPLING.count,
-                       "start_opl": CORNER_SAMPLING.start_opl, "bin_width_opl": CORNER_SAMPLING.bin_width_opl,
-                       "max_depth": max_depth},
-        "floor": {"type": "rectangle",
-                  "to_world": mitsuba.ScalarTransform4f().translate([0.5, 0.5, 0]).scale([0.5, 0.5, 1]),
-                  "bsdf": {"type": "diffuse", "reflectance": CORNER_ALBEDO}},
-        "wall": {"type": "rectangle", "to_world": mitsuba.ScalarTransform4f(wall),
-                 "bsdf": {"type": "diffuse", "reflectance": CORNER_ALBEDO}},
-        "source": {"type": "point", "position": CORNER_SOURCE.tolist(), "intensity": 1.0},
-    }
-    for k, position in enumerate(CORNER_SENSORS):
-        entries[f"sensor_{k}"] = {"type": "omni_point", "position": position.tolist(), "film": film}
-    return entries
+    from transient.mitsuba_scene import corner_scene_dict
+
+    return corner_scene_dict(CORNER_SOURCE, CORNER_SENSORS, CORNER_ALBEDO, CORNER_SAMPLING, max_depth)
 
 
 def _corner_one_bounce_model() -> np.ndarray:
@@ -241,7 +316,7 @@ def _corner_two_bounce_reference(samples: int, rng) -> tuple[np.ndarray, np.ndar
     x1 uniform on one plane, a cosine-weighted direction from it intersected
     analytically with the other plane; per-sample weight
     cos θ_k / d_k² · ρ · ρ/π · cos θ_s / d_s² (the BSDF's cos/pdf cancels).
-    Returns (mean, standard error), both (K, N).
+    Returns (mean, standard error from the samples' second moments), both (K, N).
     """
     sampling, mean, variance = CORNER_SAMPLING, 0.0, 0.0
     for first in ("floor", "wall"):
@@ -292,169 +367,149 @@ def test_general_path_sees_an_area_emitter(mitsuba):
     sensor = (0.2, 0.1, 0.5)
     film = {"type": "hdrfilm", "width": 1, "height": 1, "pixel_format": "luminance"}
     entries = {"type": "scene",
-               "integrator": {"type": "transient_opl", "bins": 1, "start_opl": 0.0, "bin_width_opl": 10.0},
+               "integrator": {"type": "transient_opl_path", "bins": 1, "start_opl": 0.0, "bin_width_opl": 10.0},
                "lamp": {"type": "rectangle", "bsdf": {"type": "diffuse", "reflectance": 0.0},
                         "emitter": {"type": "area", "radiance": 1.0}},
                "sensor": {"type": "omni_point", "position": list(sensor), "film": film}}
-    mean, stderr = _render_dict(mitsuba, entries, 2**20, 24)
+    result = _render_dict(mitsuba, entries, 2**20, 24)
 
     def integrand(y, x):
         squared = (x - sensor[0]) ** 2 + (y - sensor[1]) ** 2 + sensor[2] ** 2
         return sensor[2] / squared**1.5
 
     exact, _ = integrate.dblquad(integrand, -1.0, 1.0, -1.0, 1.0, epsabs=0, epsrel=1e-10)
-    z = (mean[0, 0] - exact) / stderr[0, 0]
-    assert stderr[0, 0] < 1e-2 * exact
-    assert abs(z) < stats.norm.isf(FALSE_ALARM / 2)
+    t = (result.mean[0, 0] - exact) / result.stderr[0, 0]
+    assert result.stderr[0, 0] < 1e-2 * exact
+    assert abs(t) < stats.t.isf(FALSE_ALARM / 2, result.dof)
 
 
 def test_corner_one_bounce_matches_two_plane_models(mitsuba):
-    mean, stderr = _render_dict(mitsuba, _corner(mitsuba, 1), 2**22, 22)
-    chi2_per_dof, largest, dof, passes = agreement(mean, stderr, _corner_one_bounce_model())
+    result = _render_dict(mitsuba, _corner(1), 2**22, 22)
+    chi2_per_dof, largest, dof, passes = agreement(result.mean, result.stderr, _corner_one_bounce_model(),
+                                                   result.dof)
     assert dof >= 20
     assert passes, f"chi2/dof {chi2_per_dof:.3f}, max|z| {largest:.2f} over {dof} bins"
 
 
 def test_corner_two_bounces_match_independent_estimate(mitsuba, rng):
-    mean, stderr = _render_dict(mitsuba, _corner(mitsuba, 2), 2**22, 23)
+    result = _render_dict(mitsuba, _corner(2), 2**22, 23)
     one = _corner_one_bounce_model()
     two, two_stderr = _corner_two_bounce_reference(2**22, rng)
-    combined = np.sqrt(stderr**2 + two_stderr**2)
-    chi2_per_dof, largest, dof, passes = agreement(mean, combined, one + two)
-    assert dof >= 40
-    assert passes, f"chi2/dof {chi2_per_dof:.3f}, max|z| {largest:.2f} over {dof} bins"
+    combined = np.sqrt(result.stderr**2 + two_stderr**2)
+    dof = combined_dof(result.stderr, result.dof, two_stderr, np.inf)
+    chi2_per_dof, largest, bins, passes = agreement(result.mean, combined, one + two, dof)
+    assert bins >= 40
+    assert passes, f"chi2/dof {chi2_per_dof:.3f}, max|z| {largest:.2f} over {bins} bins"
     # Interreflection is visible: leaving it out fails the same check.
     assert two.sum() > 0.05 * one.sum()
-    *_, without_passes = agreement(mean, combined, one)
+    *_, without_passes = agreement(result.mean, combined, one, dof)
     assert not without_passes
 
 
-# -- accumulation, chunking, checkpoints -----------------------------------
+# -- accumulation, chunking ------------------------------------------------
 
 
 def test_float64_accumulation_of_2_26_samples_in_one_bin():
-    """2^26 contributions into one bin in one kernel: a float32 sum would stall.
+    """2^26 contributions into one bin: a float32 sum would stall.
 
     A float32 accumulator stops growing once the sum reaches 2^24 times the
     typical contribution, so its mean would be low by far more than the
-    standard error (about 1e-4 of the mean here).
+    standard error.
     """
     scene = Scene(size=1.0, pixels=2, reflectance=0.5, source=(0.5, 0.5, 1.0),
                   sensors=[(0.4, 0.6, 1.0)], sampling=Sampling(bin_width_opl=10.0, start_opl=0.0, count=1))
-    samples = 2**26
-    result = render(scene, spp=samples, seed=14, chunk_size=samples, progress=False)
+    result = render(scene, spp=2**26, seed=14, chunk_size=2**26, progress=False)
     reference = model(scene)
-    z = (result.mean[0, 0] - reference[0, 0]) / result.stderr[0, 0]
-    assert result.stderr[0, 0] < 1e-3 * reference[0, 0]
-    assert abs(z) < stats.norm.isf(FALSE_ALARM / 2)
-
-
-def test_standard_error_formula():
-    rng = np.random.default_rng(0)
-    values = rng.exponential(size=(3, 1000))
-    se = standard_error(values.sum(axis=1), (values**2).sum(axis=1), 1000)
-    np.testing.assert_allclose(se, values.std(axis=1, ddof=1) / np.sqrt(1000), rtol=1e-12)
+    t = (result.mean[0, 0] - reference[0, 0]) / result.stderr[0, 0]
+    assert result.stderr[0, 0] < 1e-6 * reference[0, 0]
+    assert abs(t) < stats.t.isf(FALSE_ALARM / 2, result.dof)
 
 
 def test_chunking_does_not_change_the_result(scene):
     samples = 3 * 2**16 + 17
-    whole = render(scene, spp=samples, seed=15, chunk_size=samples, progress=False)
+    whole = render(scene, spp=samples, seed=15, chunk_size=2**31, progress=False)
     for chunk in (2**16, 12345):
         split = render(scene, spp=samples, seed=15, chunk_size=chunk, progress=False)
-        # Float64 atomics add in any order: equal to rounding, not bit for bit.
+        # Float64 additions in another order: equal to rounding, not bit for bit.
         np.testing.assert_allclose(split.mean, whole.mean, rtol=1e-12, atol=0)
         np.testing.assert_allclose(split.stderr, whole.stderr, rtol=1e-9, atol=0)
-    other_seed = render(scene, spp=samples, seed=16, chunk_size=samples, progress=False)
+    other_seed = render(scene, spp=samples, seed=16, progress=False)
     assert not np.allclose(other_seed.mean, whole.mean, rtol=1e-6, atol=0)
 
 
-def test_interrupt_then_resume_matches_uninterrupted(scene, tmp_path):
-    samples, chunk = 5 * 2**15, 2**15
+def test_sample_streams_beyond_2_32_are_new_for_every_seed(mitsuba, scene):
+    """Sample 2^32 + i of one seed must not replay sample i of any seed."""
+    from transient.chunks import ReplicaLayout
+    from transient.mitsuba_scene import load_scene
 
-    def stop_after_two_chunks(done):
-        if done >= 2 * chunk:
-            raise KeyboardInterrupt
+    loaded = load_scene(scene, sampler="independent")
+    integrator = loaded.integrator()
+    layout = ReplicaLayout(4, 2**31)
+    count = 2**12
 
-    with pytest.raises(KeyboardInterrupt):
-        render(scene, spp=samples, seed=17, chunk_size=chunk, out_dir=tmp_path, progress=False,
-               on_chunk=stop_after_two_chunks)
-    with np.load(tmp_path / STATE_FILE) as state:
-        assert int(state["samples"]) == 2 * chunk
-        assert str(state["fingerprint"]) == scene_fingerprint(scene)
-    meta = json.loads((tmp_path / "meta.json").read_text())
-    assert meta["samples"] == 2 * chunk and meta["kind"] == "render"
-    assert meta["attenuation"] == "lambertian" and meta["seed"] == 17
-    partial = np.load(tmp_path / "transient.npy")
-    assert partial.shape == (scene.sensor_count, scene.sampling.count)
+    def sums(seed, first):
+        return integrator.render_chunk(loaded, seed=seed, layout=layout, first=first, count=count).sum(axis=0)
 
-    with pytest.raises(ValueError, match="seed"):
-        render(scene, spp=samples, seed=18, chunk_size=chunk, out_dir=tmp_path, resume=True,
-               progress=False)
-    with pytest.raises(ValueError, match="different scene"):
-        render(scene.replace(source=(0.3, 0.6, 0.9)), spp=samples, seed=17, chunk_size=chunk,
-               out_dir=tmp_path, resume=True, progress=False)
-
-    resumed = render(scene, spp=samples, seed=17, chunk_size=chunk, out_dir=tmp_path, resume=True,
-                     progress=False)
-    straight = render(scene, spp=samples, seed=17, chunk_size=chunk, progress=False)
-    assert resumed.samples == samples
-    np.testing.assert_allclose(resumed.mean, straight.mean, rtol=1e-12, atol=0)
-    np.testing.assert_allclose(np.load(tmp_path / "transient.npy"), straight.mean, rtol=1e-12, atol=0)
-    np.testing.assert_allclose(np.load(tmp_path / "stderr.npy"), straight.stderr, rtol=1e-9, atol=0)
-    assert json.loads((tmp_path / "meta.json").read_text())["samples"] == samples
-
-
-def test_render_rejects_bad_arguments(scene, tmp_path):
-    with pytest.raises(ValueError, match="spp"):
-        render(scene, spp=1, progress=False)
-    with pytest.raises(ValueError, match="seed"):
-        render(scene, spp=100, seed=-1, progress=False)
-    with pytest.raises(ValueError, match="resume"):
-        render(scene, spp=100, resume=True, out_dir=tmp_path, progress=False)
-
-
-def test_sigterm_keeps_finished_chunks(scene, tmp_path):
-    chunk = 2**15
-
-    def terminate_after_one_chunk(done):
-        os.kill(os.getpid(), signal.SIGTERM)
-
-    previous = signal.getsignal(signal.SIGTERM)
-    with pytest.raises(KeyboardInterrupt):
-        render(scene, spp=4 * chunk, seed=19, chunk_size=chunk, out_dir=tmp_path, progress=False,
-               on_chunk=terminate_after_one_chunk)
-    assert signal.getsignal(signal.SIGTERM) is previous
-    with np.load(tmp_path / STATE_FILE) as state:
-        assert int(state["samples"]) == chunk
-    resumed = render(scene, spp=4 * chunk, seed=19, chunk_size=chunk, out_dir=tmp_path, resume=True,
-                     progress=True)
-    straight = render(scene, spp=4 * chunk, seed=19, chunk_size=2 * chunk, progress=False)
-    np.testing.assert_allclose(resumed.mean, straight.mean, rtol=1e-12, atol=0)
+    late = sums(5, 2**32)
+    for seed in (5, 5 ^ 0x9E3779B9):
+        assert not np.allclose(late, sums(seed, 0), rtol=1e-6)   # other streams: other noise
+    np.testing.assert_allclose(sums(5, 2**32), late, rtol=1e-12)
 
 
 # -- plugins ---------------------------------------------------------------
 
 
-@pytest.fixture(scope="module")
-def mitsuba():
+def test_plugins_refuse_what_they_cannot_render(mitsuba, scene):
+    from transient.chunks import ReplicaLayout
+    from transient.mitsuba_scene import scene_dict
+
+    layout = ReplicaLayout(2, 16)
+
+    def chunk(entries):
+        loaded = mitsuba.load_dict(entries)
+        return loaded.integrator().render_chunk(loaded, seed=0, layout=layout, first=0, count=16)
+
+    parts = scene_dict(scene)
+    with pytest.raises(ValueError, match="exactly one 'rectangle'"):
+        chunk(dict(parts, wall={"type": "rectangle"}))
+    with pytest.raises(ValueError, match="source_position"):
+        chunk(dict(parts, integrator=dict(parts["integrator"], source_position=[0.3, 0.6, 0.81])))
+    for change, message in (({"waveform": "sine"}, "waveform"), ({"max_depth": 2}, "max_depth"),
+                            ({"strategy": "best"}, "strategy"), ({"sampler": "sobol"}, "sampler"),
+                            ({"source_position": [0.3, 0.6, -0.8]}, "above")):
+        with pytest.raises(RuntimeError, match=message):
+            mitsuba.load_dict(dict(parts, integrator=dict(parts["integrator"], **change)))
+    without = {key: value for key, value in parts["integrator"].items() if key != "plane_to_world"}
+    with pytest.raises(RuntimeError, match="plane_to_world"):
+        mitsuba.load_dict(dict(parts, integrator=without))
+    mirror = dict(_general(parts), plane=dict(parts["plane"], bsdf={"type": "conductor"}))
+    with pytest.raises(ValueError, match="diffuse"):
+        chunk(mirror)
+    with pytest.raises(ValueError, match="seed"):
+        render_loaded(mitsuba.load_dict(parts), spp=100, seed=2**32)
+
+
+def test_sensor_below_the_plane_sees_nothing(mitsuba, scene):
+    """The rectangle's diffuse BSDF is one-sided: a sensor under it receives no light."""
+    from transient.mitsuba_scene import scene_dict
+
+    parts = scene_dict(scene)
+    parts["sensor_000001"]["position"] = [0.5, 0.5, -0.5]
+    result = _render_dict(mitsuba, parts, 2**16, 1)
+    assert np.all(result.mean[1] == 0.0) and np.any(result.mean[0] > 0)
+
+
+def test_backend_error_without_a_cuda_device():
+    import drjit as dr
+
     backend.select_variant()
-    import mitsuba
+    if dr.has_backend(dr.JitBackend.CUDA):
+        pytest.skip("a CUDA device is present")
+    with pytest.raises(BackendError) as error:
+        backend.select_variant("cuda_ad_mono")
+    assert "\n" not in str(error.value) and "CUDA" in str(error.value)
+    assert backend.select_variant() in ("llvm_mono", "llvm_ad_mono")
 
-    return mitsuba
-
-
-@pytest.mark.parametrize("waveform", ["impulse", "square", "butterworth"])
-def test_drjit_cumulative_matches_numpy(mitsuba, waveform):
-    from analytic.waveforms import make_waveform
-    from transient.integrator import cumulative
-
-    for period in (0.001, 0.1, 10.0):
-        shape = make_waveform(Illumination(waveform=waveform), period)
-        span = max(shape.duration, period)
-        # a geometric grid reaches the u -> 0 end, where S ~ u³ for the Butterworth pulse
-        u = np.concatenate([-np.geomspace(1e-9, 1, 200) * span, np.geomspace(1e-9, 2, 2000) * span])
-        values = np.array(cumulative(shape, mitsuba.Float64(u)))
-        np.testing.assert_allclose(values, shape.cumulative(u), rtol=1e-12, atol=0)
 
 
 def test_omni_point_sensor(mitsuba):
@@ -478,30 +533,6 @@ def test_omni_point_sensor(mitsuba):
     ray, ray_weight = sensor.sample_ray(0.0, 0.5, mitsuba.Point2f(0.3, 0.8), mitsuba.Point2f(0.5, 0.5))
     assert float(ray_weight[0][0]) == pytest.approx(4 * np.pi)        # ∫ dω over the sphere
     assert abs(float(dr.norm(ray.d)[0]) - 1.0) < 1e-6
-
-
-def test_integrator_refuses_scenes_it_cannot_render(mitsuba, scene):
-    from transient.mitsuba_scene import scene_dict
-
-    parts = scene_dict(scene)
-    extra = dict(parts, wall={"type": "rectangle"})
-    loaded = mitsuba.load_dict(extra)
-    with pytest.raises(ValueError, match="exactly one 'rectangle'"):
-        loaded.integrator().render_transient(loaded, seed=0, first_sample=0, sample_count=16)
-    moved = dict(parts, integrator=dict(parts["integrator"], source_position=[0.3, 0.6, 0.81]))
-    loaded = mitsuba.load_dict(moved)
-    with pytest.raises(ValueError, match="source_position"):
-        loaded.integrator().render_transient(loaded, seed=0, first_sample=0, sample_count=16)
-    with pytest.raises(RuntimeError, match="waveform"):
-        mitsuba.load_dict(dict(parts, integrator=dict(parts["integrator"], waveform="sine")))
-    with pytest.raises(RuntimeError, match="max_depth"):
-        mitsuba.load_dict(dict(parts, integrator=dict(parts["integrator"], max_depth=2)))
-    general = {key: value for key, value in parts["integrator"].items()
-               if key not in ("plane_to_world", "source_position")}
-    mirror = dict(parts, integrator=general, plane=dict(parts["plane"], bsdf={"type": "conductor"}))
-    loaded = mitsuba.load_dict(mirror)
-    with pytest.raises(ValueError, match="diffuse"):
-        loaded.integrator().render_transient(loaded, seed=0, first_sample=0, sample_count=16)
 
 
 # -- backend ---------------------------------------------------------------
@@ -585,43 +616,51 @@ def test_fresh_process_refuses_llvm_15():
 # -- CUDA ------------------------------------------------------------------
 
 
-def _cuda_available() -> bool:
+def _cuda_variant() -> str | None:
+    """A mono CUDA variant when this machine has a CUDA device, else None."""
     backend.select_variant()
     import drjit as dr
     import mitsuba as mi
 
-    return any(v.startswith("cuda_") and v.endswith("mono") for v in mi.variants()) and \
-        dr.has_backend(dr.JitBackend.CUDA)
+    if not dr.has_backend(dr.JitBackend.CUDA):
+        return None
+    return next((v for v in ("cuda_mono", "cuda_ad_mono") if v in mi.variants()), None)
 
 
 @pytest.mark.cuda
 def test_cuda_variant_agrees_with_model(scene):
-    if not _cuda_available():
+    variant = _cuda_variant()
+    if variant is None:
         pytest.skip("no CUDA device")
-    import mitsuba as mi
-
-    variant = "cuda_mono" if "cuda_mono" in mi.variants() else "cuda_ad_mono"
     try:
-        result = render(scene, spp=2**22, seed=11, variant=variant, progress=False)
+        result = render(scene, spp=2**24, seed=11, variant=variant, progress=False)
     finally:
         backend.select_variant()
-    chi2_per_dof, largest, dof, passes = agreement(result.mean, result.stderr, model(scene))
+    chi2_per_dof, largest, dof, passes = agreement(result.mean, result.stderr, model(scene), result.dof)
     assert result.variant == variant
     assert passes, f"chi2/dof {chi2_per_dof:.3f}, max|z| {largest:.2f} over {dof} bins"
 
 
-def test_sample_streams_beyond_2_32_are_new_for_every_seed(mitsuba, scene):
-    """Sample 2^32 + i of one seed must not replay sample i of any seed (the
-    old key folding made seed s past 2^32 equal seed s ^ 0x9E3779B9 from 0)."""
-    from transient.mitsuba_scene import load_scene
+@pytest.mark.cuda
+@pytest.mark.parametrize("waveform", ["impulse", "butterworth"])
+def test_cuda_sums_equal_cpu_sums(scene, waveform):
+    """A fixed seed draws the same samples on both backends: the sums agree to float64 rounding."""
+    variant = _cuda_variant()
+    if variant is None:
+        pytest.skip("no CUDA device")
+    from transient.chunks import ReplicaLayout
 
-    loaded = load_scene(scene)
-    integrator = loaded.integrator()
-    count = 2**12
-    late, _ = integrator.render_transient(loaded, seed=5, first_sample=2**32, sample_count=count)
-    for seed in (5, 5 ^ 0x9E3779B9):
-        early, _ = integrator.render_transient(loaded, seed=seed, first_sample=0, sample_count=count)
-        assert not np.allclose(late, early, rtol=1e-6)   # other streams: other noise
-    again, _ = integrator.render_transient(loaded, seed=5, first_sample=2**32, sample_count=count)
-    # with several Dr.Jit threads, atomic adds land in any order: equal to rounding
-    np.testing.assert_allclose(late, again, rtol=1e-12)
+    shaped = scene.replace(illumination=Illumination(waveform=waveform))
+    layout = ReplicaLayout.for_samples(2**22)
+    sums = {}
+    try:
+        for name in (variant, None):
+            backend.select_variant(name)
+            from transient.mitsuba_scene import load_scene
+
+            loaded = load_scene(shaped)
+            sums[name] = loaded.integrator().render_chunk(loaded, seed=7, layout=layout, first=2**20,
+                                                          count=2**21)
+    finally:
+        backend.select_variant()
+    np.testing.assert_allclose(sums[variant], sums[None], rtol=1e-9, atol=1e-9 * np.abs(sums[None]).max())

@@ -23,6 +23,8 @@ import re
 import sys
 from pathlib import Path
 
+from analytic.errors import ResourceError
+
 __all__ = ["BackendError", "MIN_LLVM", "llvm_version_of", "find_llvm_libraries", "choose_libllvm",
            "select_variant", "SEARCH_PATTERNS"]
 
@@ -47,7 +49,7 @@ _FIX = "fix: apt-get install -y libllvm19 (or set DRJIT_LIBLLVM_PATH to a libLLV
 _LIBRARY_NAME = re.compile(r"^libLLVM(?:-(?P<dash>\d+)[\w.]*)?\.so(?:\.(?P<dot>\d+)[\d.]*)?$")
 
 
-class BackendError(RuntimeError):
+class BackendError(ResourceError):
     """The Mitsuba / Dr.Jit backend cannot be used as configured (one-line message with the fix)."""
 
 
@@ -197,8 +199,36 @@ def default_variant(available: list[str]) -> str:
                        f"(available: {', '.join(available)})")
 
 
-_registered: set[str] = set()
 _llvm_checked = False
+# The variant the plugin modules were last imported for: their classes (and
+# the constructors registered with Mitsuba) belong to that variant.
+_plugins_variant: str | None = None
+
+#: The plugin modules, registered (imported, or re-imported for a new variant)
+#: by :func:`select_variant`: each defines its class against the active
+#: variant's Mitsuba base classes and registers it at import, as Mitsuba's own
+#: Python integrators do.
+PLUGIN_MODULES = ("transient.sensor", "transient.plane", "transient.path")
+
+
+def _register_plugins() -> None:
+    """Import the plugin modules for the active variant (re-import them after a variant change)."""
+    import importlib
+
+    for name in PLUGIN_MODULES:
+        if name in sys.modules:
+            importlib.reload(sys.modules[name])
+        else:
+            importlib.import_module(name)
+
+
+def _check_cuda(variant: str) -> None:
+    """Refuse a CUDA variant on a machine where Dr.Jit finds no CUDA device."""
+    import drjit as dr
+
+    if not dr.has_backend(dr.JitBackend.CUDA):
+        raise BackendError(f"variant {variant}: no CUDA device or driver found on this machine; "
+                           f"use a CPU variant (llvm_ad_mono)")
 
 
 def select_variant(variant: str | None = None) -> str:
@@ -220,7 +250,9 @@ def select_variant(variant: str | None = None) -> str:
     ------
     BackendError
         When only a libLLVM < 16 exists (or ``DRJIT_LIBLLVM_PATH`` names
-        one), or the variant is not in this Mitsuba build or not mono.
+        one), the variant is not in this Mitsuba build or not mono, or a
+        CUDA variant is asked for where no CUDA device exists. The message
+        is one line and says how to fix it.
 
     Notes
     -----
@@ -239,17 +271,15 @@ def select_variant(variant: str | None = None) -> str:
     elif variant not in available:
         raise BackendError(f"variant {variant!r} is not in this Mitsuba build "
                            f"(available: {', '.join(available)})")
+    if variant.startswith("cuda_"):
+        _check_cuda(variant)
     if mi.variant() != variant:
         mi.set_variant(variant)
-    global _llvm_checked
+    global _llvm_checked, _plugins_variant
     if variant.startswith("llvm_") and not _llvm_checked:
         _check_loaded_llvm()
         _llvm_checked = True
-    if variant not in _registered:
-        # Plugins register against the variant active at registration time.
-        from . import integrator, sensor
-
-        sensor.register()
-        integrator.register()
-        _registered.add(variant)
+    if _plugins_variant != variant:
+        _register_plugins()
+        _plugins_variant = variant
     return variant

@@ -5,9 +5,11 @@ diffuse with one albedo, a point source and omnidirectional sensors inside
 the corner. Nothing occludes a single bounce there, so the one-bounce
 transient is exactly the floor's model plus the wall's model (the wall seen
 in its own frame by the rotation (x, y, z) -> (y, z, x)); light that bounces
-between the planes is outside the analytic model. The harness renders with
-max_depth = 1 (must agree with the model) and max_depth = 3 (must not be
-declared in agreement: it reports the share of further bounces instead).
+between the planes is outside the analytic model. :func:`check_corner`
+renders with max_depth = 1 (must agree with the model) and max_depth = 3
+(reports the share of further bounces, and, when mitransient is installed,
+judges the three-bounce transient against mitransient's ``transient_path``
+of the same scene: a renderer nobody here wrote).
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ import numpy as np
 from analytic.scene import Sampling, Scene
 from analytic.system import forward
 
-__all__ = ["Corner", "default_corner", "corner_model", "render_corner"]
+__all__ = ["Corner", "default_corner", "corner_model", "render_corner", "check_corner", "corner_against_mitransient"]
 
 
 @dataclass(frozen=True)
@@ -52,49 +54,83 @@ def corner_model(corner: Corner) -> np.ndarray:
     return sum(forward(plane) for plane in _planes(corner))
 
 
-def _scene_dict(corner: Corner, max_depth: int) -> dict:
-    import mitsuba as mi
+def render_corner(corner: Corner, *, spp: int, seed: int, max_depth: int, variant: str | None = None):
+    """The corner rendered by ``transient_opl_path`` with ``max_depth`` bounces.
 
-    film = {"type": "hdrfilm", "width": 1, "height": 1, "pixel_format": "luminance"}
-    wall = np.array([[0, 0, 0.5, 0], [0.5, 0, 0, 0.5], [0, 0.5, 0, 0.5], [0, 0, 0, 1.0]])
-    entries = {
-        "type": "scene",
-        "integrator": {"type": "transient_opl", "bins": corner.sampling.count,
-                       "start_opl": corner.sampling.start_opl, "bin_width_opl": corner.sampling.bin_width_opl,
-                       "max_depth": max_depth},
-        "floor": {"type": "rectangle", "to_world": mi.ScalarTransform4f().translate([0.5, 0.5, 0]).scale(
-            [0.5, 0.5, 1]), "bsdf": {"type": "diffuse", "reflectance": corner.albedo}},
-        "wall": {"type": "rectangle", "to_world": mi.ScalarTransform4f(wall),
-                 "bsdf": {"type": "diffuse", "reflectance": corner.albedo}},
-        "source": {"type": "point", "position": list(corner.source), "intensity": 1.0},
-    }
-    for k, position in enumerate(corner.sensors):
-        entries[f"sensor_{k}"] = {"type": "omni_point", "position": list(position), "film": film}
-    return entries
-
-
-def render_corner(corner: Corner, *, spp: int, seed: int, max_depth: int, chunk: int = 2**21):
-    """(mean, stderr) of the corner rendered with ``max_depth`` bounces, ``(K, N)`` each."""
+    Returns
+    -------
+    transient.render.RenderResult
+        Mean, standard error from the replicas and their degrees of freedom.
+    """
     from transient.backend import select_variant
-    from transient.render import standard_error
+    from transient.render import render_loaded
 
-    select_variant()
+    select_variant(variant)
     import mitsuba as mi
 
-    loaded = mi.load_dict(_scene_dict(corner, max_depth))
-    shape = (len(corner.sensors), corner.sampling.count)
-    sums, squares = np.zeros(shape), np.zeros(shape)
-    for first in range(0, spp, chunk):
-        count = min(chunk, spp - first)
-        part_sums, part_squares = loaded.integrator().render_transient(
-            loaded, seed=seed, first_sample=first, sample_count=count)
-        sums += part_sums
-        squares += part_squares
-    return sums / spp, standard_error(sums, squares, spp)
+    from transient.mitsuba_scene import corner_scene_dict
+
+    loaded = mi.load_dict(corner_scene_dict(corner.source, corner.sensors, corner.albedo, corner.sampling,
+                                            max_depth))
+    return render_loaded(loaded, spp=spp, seed=seed)
 
 
-def check_corner(corner: Corner | None = None, *, spp: int = 2**22, seed: int = 0) -> dict:
+def corner_against_mitransient(corner: Corner, ours, *, samples: int = 2**20, replicas: int = 16,
+                               max_depth: int = 3, seed: int = 0):
+    """Judge our ``max_depth``-bounce render of the corner against mitransient's of the same scene.
+
+    Parameters
+    ----------
+    corner : Corner
+    ours : transient.render.RenderResult
+        Our render with the same ``max_depth``.
+    samples : int
+        mitransient samples per sensor and replica.
+    replicas : int
+        mitransient renders (different seeds): their spread gives its error.
+    max_depth : int
+        Surface bounces of both.
+    seed : int
+        First mitransient seed.
+
+    Returns
+    -------
+    (Agreement, MitransientRuns)
+        The difference judged per bin with se² = se_ours² + se_theirs² and
+        Welch–Satterthwaite degrees of freedom (Student t on both sides).
+
+    Raises
+    ------
+    RuntimeError
+        mitransient not installed or failing.
+    """
+    from validation.bench import run_mitransient
+    from validation.compare import combined_dof, compare_transients
+
+    theirs = run_mitransient(source=corner.source, sensors=corner.sensors, sampling=corner.sampling,
+                             samples=samples, seeds=range(seed, seed + replicas), max_depth=max_depth,
+                             albedo=corner.albedo)
+    stderr = np.sqrt(ours.stderr**2 + theirs.stderr**2)
+    dof = combined_dof(ours.stderr, ours.dof, theirs.stderr, theirs.dof)
+    return compare_transients(ours.mean, stderr, theirs.mean, dof=dof), theirs
+
+
+def check_corner(corner: Corner | None = None, *, spp: int = 2**22, seed: int = 0,
+                 mitransient_samples: int | None = None) -> dict:
     """Render the corner with 1 and with 3 bounces; judge the first, measure the rest.
+
+    Parameters
+    ----------
+    corner : Corner, optional
+        Default :func:`default_corner`.
+    spp : int
+        Samples of each of our renders.
+    seed : int
+        Seed of the one-bounce render (the three-bounce one uses seed + 1).
+    mitransient_samples : int, optional
+        When given and mitransient is installed: also judge the
+        three-bounce render against 16 mitransient renders of this many
+        samples per sensor.
 
     Returns
     -------
@@ -102,18 +138,19 @@ def check_corner(corner: Corner | None = None, *, spp: int = 2**22, seed: int = 
         ``one_bounce_agrees`` (the 1-bounce render against the model),
         ``further_bounce_share`` (share of all light from bounces 2 and 3),
         ``agreement_with_all_bounces`` (the verdict if one wrongly compared
-        the full render with the one-bounce model), ``text``, ``arrays``.
+        the full render with the one-bounce model), ``mitransient`` (the
+        independent check, or why it did not run), ``text``, ``arrays``.
     """
     from validation.compare import compare_transients
 
     corner = corner or default_corner()
     model = corner_model(corner)
-    one, one_se = render_corner(corner, spp=spp, seed=seed, max_depth=1)
-    many, many_se = render_corner(corner, spp=spp, seed=seed + 1, max_depth=3)
-    first = compare_transients(one, one_se, model)
-    full = compare_transients(many, many_se, model)
-    share = float((many.sum() - one.sum()) / many.sum())
-    per_sensor = ((many.sum(axis=1) - one.sum(axis=1)) / many.sum(axis=1)).tolist()
+    one = render_corner(corner, spp=spp, seed=seed, max_depth=1)
+    many = render_corner(corner, spp=spp, seed=seed + 1, max_depth=3)
+    first = compare_transients(one.mean, one.stderr, model, dof=one.dof)
+    full = compare_transients(many.mean, many.stderr, model, dof=many.dof)
+    share = float((many.mean.sum() - one.mean.sum()) / many.mean.sum())
+    per_sensor = ((many.mean.sum(axis=1) - one.mean.sum(axis=1)) / many.mean.sum(axis=1)).tolist()
     text = (f"One bounce (max_depth = 1) against floor + wall models: {first.summary()}\n\n"
             f"With 3 bounces the corner is outside the one-bounce model: further bounces carry "
             f"{100 * share:.1f} % of the light (per sensor: "
@@ -121,9 +158,21 @@ def check_corner(corner: Corner | None = None, *, spp: int = 2**22, seed: int = 
             f"model anyway it would {'agree' if full.agrees else 'disagree'} "
             f"(χ²/dof {full.chi2_per_dof:.1f}, max |z| {full.max_abs_z:.1f}), so the harness reports "
             f"the share instead of a verdict.")
+    independent = {"status": "not run"}
+    if mitransient_samples is not None:
+        try:
+            verdict, theirs = corner_against_mitransient(corner, many, samples=mitransient_samples)
+            independent = {"status": "ok", "version": theirs.version, "samples": theirs.samples,
+                           "replicas": int(theirs.estimates.shape[0]), "agrees": verdict.agrees,
+                           "agreement": verdict.as_dict()}
+            text += (f"\n\nThree bounces against mitransient {theirs.version} (transient_path, irradiancemeter "
+                     f"spheres corrected, {theirs.estimates.shape[0]} renders of {theirs.samples} samples): "
+                     f"{verdict.summary()}")
+        except RuntimeError as error:
+            independent = {"status": str(error)}
     return {"name": corner.name, "samples": spp, "one_bounce_agrees": first.agrees,
             "one_bounce": first.as_dict(), "further_bounce_share": share,
             "further_bounce_share_per_sensor": per_sensor,
-            "agreement_with_all_bounces": full.agrees, "text": text,
-            "arrays": {"sampling": corner.sampling, "model": model, "one": one, "one_se": one_se,
-                       "many": many, "many_se": many_se}}
+            "agreement_with_all_bounces": full.agrees, "mitransient": independent, "text": text,
+            "arrays": {"sampling": corner.sampling, "model": model, "one": one.mean, "one_se": one.stderr,
+                       "many": many.mean, "many_se": many.stderr}}

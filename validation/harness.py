@@ -269,7 +269,7 @@ def check_scene(scene: Scene, *, spp: int, seed: int = 0, convergence: bool = Tr
     timings["model_seconds"] = time.perf_counter() - started
     result = render(scene, spp=spp, seed=seed, progress=progress)
     timings["render_seconds"] = result.seconds
-    agreement = compare_transients(result.mean, result.stderr, model)
+    agreement = compare_transients(result.mean, result.stderr, model, dof=result.dof)
     check = SceneCheck(scene.name, scene, spp, seed, model, result.mean, result.stderr, agreement)
     check.metrics.update(timings)
     check.metrics["window_share"] = share

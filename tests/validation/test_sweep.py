@@ -11,7 +11,6 @@ resumed. Everything runs on loopback with fixed seeds.
 
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import os
@@ -20,18 +19,22 @@ import signal
 import numpy as np
 import pytest
 
-from analytic.scene import SceneError, default_scene
+from analytic.errors import ResourceError, SceneError
+from analytic.scene import default_scene
 from analytic.scene_file import scene_from_dict
-from transient.render import chunk_ranges, render, scene_fingerprint
-from validation.cli.sweep import add_commands
+from transient.chunks import ChunkPlan, ReplicaAccumulator, ReplicaLayout
+from transient.render import render, scene_fingerprint
+from validation.cli import main
 from validation.sweep import ITEM_FILE, STATE_FILE, load_sweep, run_sweep, sweep_client, sweep_from_dict
 from validation.sweep.config import default_scene_table
 
 distributed = pytest.importorskip("distributed")
 
 CHUNK = 2**13
-SAMPLES = 6 * CHUNK + 100          # 7 chunks, the last one short
+SAMPLES = 6 * CHUNK + 100          # 32 replicas of 1540 samples: 7 chunks, the last one short
 SEED = 23
+PLAN = ChunkPlan(ReplicaLayout.for_samples(SAMPLES), CHUNK)
+CHUNKS = len(PLAN)
 
 BASE_SCENE = """
 [plane]
@@ -84,10 +87,17 @@ def sweep_file(tmp_path_factory):
     return write_sweep(tmp_path_factory.mktemp("sweep"))
 
 
+class _Estimate:
+    def __init__(self, accumulator):
+        self.mean, self.stderr, self.dof = accumulator.mean(), accumulator.stderr(), accumulator.dof
+
+
 @pytest.fixture(scope="module")
 def reference(sweep_file):
-    """Sequential renders of every item (Dr.Jit on one thread, as in a worker): name -> result."""
+    """Every item rendered here, chunk after chunk of the sweep's plan (Dr.Jit on one thread, as
+    in a worker): name -> estimate. The sweep must give these numbers exactly."""
     from transient.backend import select_variant
+    from transient.mitsuba_scene import load_scene
 
     select_variant()
     import drjit as dr
@@ -95,8 +105,15 @@ def reference(sweep_file):
     threads = dr.thread_count()
     dr.set_thread_count(1)
     try:
-        return {item.name: render(item.scene, spp=SAMPLES, seed=SEED, chunk_size=CHUNK, progress=False)
-                for item in load_sweep(sweep_file).items}
+        estimates = {}
+        for item in load_sweep(sweep_file).items:
+            loaded = load_scene(item.scene)
+            accumulator = ReplicaAccumulator(PLAN.layout, (item.scene.sensor_count, item.scene.sampling.count))
+            for chunk in PLAN:
+                accumulator.add(chunk, loaded.integrator().render_chunk(
+                    loaded, seed=SEED, layout=PLAN.layout, first=chunk.first, count=chunk.count))
+            estimates[item.name] = _Estimate(accumulator)
+        return estimates
     finally:
         dr.set_thread_count(threads)
 
@@ -166,24 +183,34 @@ def test_reflectance_folder_gives_one_item_per_image(tmp_path, rng):
     ('scene = "missing.toml"\nsamples = 100\n', "scene"),
     ('samples = 100\n', "scene"),
 ])
-def test_bad_sweep_files_name_the_key(tmp_path, text, key):
+def test_bad_sweep_files_name_the_key(tmp_path, capsys, text, key):
     path = write_sweep(tmp_path, text=text)
     with pytest.raises(SceneError) as caught:
         load_sweep(path)
     assert caught.value.key == key
     # Through the command, before any cluster starts or any file is written.
-    parser = argparse.ArgumentParser()
-    add_commands(parser.add_subparsers(dest="command", required=True))
-    args = parser.parse_args(["sweep", str(path), "--out", str(tmp_path / "out"), "--quiet"])
-    with pytest.raises(SceneError, match=key.replace(".", r"\.")):
-        args.run(args)
+    assert main(["sweep", str(path), "--out", str(tmp_path / "out"), "--quiet"]) == 2
+    error = capsys.readouterr().err.strip().splitlines()
+    assert len(error) == 1 and key in error[0]
     assert not (tmp_path / "out").exists()
 
 
-def test_chunk_ranges_cover_the_samples_once():
-    assert chunk_ranges(SAMPLES, CHUNK) == [(i * CHUNK, CHUNK) for i in range(6)] + [(6 * CHUNK, 100)]
-    ranges = chunk_ranges(2**32 + 10, 3 * 2**30)   # never straddles 2^32
-    assert ranges == [(0, 3 * 2**30), (3 * 2**30, 2**30), (2**32, 10)]
+def test_the_sweep_renders_what_render_renders():
+    """The sweep's chunks differ from render()'s (which starts small for an early checkpoint):
+    the same samples, summed in another order, to float64 rounding."""
+    scene = scene_from_dict({"plane": {"pixels": 4}, "sensors": {"positions": [[0.2, 0.7, 1.0]]},
+                             "sampling": {"period": 0.1, "start": 1.5, "count": 20}})
+    from transient.backend import select_variant
+    from transient.mitsuba_scene import load_scene
+
+    select_variant()
+    loaded = load_scene(scene)
+    accumulator = ReplicaAccumulator(PLAN.layout, (1, 20))
+    for chunk in PLAN:
+        accumulator.add(chunk, loaded.integrator().render_chunk(loaded, seed=SEED, layout=PLAN.layout,
+                                                                first=chunk.first, count=chunk.count))
+    direct = render(scene, spp=SAMPLES, seed=SEED, progress=False)
+    np.testing.assert_allclose(accumulator.mean(), direct.mean, rtol=1e-12, atol=0)
 
 
 # -- on the cluster ---------------------------------------------------------
@@ -194,18 +221,19 @@ def test_sweep_equals_sequential_renders(client, sweep_file, reference, tmp_path
                              "cross_check": True, "grid": sweep.grid}, sweep_file.parent)
     result = run_sweep(sweep, tmp_path, client=client, progress=False)
     assert_matches_reference(tmp_path, reference)
-    assert sorted(result.computed_chunks) == sorted((item.name, c) for item in sweep.items for c in range(7))
+    assert sorted(result.computed_chunks) == sorted((item.name, c) for item in sweep.items for c in range(CHUNKS))
     # The cross-check ran on every item, and the model files sit beside the render.
     assert result.all_agree is True
     index = json.loads((tmp_path / "index.json").read_text())
     assert [row["name"] for row in index["items"]] == list(reference)
     for row in index["items"]:
-        assert row["status"] == "done" and row["samples"] == SAMPLES and row["agrees"] is True
+        assert row["status"] == "done" and row["samples"] == PLAN.layout.samples and row["agrees"] is True
+        assert row["replicas"] == 32 and row["dof"] == 31 and row["window_share"] == 1.0
         assert row["render_seconds"] > 0 and row["chi2_per_dof"] > 0
         folder = tmp_path / row["path"]
         meta = json.loads((folder / "meta.json").read_text())
-        assert meta["samples"] == SAMPLES and meta["seed"] == SEED and meta["kind"] == "render"
-        assert meta["parameters"] == row["parameters"]
+        assert meta["samples"] == PLAN.layout.samples and meta["seed"] == SEED and meta["kind"] == "render"
+        assert meta["sweep_parameters"] == row["parameters"] and meta["dof"] == 31
         assert (folder / "transient.exr").is_file() and (folder / "model" / "transient.npy").is_file()
         assert json.loads((folder / "agreement.json").read_text())["agrees"] is True
     with open(tmp_path / "index.csv", newline="") as stream:
@@ -232,16 +260,16 @@ def test_interrupted_sweep_resumes_without_recomputing(client, sweep_file, refer
             finished.append(item.name)
         elif (tmp_path / item.name / STATE_FILE).is_file():
             with np.load(tmp_path / item.name / STATE_FILE) as state:
-                checkpointed[item.name] = set(np.flatnonzero(state["done"]).tolist())
+                checkpointed[item.name] = set(state["done"].tolist())
     # Items go first to last: ten chunks finish the first item (seven) and start another.
-    assert finished and checkpointed and sum(map(len, checkpointed.values())) + 7 * len(finished) == 10
+    assert finished and checkpointed and sum(map(len, checkpointed.values())) + CHUNKS * len(finished) == 10
     finished_times = {name: os.stat(tmp_path / name / "transient.npy").st_mtime_ns for name in finished}
     index = json.loads((tmp_path / "index.json").read_text())
     assert {row["name"] for row in index["items"] if row["status"] == "done"} == set(finished)
 
     result = run_sweep(sweep, tmp_path, client=client, progress=False)
     assert set(result.skipped_items) == set(finished)
-    expected = {(item.name, c) for item in sweep.items if item.name not in finished for c in range(7)
+    expected = {(item.name, c) for item in sweep.items if item.name not in finished for c in range(CHUNKS)
                 if c not in checkpointed.get(item.name, ())}
     assert sorted(result.computed_chunks) == sorted(expected)
     assert {name: os.stat(tmp_path / name / "transient.npy").st_mtime_ns for name in finished} == finished_times
@@ -252,7 +280,7 @@ def test_interrupted_sweep_resumes_without_recomputing(client, sweep_file, refer
     # Another seed into the same folder is refused, not mixed in.
     other = sweep_from_dict({"scene": "base.toml", "samples": SAMPLES, "seed": SEED + 1, "chunk": CHUNK,
                              "grid": sweep.grid}, sweep_file.parent)
-    with pytest.raises(SceneError, match="another"):
+    with pytest.raises(ResourceError, match="another"):
         run_sweep(other, tmp_path, client=client, progress=False)
 
 
@@ -273,21 +301,16 @@ def test_killed_worker_chunk_is_redone(client, sweep_file, reference, tmp_path):
     result = run_sweep(sweep, tmp_path, client=client, progress=False, on_chunk=kill_a_busy_worker)
     assert killed and killed["tasks"] >= 1
     # The lost chunks were redone elsewhere: every chunk arrived exactly once, and the result is exact.
-    assert sorted(result.computed_chunks) == sorted((item.name, c) for item in sweep.items for c in range(7))
+    assert sorted(result.computed_chunks) == sorted((item.name, c) for item in sweep.items for c in range(CHUNKS))
     assert_matches_reference(tmp_path, reference)
     client.wait_for_workers(2, timeout=60)
 
 
 def test_cli_on_a_running_scheduler(client, sweep_file, reference, tmp_path, capsys):
-    parser = argparse.ArgumentParser()
-    add_commands(parser.add_subparsers(dest="command", required=True))
-    args = parser.parse_args(["sweep", str(sweep_file), "--out", str(tmp_path),
-                              "--scheduler", client.scheduler.address, "--quiet"])
-    assert args.run(args) == 0
+    argv = ["sweep", str(sweep_file), "--out", str(tmp_path), "--scheduler", client.scheduler.address]
+    assert main(argv + ["--quiet"]) == 0
     assert_matches_reference(tmp_path, reference)
-    args.quiet = False
-    assert args.run(args) == 0
+    assert main(argv) == 0
     assert "4 already done" in capsys.readouterr().out
     with pytest.raises(SystemExit):
-        parser.parse_args(["sweep", str(sweep_file), "--out", str(tmp_path), "--scheduler", "x",
-                           "--workers", "2"])
+        main(["sweep", str(sweep_file), "--out", str(tmp_path), "--scheduler", "x", "--workers", "2"])

@@ -19,7 +19,7 @@ from pathlib import Path
 
 from transient.render import sigterm_as_interrupt
 
-from .checkpoint import CHECKPOINT_SECONDS, ItemState, load_state, save_state
+from .checkpoint import CHECKPOINT_SECONDS, ItemState, layout_of, load_state, save_state
 from .config import Sweep
 from .index import finish_item, finished_row, write_index
 from .tasks import _identity, model_transient, render_chunk
@@ -206,19 +206,20 @@ def _run(sweep: Sweep, out_dir: Path, client, prepared, *, progress, retries, on
         # Earlier items first, so a long sweep finishes items one after another.
         priority = -item.index
         scene_future = client.submit(_identity, item.scene, pure=False, priority=priority)
-        for chunk, (first, count) in enumerate(state.ranges):
-            if not state.done[chunk]:
-                future = client.submit(render_chunk, scene_future, state.fingerprint, sweep.seed, first, count,
-                                       sweep.variant, pure=False, retries=retries, priority=priority)
-                tasks[future] = (item.name, chunk)
+        for chunk in state.plan:
+            if chunk.index not in state.chunk_sums:
+                future = client.submit(render_chunk, scene_future, state.fingerprint, sweep.seed,
+                                       state.plan.layout, chunk, sweep.variant, pure=False, retries=retries,
+                                       priority=priority)
+                tasks[future] = (item.name, chunk.index)
         if sweep.cross_check:
             tasks[client.submit(model_transient, scene_future, pure=False, retries=retries,
                                 priority=priority)] = (item.name, None)
         del scene_future   # the chunk tasks hold it; released when they finish
 
-    total_samples = sweep.samples * len(sweep.items)
-    done_samples = sum(sweep.samples for _ in rows) + sum(
-        int(sum(count for (first, count), d in zip(s.ranges, s.done) if d)) for s in states.values())
+    samples = layout_of(sweep).samples       # R n: the requested count rounded up to whole replicas
+    total_samples = samples * len(sweep.items)
+    done_samples = samples * len(rows) + sum(state.samples_done for state in states.values())
     bars = []
     if progress:
         from tqdm import tqdm
@@ -248,14 +249,12 @@ def _run(sweep: Sweep, out_dir: Path, client, prepared, *, progress, retries, on
             if chunk is None:
                 state.model, state.model_seconds = future.result()
             else:
-                sums, squares, seconds, variant = future.result()
-                state.sums[chunk], state.squares[chunk] = sums, squares
-                state.seconds[chunk], state.variant = seconds, variant
-                state.done[chunk] = True
+                sums, seconds, variant = future.result()
+                state.chunk_sums[chunk], state.seconds[chunk], state.variant = sums, seconds, variant
                 state.dirty = True
                 computed.append((name, chunk))
                 if bars:
-                    bars[1].update(state.ranges[chunk][1])
+                    bars[1].update(state.plan[chunk].count)
             future.release()
             finish_if_ready(state)
             now = time.perf_counter()

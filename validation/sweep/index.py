@@ -10,7 +10,7 @@ from pathlib import Path
 
 from analytic.io import save_json, save_text, write_transient
 
-from .checkpoint import ITEM_FILE, ItemState, merge_chunks, mismatch, state_identity
+from .checkpoint import ITEM_FILE, ItemState, mismatch, state_identity
 from .config import Sweep, SweepItem
 
 __all__ = ["finished_row", "finish_item", "write_index"]
@@ -33,29 +33,29 @@ def finished_row(item: SweepItem, folder: Path, sweep: Sweep, fingerprint: str) 
 def finish_item(state: ItemState, sweep: Sweep, out_dir: Path) -> dict:
     """Merge, write the item's files and its ``item.json``; return its index row."""
     from analytic.io import build_meta
-    from transient.render import standard_error
     from validation.compare import compare_transients
 
     scene, item = state.item.scene, state.item
-    sums, squares = merge_chunks(state)
-    samples = sweep.samples
-    mean, stderr = sums / samples, standard_error(sums, squares, samples)
+    estimate = state.estimate()
+    mean, stderr, dof, samples = estimate.mean(), estimate.stderr(), estimate.dof, estimate.samples
     identity = {"sweep_parameters": item.parameters, "scene_fingerprint": state.fingerprint}
     meta = build_meta(scene, kind="render", samples=samples, seed=sweep.seed,
                       window_share=state.window_share, variant=state.variant,
-                      chunk_size=sweep.chunk_size, chunks=len(state.ranges), **identity)
+                      chunk_size=sweep.chunk_size, chunks=len(state.plan), replicas=estimate.completed,
+                      dof=dof, **identity)
     write_transient(state.folder, mean, meta, stderr=stderr)
-    compute = float(state.seconds.sum())
+    compute = float(sum(state.seconds.values()))
     row = {"name": item.name, "index": item.index, "path": str(state.folder.relative_to(out_dir)),
            "parameters": item.parameters, "samples": int(samples), "seed": sweep.seed,
-           "chunk_size": sweep.chunk_size, "chunks": len(state.ranges), "fingerprint": state.fingerprint,
+           "chunk_size": sweep.chunk_size, "chunks": len(state.plan), "replicas": estimate.completed,
+           "dof": dof, "fingerprint": state.fingerprint,
            "render_seconds": compute, "samples_per_second": samples / compute if compute > 0 else None,
            "finished_after_seconds": time.perf_counter() - state.started, "variant": state.variant,
            "window_share": state.window_share, "agrees": None}
     if state.model is not None:
         model_meta = build_meta(scene, kind="model", window_share=state.window_share, **identity)
         write_transient(state.folder / "model", state.model, model_meta)
-        agreement = compare_transients(mean, stderr, state.model).as_dict()
+        agreement = compare_transients(mean, stderr, state.model, dof=dof).as_dict()
         save_json(state.folder / "agreement.json", agreement)
         row.update(agrees=agreement["agrees"], chi2_per_dof=agreement["chi2_per_dof"],
                    max_abs_z=agreement["max_abs_z"], z_threshold=agreement["z_threshold"],

@@ -68,9 +68,9 @@ class WorkerCache:
 _CACHE = WorkerCache()
 
 
-def render_chunk(scene: Scene, fingerprint: str, seed: int, first: int, count: int,
-                 variant: str | None = None) -> tuple[np.ndarray, np.ndarray, float, str]:
-    """Render samples ``[first, first + count)`` of a scene (a Dask task).
+def render_chunk(scene: Scene, fingerprint: str, seed: int, layout, chunk,
+                 variant: str | None = None) -> tuple[np.ndarray, float, str]:
+    """Render one chunk of an item's samples (a Dask task).
 
     Parameters
     ----------
@@ -80,16 +80,18 @@ def render_chunk(scene: Scene, fingerprint: str, seed: int, first: int, count: i
         :func:`transient.render.scene_fingerprint` of ``scene``: the key of
         the worker's cache of loaded Mitsuba scenes.
     seed : int
-        Render seed; sample i depends on (seed, i) only.
-    first, count : int
-        The chunk: global index of its first sample, and its sample count.
+        Render seed; sample g depends on (seed, g) only.
+    layout : transient.chunks.ReplicaLayout
+        The render's replicas.
+    chunk : transient.chunks.Chunk
+        The global samples [first, first + count) to draw.
     variant : str, optional
         Mitsuba variant (default: the worker's CPU default).
 
     Returns
     -------
-    sums, sums_of_squares : numpy.ndarray
-        ``(K, N)`` float64 Σc and Σc² over the chunk's samples (units of y).
+    sums : numpy.ndarray
+        ``(replicas the chunk touches, K, N)`` float64 Σc per replica (units of y).
     seconds : float
         Wall time of the render call on the worker, seconds.
     variant : str
@@ -97,10 +99,9 @@ def render_chunk(scene: Scene, fingerprint: str, seed: int, first: int, count: i
     """
     active, loaded, integrator = _CACHE.get(scene, fingerprint, variant)
     started = time.perf_counter()
-    sums, squares = integrator.render_transient(loaded, seed=int(seed), first_sample=int(first),
-                                                sample_count=int(count))
-    return (np.asarray(sums, dtype=np.float64), np.asarray(squares, dtype=np.float64),
-            time.perf_counter() - started, active)
+    sums = integrator.render_chunk(loaded, seed=int(seed), layout=layout, first=int(chunk.first),
+                                   count=int(chunk.count))
+    return np.asarray(sums, dtype=np.float64), time.perf_counter() - started, active
 
 
 def model_transient(scene: Scene) -> tuple[np.ndarray, float]:

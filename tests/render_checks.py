@@ -1,0 +1,41 @@
+"""Shared by the renderer's tests: the exact model and the agreement test of DESIGN.md section 6.
+
+Agreement is judged per bin (validation.compare): the render's standard
+error comes from its 32 independent replicas, so each z is Student's t
+with 31 degrees of freedom mapped to a normal score; over the bins with
+enough samples, χ²/dof must lie inside the two-sided band and max |z|
+below the Šidák threshold, the two together at false-alarm rate 1e-3.
+"""
+
+import numpy as np
+
+from analytic.scene import Scene
+from analytic.system import forward
+from transient.render import render_loaded
+from validation.compare import compare_transients
+
+FALSE_ALARM = 1e-3
+
+
+def model(scene: Scene) -> np.ndarray:
+    """The exact analytic model's y for the scene."""
+    return forward(scene)
+
+
+
+def agreement(mean, stderr, reference, dof):
+    """(χ²/dof, max |z|, bins judged, passes) by validation.compare (DESIGN.md section 6)."""
+    result = compare_transients(mean, stderr, reference, dof=dof, false_alarm=FALSE_ALARM)
+    return result.chi2_per_dof, result.max_abs_z, result.bins, result.agrees
+
+
+def render_dict(mitsuba, entries: dict, samples: int, seed: int):
+    """Load a Mitsuba scene dict and render it (mean, stderr, dof from the replicas)."""
+    return render_loaded(mitsuba.load_dict(entries), spp=samples, seed=seed)
+
+
+def general_path_dict(entries: dict, **changes) -> dict:
+    """The same scene for transient_opl_path (the single-plane keys dropped)."""
+    general = {key: value for key, value in entries["integrator"].items()
+               if key not in ("plane_to_world", "source_position")}
+    return dict(entries, integrator=dict(general, type="transient_opl_path", **changes))

@@ -1,0 +1,62 @@
+"""The CUDA variant: agreement with the model, and the CPU's sums to 1e-9 (skipped without a card)."""
+
+from __future__ import annotations
+
+
+import numpy as np
+import pytest
+
+from analytic.scene import Illumination
+from render_checks import agreement, model
+from transient import backend
+from transient.render import render
+
+
+def _cuda_variant() -> str | None:
+    """A mono CUDA variant when this machine has a CUDA device, else None."""
+    backend.select_variant()
+    import drjit as dr
+    import mitsuba as mi
+
+    if not dr.has_backend(dr.JitBackend.CUDA):
+        return None
+    return next((v for v in ("cuda_mono", "cuda_ad_mono") if v in mi.variants()), None)
+
+
+@pytest.mark.cuda
+def test_cuda_variant_agrees_with_model(scene):
+    variant = _cuda_variant()
+    if variant is None:
+        pytest.skip("no CUDA device")
+    try:
+        result = render(scene, spp=2**24, seed=11, variant=variant, progress=False)
+    finally:
+        backend.select_variant()
+    chi2_per_dof, largest, dof, passes = agreement(result.mean, result.stderr, model(scene), result.dof)
+    assert result.variant == variant
+    assert passes, f"chi2/dof {chi2_per_dof:.3f}, max|z| {largest:.2f} over {dof} bins"
+
+
+@pytest.mark.cuda
+@pytest.mark.parametrize("waveform", ["impulse", "butterworth"])
+def test_cuda_sums_equal_cpu_sums(scene, waveform):
+    """A fixed seed draws the same samples on both backends: the sums agree to float64 rounding."""
+    variant = _cuda_variant()
+    if variant is None:
+        pytest.skip("no CUDA device")
+    from transient.chunks import ReplicaLayout
+
+    shaped = scene.replace(illumination=Illumination(waveform=waveform))
+    layout = ReplicaLayout.for_samples(2**22)
+    sums = {}
+    try:
+        for name in (variant, None):
+            backend.select_variant(name)
+            from transient.mitsuba_scene import load_scene
+
+            loaded = load_scene(shaped)
+            sums[name] = loaded.integrator().render_chunk(loaded, seed=7, layout=layout, first=2**20,
+                                                          count=2**21)
+    finally:
+        backend.select_variant()
+    np.testing.assert_allclose(sums[variant], sums[None], rtol=1e-9, atol=1e-9 * np.abs(sums[None]).max())

@@ -34,7 +34,7 @@ from .errors import DataError, ResourceError
 
 __all__ = ["atomic_write", "staged_writes", "output_folder", "save_npy", "save_json", "save_text",
            "save_exr", "save_png_image", "write_transient", "read_transient", "read_exr", "build_meta",
-           "remove_temporaries", "LOCK_FILE", "UNITS"]
+           "remove_temporaries", "json_ready", "LOCK_FILE", "UNITS"]
 
 #: Held (flock) by the command writing a folder; holds its process id.
 LOCK_FILE = ".diffuse-imaging.lock"
@@ -270,6 +270,11 @@ def _json_default(value):
     if isinstance(value, Path):
         return str(value)
     raise TypeError(f"not JSON serialisable: {type(value).__name__}")
+
+
+def json_ready(value):
+    """The value as save_json writes it: NaN and infinity as None (JSON has neither), arrays as lists."""
+    return json.loads(json.dumps(_finite_or_null(value), default=_json_default, allow_nan=False))
 
 
 def _finite_or_null(value):

@@ -32,11 +32,10 @@ from __future__ import annotations
 import json
 import math
 import re
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy import special, stats
 
 from analytic.errors import DataError
 from analytic.scene import Sampling, Scene
@@ -534,8 +533,7 @@ class CheckResult:
         The data agree with the model as given.
     chi2_per_dof, max_abs_z : float or None
         As given (None when judged by shape only). With replicas z is
-        expressed as its standard-normal equivalent (see Notes of
-        :func:`check_transient`).
+        judged as Student's t (see Notes of :func:`check_transient`).
     fit : Fit
         Best scale and offset.
     agrees_after_fit : bool
@@ -615,30 +613,9 @@ class CheckResult:
 
 
 def _agreement(data, stderr, model, dof, false_alarm) -> Agreement:
-    """compare_transients with Student-t z when the error comes from R replicas (dof = R - 1).
-
-    Today's ``compare_transients`` takes Gaussian z. Each t-distributed z is
-    mapped through its CDF to the standard normal with the same tail
-    probability, z_N = Φ⁻¹(F_t(z; dof)), exactly (in log space, so no tail
-    is clipped); then its χ² and Šidák max-|z| thresholds hold exactly. The
-    data are kept and the model moved to data - z_N se, so the judged bins
-    (se < 0.1 |y_data|) are the same. When compare_transients takes the
-    degrees of freedom itself, this becomes
-    ``compare_transients(data, stderr, model, dof=dof, ...)``.
-    """
-    if dof is None:
-        return compare_transients(data, stderr, model, false_alarm=false_alarm,
-                                  max_relative_stderr=MAX_RELATIVE_STDERR)
-    sampled = stderr > 0
-    t_score = np.zeros_like(data)
-    t_score[sampled] = (data[sampled] - model[sampled]) / stderr[sampled]
-    normal = -np.sign(t_score) * special.ndtri_exp(stats.t.logsf(np.abs(t_score), dof))
-    equivalent = np.where(sampled, data - normal * stderr, model)
-    agreement = compare_transients(data, stderr, equivalent, false_alarm=false_alarm,
-                                   max_relative_stderr=MAX_RELATIVE_STDERR)
-    norm = float(np.linalg.norm(model))
-    relative = float(np.linalg.norm(data - model) / norm) if norm > 0 else float("inf")
-    return replace(agreement, relative_l2=relative)
+    """compare_transients, with Student-t z on ``dof`` degrees of freedom when the error comes from replicas."""
+    return compare_transients(data, stderr, model, dof=np.inf if dof is None else dof,
+                              false_alarm=false_alarm, max_relative_stderr=MAX_RELATIVE_STDERR)
 
 
 def _relative_l2(data, model) -> float:
@@ -747,10 +724,9 @@ def check_transient(scene: Scene, data, *, stderr=None, shape_only: bool = False
     -----
     Replicas y_r: mean ȳ = Σ y_r / R, standard error
     se = sqrt(Σ (y_r - ȳ)² / (R (R - 1))), and z = (ȳ - y_model) / se follows
-    Student's t with R - 1 degrees of freedom; each z is mapped to the
-    standard normal with the same tail probability before the thresholds of
-    :func:`validation.compare.compare_transients` apply (so they keep their
-    false-alarm rate α). The fit minimises
+    Student's t with R - 1 degrees of freedom, which
+    :func:`validation.compare.compare_transients` judges with its t
+    thresholds (so they keep their false-alarm rate α). The fit minimises
     Σ ((y_data - s y_model(t0 + δ)) / se)² over the judged bins
     (:func:`fit_scale_offset`); the verdict after it uses the same
     thresholds (two fitted parameters against D judged bins: the χ²
@@ -854,14 +830,14 @@ def write_check_report(out: str | Path, result: CheckResult, *, scene_name: str 
     Returns
     -------
     dict
-        The metrics written to metrics.json.
+        The metrics written to metrics.json (NaN and infinity as None).
     """
-    from analytic.io import save_json, staged_writes
+    from analytic.io import json_ready, save_json, staged_writes
     from validation.plots import plot_check_transients, plot_check_z
     from validation.report import write_markdown
 
     out = Path(out)
-    metrics = result.as_dict() | {"scene": scene_name, "data": [str(p) for p in data_paths]}
+    metrics = json_ready(result.as_dict() | {"scene": scene_name, "data": [str(p) for p in data_paths]})
     fit = result.fit
     lines = [f"# check: {scene_name or 'scene'}", ""]
     if data_paths:

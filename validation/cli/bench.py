@@ -13,7 +13,7 @@ def command_bench(args) -> int:
     from validation.bench import speed_against_error
 
     with output_folder(args.out) as out:
-        result = speed_against_error(out)
+        result = speed_against_error(out, variant=args.variant)
     if not args.quiet:
         print(result["markdown"])
     return 0
@@ -23,5 +23,7 @@ def add_commands(subparsers) -> None:
     """Add ``bench``."""
     bench = subparsers.add_parser("bench", help="speed against error of model, renderer, mitransient")
     bench.add_argument("--out", required=True, help="output folder")
+    bench.add_argument("--variant", help="Mitsuba variant of both renderers: llvm_ad_mono (CPU, the default) "
+                                         "or cuda_ad_mono (GPU)")
     add_quiet(bench)
     bench.set_defaults(run=command_bench)

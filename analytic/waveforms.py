@@ -241,10 +241,12 @@ class Waveform:
         period : float
             Bin width T, metres of path length.
         count : int, optional
-            Bins in the window, N. The pulse of a square of width 1e300 m
-            touches ~1e300 / T bins, but no more than the window's N are
-            ever sampled: with ``count`` the answer is at most N, a bound
-            callers can loop over.
+            Bins in the window, N. A square of width 1e300 m touches
+            ~1e300 / T bins, but only the window's N are ever sampled: with
+            ``count`` the answer is at most N, a bound callers can loop
+            over. Such a loop must start at the first bin inside the
+            window, max(n(τ), 0), not at the path's own bin n(τ), which may
+            lie far before it.
 
         Returns
         -------
@@ -253,7 +255,8 @@ class Waveform:
             rational arithmetic (no overflow, no rounding), capped at
             ``count`` when given.
         """
-        if not (isinstance(period, (int, float)) and math.isfinite(period) and period > 0):
+        if (isinstance(period, bool) or not isinstance(period, (int, float, np.integer, np.floating))
+                or not math.isfinite(period) or not period > 0):
             raise ValueError(f"period must be a finite number > 0, got {period!r}")
         if count is not None and (isinstance(count, bool) or not isinstance(count, (int, np.integer))
                                   or count < 1):
@@ -343,11 +346,11 @@ def make_waveform(illumination: Illumination, period: float) -> Waveform:
     ``MIN_CUTOFF_DURATION``), where float64 cannot deliver:
 
     - order <= 20. Accuracy is not the limit (~ε Σ|ρ| e^{Re q x₀}, 4e-14
-      at n = 30) but the series' coefficients, which multiply u^m in metres
-      up to m = 2n: at n = 20 they are M ω_c^{m-1} / (m! g_max) down to
-      ~1e-48 ω_c^39, normal float64 over the whole cutoff range below with
-      ~1e50 to spare at either end; order 25 would need powers up to 50,
-      which underflow at the lowest cutoff.
+      at n = 30) but the series' coefficients M ω_c^{m-1} / (m! g_max),
+      which multiply u^m in metres up to m = 2n: measured over the cutoff
+      and duration ranges below they span 6e-251..4e245 at n = 20 (1e57 to
+      spare at either end), 1e-264..4e257 at n = 21; at n = 24 they
+      overflow (cutoff 1e6), at n = 25 they underflow (cutoff 1e-6).
     - 1e-6 <= cutoff <= 1e6 cycles/m, for the same reason (ω_c^39 / 40! in
       range).
     - 1e-3 <= cutoff T <= 1e3: a longer pulse touches up to ~1e5 bins per
@@ -471,13 +474,13 @@ class _NormalizedButterworth:
         return float(optimize.brentq(lambda x: self.series_magnitude(x) - self.envelope(x),
                                      0.0, 0.6 * n + 3.0, xtol=1e-12))
 
-    def derivative(self, x: np.ndarray, order: int) -> tuple[np.ndarray, np.ndarray]:
-        """d^order G / dx^order at x >= 0 (1: g, 2: g'), and a bound on its rounding error."""
+    def derivative(self, x: np.ndarray, times: int) -> tuple[np.ndarray, np.ndarray]:
+        """d^times G / dx^times at x >= 0 (1: g, 2: g'), and a bound on its rounding error."""
         x = np.asarray(x, dtype=np.float64)
         series = self.taylor
-        for _ in range(order):
+        for _ in range(times):
             series = np.polynomial.polynomial.polyder(series)
-        weights = self.residues * self.poles ** (order - 1)
+        weights = self.residues * self.poles ** (times - 1)
         exponential = np.real(np.exp(np.multiply.outer(x, self.poles)) @ weights)
         error_exponential = 16 * np.finfo(float).eps * (1 + x) * (
             np.exp(np.multiply.outer(x, self.poles.real)) @ np.abs(weights))

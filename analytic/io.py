@@ -443,7 +443,7 @@ def build_meta(scene, *, kind: str, samples: int = 0, seed: int | None = None,
         # the renderer renders physical transport only
         "attenuation": scene.attenuation if kind == "model" else "lambertian",
         "illumination": waveform.name,
-        "illumination_parameters": _illumination_parameters(scene.illumination, waveform),
+        "illumination_parameters": dict(waveform.parameters),
         "tolerance": float(scene.tolerance) if kind == "model" else None,
         "window_share": None if window_share is None else float(window_share),
         "noise": None if noise is None else {"kind": noise.kind, "sigma": noise.sigma,
@@ -459,16 +459,6 @@ def build_meta(scene, *, kind: str, samples: int = 0, seed: int | None = None,
         raise ValueError(f"extra: {', '.join(clash)} are schema keys")
     meta.update(extra)
     return meta
-
-
-def _illumination_parameters(illumination, waveform) -> dict:
-    """The waveform's parameters with their defaults resolved, metres of path length."""
-    if waveform.name == "square":
-        return {"width": float(waveform.duration)}
-    if waveform.name == "butterworth":
-        return {"cutoff": float(waveform.cutoff), "duration": float(waveform.duration),
-                "order": int(waveform.order)}
-    return {}
 
 
 def write_transient(out_dir: str | Path, transient: np.ndarray, meta: dict[str, Any], *,

@@ -42,5 +42,6 @@ def require_memory(needed: float, what: str, fix: str, *, limit: int | None = No
     """
     limit = available_memory() // 2 if limit is None else int(limit)
     if needed > limit:
-        raise ResourceError(f"{what} needs {needed / 2**30:.3g} GiB of memory, over the "
-                            f"{limit / 2**30:.3g} GiB available; {fix}")
+        size = f"{needed / 2**30:.3g} GiB" if needed < 2**1000 else "more than 10^291 GiB"
+        raise ResourceError(f"{what} needs {size} of memory, over the {limit / 2**30:.3g} GiB available; "
+                            f"{fix}")

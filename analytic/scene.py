@@ -156,11 +156,8 @@ class Illumination:
             if name == "order":
                 object.__setattr__(self, name, _integer("illumination.order", value))
                 continue
-            number = _number(f"illumination.{name}", value, positive=True)
-            if name in ("width", "duration") and number < MIN_LENGTH:
-                raise SceneError(f"illumination.{name}", f"{number:g} m is below the smallest length "
-                                                         f"supported, {MIN_LENGTH:g} m")
-            object.__setattr__(self, name, number)
+            # the waveform's own bounds (analytic.waveforms.make_waveform) depend on the period
+            object.__setattr__(self, name, _number(f"illumination.{name}", value, positive=True))
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -22,7 +22,7 @@ float64 cannot.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from fractions import Fraction
 from typing import NamedTuple
 
@@ -144,6 +144,11 @@ class Waveform:
     peak_time : float
         First time at which s reaches its peak 1, metres (0 for the impulse
         and the square).
+    parameters : dict
+        The scene's illumination parameters with their defaults resolved:
+        ``width`` (square, metres), ``cutoff`` (cycles per metre),
+        ``duration`` (the truncation, metres) and ``order`` (Butterworth);
+        empty for the impulse. What the metadata records.
     """
 
     name: str
@@ -159,6 +164,7 @@ class Waveform:
     series: np.ndarray = None
     series_limit: float = 0.0
     peak_time: float = 0.0
+    parameters: dict = field(default_factory=dict)
 
     def cumulative(self, u) -> np.ndarray:
         """S(u) = ∫_{-∞}^u s(t) dt, u in metres of path length; metres (1 for the impulse)."""
@@ -370,7 +376,8 @@ def make_waveform(illumination: Illumination, period: float) -> Waveform:
             raise SceneError("sampling.period", f"{period!r} m is so small that the default square "
                              f"width period / 5 underflows to 0; set illumination.width")
         return Waveform("square", SQUARE, width, (0.0, width), _empty(), _empty(), _empty(), _empty(),
-                        0.0, f"square pulse, unit amplitude, width {width:.6g} m", _empty(), 0.0, 0.0)
+                        0.0, f"square pulse, unit amplitude, width {width:.6g} m", _empty(), 0.0, 0.0,
+                        {"width": float(width)})
     order, cutoff, duration = _butterworth_parameters(illumination, period)
     return _butterworth(order, cutoff, duration)
 
@@ -558,4 +565,4 @@ def _butterworth(order: int, cutoff: float, duration: float) -> Waveform:
                    f"unit peak at {peak_time:.6g} m")
     return Waveform("butterworth", EXPONENTIAL_SUM, float(end), (0.0, float(end)), decay, frequency,
                     cos_coefficient, sin_coefficient, constant, description, series, float(series_limit),
-                    float(peak_time))
+                    float(peak_time), {"cutoff": float(cutoff), "duration": float(duration), "order": int(order)})

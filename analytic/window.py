@@ -98,14 +98,8 @@ def _pinned(scene: Scene, period: float):
     from .scene import Illumination
     from .waveforms import make_waveform
 
-    illumination = scene.illumination
-    waveform = make_waveform(illumination, period)
-    if waveform.name == "square":
-        return Illumination(waveform="square", width=waveform.duration)
-    if waveform.name == "butterworth":
-        return Illumination(waveform="butterworth", cutoff=waveform.cutoff, duration=waveform.duration,
-                            order=waveform.order)
-    return illumination
+    return Illumination(waveform=scene.illumination.waveform,
+                        **make_waveform(scene.illumination, period).parameters)
 
 
 def warn_if_cut(scene: Scene, share: float) -> None:

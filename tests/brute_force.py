@@ -56,16 +56,30 @@ def path_length_range(scene, grid: int = 300) -> tuple[float, float]:
     return float(lengths.min()), float(lengths.max())
 
 
-def binned_impulse_transient(scene, grid: int = 300) -> np.ndarray:
-    """y_k[n] for the impulse: each sample's f a ΔA in the bin of its path length, ``(K, N)``."""
-    if scene.illumination.waveform != "impulse":
-        raise ValueError("binned_impulse_transient: impulse only")
+def binned_transient(scene, grid: int = 300) -> np.ndarray:
+    """y_k[n] for the impulse or a square pulse, ``(K, N)``.
+
+    Impulse: each sample's f a ΔA in the bin of its path length τ. Square of
+    width w: times the overlap of [τ, τ + w] with each bin,
+    max(0, min(t_{n+1}, τ + w) − max(t_n, τ)).
+    """
+    waveform = scene.illumination.waveform
+    if waveform not in ("impulse", "square"):
+        raise ValueError("binned_transient: impulse or square only")
+    width = (scene.illumination.width if scene.illumination.width is not None
+             else scene.sampling.bin_width_opl / 5.0)
     x, y, f, area = _points(scene, grid)
     sampling = scene.sampling
+    edges = sampling.edges
     out = np.zeros((scene.sensor_count, sampling.count))
     for k, sensor in enumerate(scene.sensors):
         weight, length = _attenuation(scene, x, y, sensor)
-        index = np.floor((length - sampling.start_opl) / sampling.bin_width_opl).astype(np.int64)
-        inside = (index >= 0) & (index < sampling.count)
-        np.add.at(out[k], index[inside], (f * weight * area)[inside])
+        if waveform == "impulse":
+            index = np.floor((length - sampling.start_opl) / sampling.bin_width_opl).astype(np.int64)
+            inside = (index >= 0) & (index < sampling.count)
+            np.add.at(out[k], index[inside], (f * weight * area)[inside])
+        else:
+            overlap = np.maximum(0.0, np.minimum(edges[1:, None], length[None, :] + width)
+                                 - np.maximum(edges[:-1, None], length[None, :]))
+            out[k] = overlap @ (f * weight * area)
     return scene.intensity * out

@@ -17,8 +17,7 @@ from numba import njit
 from scipy import integrate, signal
 
 from analytic.binning import bin_index
-from analytic.noise import add_noise
-from analytic.scene import Illumination, Noise, Sampling, SceneError
+from analytic.scene import Illumination, Sampling, SceneError
 from analytic.waveforms import MAX_ORDER, cumulative_scalar, make_waveform
 from waveform_reference import ButterworthReference
 
@@ -100,23 +99,8 @@ def test_impulse_kernel_is_the_one_shared_binning():
             assert kernel[:, i].sum() == 0.0
 
 
-def test_gaussian_noise_has_the_stated_sigma_and_is_seeded():
-    y = np.zeros((16, 4000))
-    noisy = add_noise(y, Noise(kind="gaussian", sigma=0.1, seed=3))
-    assert abs(noisy.std() - 0.1) < 4 * 0.1 / np.sqrt(2 * y.size)
-    assert abs(noisy.mean()) < 4 * 0.1 / np.sqrt(y.size)
-    np.testing.assert_array_equal(noisy, add_noise(y, Noise(kind="gaussian", sigma=0.1, seed=3)))
-    assert not np.array_equal(noisy, add_noise(y, Noise(kind="gaussian", sigma=0.1, seed=4)))
 
 
-def test_poisson_noise_counts_photons():
-    y = np.full(200000, 0.02)
-    noisy = add_noise(y, Noise(kind="poisson", photons=500.0, seed=1))
-    counts = noisy * 500.0
-    np.testing.assert_allclose(counts, np.round(counts), atol=1e-9)      # whole photons
-    mean = 0.02 * 500.0
-    assert abs(counts.mean() - mean) < 4 * np.sqrt(mean / y.size)
-    assert abs(counts.var() / mean - 1) < 4 * np.sqrt(2 / y.size)
 
 
 # ---------------------------------------------------------------------------

@@ -228,7 +228,7 @@ def test_sweep_equals_sequential_renders(client, sweep_file, reference, tmp_path
     assert [row["name"] for row in index["items"]] == list(reference)
     for row in index["items"]:
         assert row["status"] == "done" and row["samples"] == PLAN.layout.samples and row["agrees"] is True
-        assert row["replicas"] == 32 and row["dof"] == 31 and row["window_share"] == 1.0
+        assert row["replicas"] == 32 and row["dof"] == 31 and 0.5 < row["window_share"] < 1.01
         assert row["render_seconds"] > 0 and row["chi2_per_dof"] > 0
         folder = tmp_path / row["path"]
         meta = json.loads((folder / "meta.json").read_text())

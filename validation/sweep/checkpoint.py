@@ -87,7 +87,7 @@ class ItemState:
 def state_identity(sweep: Sweep, fingerprint: str) -> dict:
     """What a checkpoint or a finished item must match to be reused."""
     layout = layout_of(sweep)
-    return {"seed": sweep.seed, "samples": sweep.samples, "chunk_size": sweep.chunk_size,
+    return {"seed": sweep.seed, "requested_samples": sweep.samples, "chunk_size": sweep.chunk_size,
             "replicas": layout.replicas, "fingerprint": fingerprint}
 
 

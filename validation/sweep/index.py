@@ -46,7 +46,8 @@ def finish_item(state: ItemState, sweep: Sweep, out_dir: Path) -> dict:
     write_transient(state.folder, mean, meta, stderr=stderr)
     compute = float(sum(state.seconds.values()))
     row = {"name": item.name, "index": item.index, "path": str(state.folder.relative_to(out_dir)),
-           "parameters": item.parameters, "samples": int(samples), "seed": sweep.seed,
+           "parameters": item.parameters, "samples": int(samples), "requested_samples": sweep.samples,
+           "seed": sweep.seed,
            "chunk_size": sweep.chunk_size, "chunks": len(state.plan), "replicas": estimate.completed,
            "dof": dof, "fingerprint": state.fingerprint,
            "render_seconds": compute, "samples_per_second": samples / compute if compute > 0 else None,

@@ -249,14 +249,13 @@ def _relative(estimate, reference) -> float:
 
 
 def _model(scene: Scene, tolerance: float | None = None) -> tuple[np.ndarray, float]:
-    from analytic.system import QuadratureWarning, system_matrix
+    from analytic.system import QuadratureWarning, forward, system_matrix
 
     with warnings.catch_warnings():
         # The reference's own error (1e-8 relative) is far below every error measured.
         warnings.simplefilter("ignore", QuadratureWarning)
         started = time.perf_counter()
-        matrix = system_matrix(scene, tolerance=tolerance)
-        y = (matrix @ scene.reflectance.ravel()).reshape(scene.sensor_count, scene.sampling.count)
+        y = forward(scene, system_matrix(scene, tolerance=tolerance))
         return y, time.perf_counter() - started
 
 

@@ -32,7 +32,7 @@ import numpy as np
 from analytic.errors import SceneError
 from analytic.response import impulse_response
 from analytic.scene import Scene
-from analytic.system import QuadratureWarning, system_matrix
+from analytic.system import QuadratureWarning, forward, system_matrix
 from validation.compare import Agreement, compare_transients
 
 __all__ = ["SceneCheck", "check_scene", "simplification_costs", "model_convergence",
@@ -66,10 +66,6 @@ def _matrix(scene: Scene, tolerance: float | None = None):
         return system_matrix(scene, tolerance=tolerance)
 
 
-def _y(matrix, scene: Scene) -> np.ndarray:
-    return (matrix @ scene.reflectance.ravel()).reshape(scene.sensor_count, scene.sampling.count)
-
-
 def model_convergence(scene: Scene, stderr: np.ndarray, judged: np.ndarray, *,
                       known: dict | None = None, tolerances=TOLERANCES) -> list[dict]:
     """The model's own error at each tolerance against tolerance 1e-7.
@@ -80,14 +76,14 @@ def model_convergence(scene: Scene, stderr: np.ndarray, judged: np.ndarray, *,
     scene's own assembly is not repeated.
     """
     known = known or {}
-    reference = _y(_matrix(scene, REFERENCE_TOLERANCE), scene)
+    reference = forward(scene, _matrix(scene, REFERENCE_TOLERANCE))
     rows = []
     for tolerance in tolerances:
         if tolerance in known:
             y, seconds = known[tolerance]
         else:
             started = time.perf_counter()
-            y = _y(_matrix(scene, tolerance), scene)
+            y = forward(scene, _matrix(scene, tolerance))
             seconds = time.perf_counter() - started
         difference = np.abs(y - reference)
         rows.append({"tolerance": tolerance, "seconds": seconds,
@@ -110,7 +106,7 @@ def simplification_costs(scene: Scene, y_lambertian: np.ndarray, *, sensors: int
     g_eq3 the unit-speed contour integral without 1/|∇d|, scaled to g's norm
     (the omission changes the shape, not only the scale).
     """
-    y_paper = _y(_matrix(scene.replace(attenuation="paper")), scene)
+    y_paper = forward(scene, _matrix(scene.replace(attenuation="paper")))
     norm = float(np.linalg.norm(y_lambertian))
     scaled = y_paper * norm / float(np.linalg.norm(y_paper))
     result = {"paper_attenuation": float(np.linalg.norm(y_paper - y_lambertian) / norm),
@@ -265,7 +261,7 @@ def check_scene(scene: Scene, *, spp: int, seed: int = 0, convergence: bool = Tr
     warn_if_cut(scene, share)
     started = time.perf_counter()
     matrix = _matrix(scene)
-    model = _y(matrix, scene)
+    model = forward(scene, matrix)
     timings["model_seconds"] = time.perf_counter() - started
     result = render(scene, spp=spp, seed=seed, progress=progress)
     timings["render_seconds"] = result.seconds

@@ -353,7 +353,7 @@ def plot_panels(path: str | Path, rows: list[dict], *, attenuation: str, intensi
     return save_figure(figure, path, dpi=100)
 
 
-def plot_check_transients(path: str | Path, result: CheckResult, *, max_panels: int = 9) -> Path:
+def plot_check_transients(path: str | Path, result, *, max_panels: int = 9) -> Path:
     """Data (with one-standard-error bars) against the model as given and after the fit.
 
     Parameters
@@ -402,7 +402,7 @@ def plot_check_transients(path: str | Path, result: CheckResult, *, max_panels: 
     return save_figure(figure, path)
 
 
-def plot_check_z(path: str | Path, result: CheckResult) -> Path:
+def plot_check_z(path: str | Path, result) -> Path:
     """z by bin (sensor-major), as given and after the fit, with the max-|z| limits.
 
     Parameters

@@ -14,7 +14,7 @@ def command_forward(args) -> int:
     """Model the noiseless transient (and a noisy one when the scene asks); exit status 0."""
     from analytic.io import build_meta, output_folder, staged_writes, write_transient
     from analytic.noise import add_noise
-    from analytic.system import system_matrix
+    from analytic.system import forward, system_matrix
     from analytic.window import warn_if_cut, window_share
 
     scene = load_scene_argument(args.scene)
@@ -26,7 +26,7 @@ def command_forward(args) -> int:
         started = time.perf_counter()
         matrix = system_matrix(scene, progress=show_progress(args))
         assembly = time.perf_counter() - started
-        y = (matrix @ scene.reflectance.ravel()).reshape(scene.sensor_count, scene.sampling.count)
+        y = forward(scene, matrix)
         noisy = add_noise(y, scene.noise) if scene.noise is not None else None
         meta = build_meta(scene, kind="model",
                           seed=scene.noise.seed if scene.noise is not None else None,

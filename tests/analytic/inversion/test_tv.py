@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from analytic.inversion import RankDeficiencyWarning, image_metrics, reconstruct
+from analytic.inversion import RankDeficiencyWarning, reconstruct
 
 
 def test_tv_solver_reaches_the_optimum_of_an_independent_conic_solve(rng):

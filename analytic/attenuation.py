@@ -17,7 +17,8 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["attenuation", "attenuation_at", "attenuation_code", "LAMBERTIAN", "PAPER"]
+__all__ = ["attenuation", "attenuation_at", "attenuation_of_distances", "attenuation_code", "LAMBERTIAN",
+           "PAPER"]
 
 #: Integer codes of the attenuation kinds for compiled code (``Frame.mode``).
 LAMBERTIAN, PAPER = 0, 1
@@ -76,8 +77,31 @@ def attenuation(points, source, sensor, kind: str = "lambertian") -> np.ndarray:
 
 
 @njit(cache=True, error_model="numpy")
+def attenuation_of_distances(frame, source_squared, sensor_squared):
+    """a_k from the squared distances d_s², d_k² of a plane point, 1/m⁴, compiled.
+
+    Parameters
+    ----------
+    frame : analytic.isochrone.Frame
+        The source-sensor pair (heights and attenuation ``mode``).
+    source_squared, sensor_squared : float
+        d_s², d_k², m².
+
+    Notes
+    -----
+    lambertian h_s h_k / (π d_s³ d_k³), paper h_s / (d_s³ d_k²): the same
+    expressions as :func:`attenuation` with cos θ = h / d.
+    """
+    ds3 = source_squared * math.sqrt(source_squared)
+    if frame.mode == LAMBERTIAN:
+        return (frame.source_height * frame.sensor_height
+                / (math.pi * ds3 * sensor_squared * math.sqrt(sensor_squared)))
+    return frame.source_height / (ds3 * sensor_squared)
+
+
+@njit(cache=True, error_model="numpy")
 def attenuation_at(frame, x, y):
-    """a_k(x) at one plane point, 1/m⁴, compiled.
+    """a_k(x) at one plane point (x, y), metres, 1/m⁴, compiled.
 
     Parameters
     ----------
@@ -85,15 +109,7 @@ def attenuation_at(frame, x, y):
         The source-sensor pair (positions, heights and attenuation ``mode``).
     x, y : float
         Plane point, metres.
-
-    Notes
-    -----
-    Written with squared distances: lambertian h_s h_k / (π d_s³ d_k³),
-    paper h_s / (d_s³ d_k²), the same expressions as :func:`attenuation`.
     """
     ds2 = (x - frame.source_x) ** 2 + (y - frame.source_y) ** 2 + frame.source_height ** 2
     dk2 = (x - frame.sensor_x) ** 2 + (y - frame.sensor_y) ** 2 + frame.sensor_height ** 2
-    if frame.mode == LAMBERTIAN:
-        return (frame.source_height * frame.sensor_height
-                / (math.pi * ds2 * math.sqrt(ds2) * dk2 * math.sqrt(dk2)))
-    return frame.source_height / (ds2 * math.sqrt(ds2) * dk2)
+    return attenuation_of_distances(frame, ds2, dk2)

@@ -45,15 +45,17 @@ import numpy as np
 import scipy.sparse
 from numba import njit, prange
 
-from .attenuation import attenuation_at, attenuation_code
+from .attenuation import attenuation_code, attenuation_of_distances
 from .isochrone import (check_heights, ellipse, first_arrival_point, make_frame, path_length_at,
                         rectangle_range, segment_minimum)
-from .quadrature import integrate, make_workspace, pixel_isochrone_integral, tensor_integrate
+from .quadrature import (LINEAR, ROOT_BOTH, ROOT_END, ROOT_START, adapt, integrate, isochrone_rule,
+                         make_workspace, piece_map, pixel_isochrone_integral, tensor_integrate)
 from .scene import Scene, SceneError
 from .waveforms import cumulative_scalar, make_waveform
 
-__all__ = ["system_matrix", "forward", "count_entries", "QuadratureWarning", "MIN_TOLERANCE",
-           "MAX_TOLERANCE", "FOOT_CLEARANCE"]
+__all__ = ["system_matrix", "forward", "count_entries", "check_tolerance", "pair_entries", "METHODS",
+           "QuadratureWarning",
+           "MIN_TOLERANCE", "MAX_TOLERANCE", "FOOT_CLEARANCE", "SAFETY"]
 
 #: Tightest tolerance supported: below it float64 sums of ~10⁴ rounded terms
 #: no longer converge and the adaptive quadrature would refine without end.
@@ -67,12 +69,23 @@ MAX_TOLERANCE = 0.1
 #: tensor rule's convergence rate.
 FOOT_CLEARANCE = 1.0
 
+#: The quadrature asks itself for this fraction of the tolerance: its error
+#: estimates describe the values kept, and this margin covers their
+#: occasional underestimate so that the achieved error stays below the
+#: tolerance while following it.
+SAFETY = 0.5
 _INNER_FACTOR = 0.1      # inner (φ) integrals this much tighter than the outer ones
+_TENSOR_PIECES = 64      # τ-pieces the (τ, φ) tensor rule may split into before the adaptive route takes over
 # Path lengths closer than this (relative) are not told apart: the ellipse's
 # axes near a tangency or the birth at t_min come from τ² - t², whose
 # rounding makes G(τ) noise on finer scales (about 2·10⁴ roundings of τ).
 _TAU_RESOLUTION = 4e-12
 _BLOCKS_PER_THREAD = 16  # parallel jobs per thread; pixels are dealt to them in strides
+
+
+# S(u) of analytic.waveforms, compiled inline: a call that passes the waveform
+# record (it holds arrays) costs ~12 ns of reference counting, more than S.
+_cumulative = njit(cache=True, inline="always")(cumulative_scalar.py_func)
 
 
 class QuadratureWarning(RuntimeWarning):
@@ -100,12 +113,11 @@ def _bin_of(tau, start, period, count):
 
 
 @njit(cache=True, error_model="numpy")
-def _pixel_bins(frame, x0, x1, y0, y1, start, period, count, duration):
-    """(first bin, number of bins) that a pixel's light reaches; (0, 0) if none.
+def _pixel_bins(low, high, start, period, count, duration):
+    """(first bin, number of bins) that light leaving a pixel at d in [low, high] reaches; (0, 0) if none.
 
     Light leaving at path length τ lands in [τ, τ + duration].
     """
-    low, high = rectangle_range(frame, x0, x1, y0, y1)
     first = max(0, _bin_of(low, start, period, count))
     last = min(count - 1, _bin_of(high + duration, start, period, count))
     if last < first:
@@ -144,47 +156,71 @@ def _clear_of_feet(frame, x0, x1, y0, y1):
     return True
 
 
-@njit(cache=True, error_model="numpy")
-def _kernels(terms, start, period, first, bins, tau, scale, values):
-    """values[i] = scale κ_{first + i}(τ), i < bins."""
-    lower = cumulative_scalar(terms, _edge(start, period, first) - tau)
+@njit(cache=True, error_model="numpy", inline="always")
+def _kernels(terms, start, period, first, bins, tau, scale, values, noise):
+    """values[i] = scale κ_{first + i}(τ), i < bins, and noise[i] a bound on its rounding.
+
+    κ_n = S(t_{n+1} - τ) - S(t_n - τ): where both values of S are close to
+    the pulse's energy and κ is small, the difference keeps only their
+    rounding, ~1e-16 of S (8 roundings allowed here).
+    """
+    lower = _cumulative(terms, _edge(start, period, first) - tau)
+    size = abs(scale) * 8.0 * 2.2e-16
     for i in range(bins):
-        upper = cumulative_scalar(terms, _edge(start, period, first + i + 1) - tau)
+        upper = _cumulative(terms, _edge(start, period, first + i + 1) - tau)
         values[i] = scale * (upper - lower)
+        noise[i] = size * (abs(upper) + abs(lower))
         lower = upper
 
 
-@njit(cache=True, error_model="numpy")
-def _smooth_integrand(problem, x, y, values):
+@njit(cache=True, error_model="numpy", inline="always")
+def _smooth_integrand(problem, x, y, values, noise):
     """a_k(x) κ_n(d(x)) for the pair's bins: the integrand of a smooth pixel."""
     frame, terms, start, period, first, bins = problem
-    _kernels(terms, start, period, first, bins, path_length_at(frame, x, y), attenuation_at(frame, x, y),
-             values)
+    ds2 = (x - frame.source_x) ** 2 + (y - frame.source_y) ** 2 + frame.source_height ** 2
+    dk2 = (x - frame.sensor_x) ** 2 + (y - frame.sensor_y) ** 2 + frame.sensor_height ** 2
+    _kernels(terms, start, period, first, bins, math.sqrt(ds2) + math.sqrt(dk2),
+             attenuation_of_distances(frame, ds2, dk2), values, noise)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _kernel_weight(problem, tau, scale, values, noise):
+    """scale κ_n(τ) for the piece's bins (the time weight of a cut piece), and its rounding."""
+    terms, start, period, first, bins = problem
+    _kernels(terms, start, period, first, bins, tau, scale, values, noise)
 
 
 @njit(cache=True, error_model="numpy")
-def _cut_integrand(problem, v, values):
-    """κ_n(τ) G(τ) dτ/dv at τ = τ_a + span (3v² - 2v³), for the piece's bins."""
-    (frame, x0, x1, y0, y1, terms, start, period, first, bins, tau_a, span, inner_rtol,
-     angles, inner) = problem
-    tau = tau_a + span * v * v * (3.0 - 2.0 * v)
-    slope = 6.0 * span * v * (1.0 - v)
+def _cut_integrand(problem, v, values, noise):
+    """κ_n(τ) G(τ) dτ/dv at τ = piece_map(v), for the piece's bins."""
+    (frame, x0, x1, y0, y1, terms, start, period, first, bins, kind, tau_a, span, inner_rtol,
+     angles, arcs, inner) = problem
+    tau, slope = piece_map(kind, tau_a, span, v)
     cx, cy, a, b, j0, j1, j2 = ellipse(frame, tau)
     response = pixel_isochrone_integral(frame, cx, cy, a, b, j0, j1, j2, x0, x1, y0, y1, inner_rtol,
-                                        angles, inner)
+                                        angles, arcs, inner)
     weight = response * slope
     if weight == 0.0:
         for i in range(bins):
             values[i] = 0.0
+            noise[i] = 0.0
         return
-    _kernels(terms, start, period, first, bins, tau, weight, values)
+    _kernels(terms, start, period, first, bins, tau, weight, values, noise)
 
 
 @njit(cache=True, error_model="numpy")
 def _pixel_breakpoints(frame, x0, x1, y0, y1, low, high, start, period, first, bins, duration):
-    """Sorted τ in [low, high] where the cut integrand stops being smooth."""
+    """Sorted τ in [low, high] where the cut integrand stops being smooth, and which are roots.
+
+    Returns (points, root): ``root[i]`` when G(τ) has a square-root
+    behaviour at points[i] (an isochrone touching an edge inside it, born
+    at x*, or passing a foot, where G is peaked), so that the τ-pieces
+    next to it take a :func:`analytic.quadrature.piece_map` that smooths
+    it; corners and kernel breakpoints are regular ends.
+    """
     shifts = 2 if duration > 0.0 else 1
     points = np.empty(13 + shifts * (bins + 1))
+    flags = np.zeros(13 + shifts * (bins + 1), dtype=np.bool_)
     used = 0
     points[used] = low
     used += 1
@@ -197,16 +233,19 @@ def _pixel_breakpoints(frame, x0, x1, y0, y1, low, high, start, period, first, b
         value, inside = segment_minimum(frame, ax, ay, bx, by)
         if inside:
             points[used] = value
+            flags[used] = True
             used += 1
     xs, ys = first_arrival_point(frame)
     if x0 <= xs <= x1 and y0 <= ys <= y1:
         points[used] = frame.first_arrival
+        flags[used] = True
         used += 1
     # The attenuation peaks under the source and the sensor: cutting there
     # lets the τ-mapping crowd nodes onto the peak when they are low.
     for (fx, fy) in ((frame.source_x, frame.source_y), (frame.sensor_x, frame.sensor_y)):
         if x0 < fx < x1 and y0 < fy < y1:
             points[used] = path_length_at(frame, fx, fy)
+            flags[used] = True
             used += 1
     for n in range(first, first + bins + 1):
         edge = _edge(start, period, n)
@@ -215,28 +254,38 @@ def _pixel_breakpoints(frame, x0, x1, y0, y1, low, high, start, period, first, b
         if duration > 0.0:
             points[used] = edge - duration
             used += 1
-    points = np.sort(points[:used])
+    order = np.argsort(points[:used])
+    kept_points = np.empty(used)
+    kept_flags = np.zeros(used, dtype=np.bool_)
     kept = 0
     for i in range(used):
-        value = points[i]
+        value = points[order[i]]
         if value < low or value > high:
             continue
-        if kept > 0 and value <= points[kept - 1]:
+        if kept > 0 and value <= kept_points[kept - 1]:
+            kept_flags[kept - 1] = kept_flags[kept - 1] or flags[order[i]]
             continue
-        points[kept] = value
+        kept_points[kept] = value
+        kept_flags[kept] = flags[order[i]]
         kept += 1
-    return points[:kept]
+    return kept_points[:kept], kept_flags[:kept]
 
 
 @njit(cache=True, error_model="numpy")
 def _cut_entries(frame, x0, x1, y0, y1, low, high, terms, start, period, count, first, bins, rtol,
-                 out, work, inner, angles):
-    """Add the pair's entries to out[:bins] by the cut (τ, φ) quadrature."""
+                 smooth_arcs, out, work, inner, angles, arcs):
+    """Add the pair's entries to out[:bins] by the cut (τ, φ) quadrature.
+
+    ``smooth_arcs``: the integrand is smooth along every arc (the pixel is
+    clear of the feet and of x*), so each τ-piece first tries the tensor
+    rule in (τ, φ); otherwise, or when that fails, the inner φ-integrals
+    are adaptive too.
+    """
     duration = terms.duration
     low = max(low, _edge(start, period, 0) - duration)
     high = min(high, _edge(start, period, first + bins))
-    breakpoints = _pixel_breakpoints(frame, x0, x1, y0, y1, low, high, start, period, first, bins,
-                                     duration)
+    breakpoints, root = _pixel_breakpoints(frame, x0, x1, y0, y1, low, high, start, period, first, bins,
+                                           duration)
     inner_rtol = rtol * _INNER_FACTOR
     for piece in range(len(breakpoints) - 1):
         tau_a = breakpoints[piece]
@@ -250,27 +299,53 @@ def _cut_entries(frame, x0, x1, y0, y1, low, high, terms, start, period, count, 
         if hi_bin < lo_bin:
             continue
         nb = hi_bin - lo_bin + 1
-        problem = (frame, x0, x1, y0, y1, terms, start, period, lo_bin, nb, tau_a, span, inner_rtol,
-                   angles, inner)
-        # dτ/dv <= 1.5 span: a v-piece this narrow spans under _TAU_RESOLUTION of τ
-        resolution = _TAU_RESOLUTION * max(abs(tau_a), abs(tau_b)) / (1.5 * span)
-        integrate(_cut_integrand, problem, 0.0, 1.0, rtol, nb, out[lo_bin - first:], work, resolution)
+        target = out[lo_bin - first:]
+        kind = (ROOT_BOTH if root[piece] and root[piece + 1] else ROOT_START if root[piece]
+                else ROOT_END if root[piece + 1] else LINEAR)
+        # dτ/dv <= 2 span: a v-piece this narrow spans under _TAU_RESOLUTION of τ
+        resolution = _TAU_RESOLUTION * max(abs(tau_a), abs(tau_b)) / (2.0 * span)
+        if smooth_arcs:
+            trial = work.result
+            for i in range(nb):
+                trial[i] = 0.0
+            problem = ((terms, start, period, lo_bin, nb), frame, x0, x1, y0, y1, kind, tau_a, span,
+                       angles, arcs)
+            failed = adapt(isochrone_rule, _kernel_weight, problem, 0.0, 1.0, rtol, nb, trial, work,
+                           resolution, _TENSOR_PIECES)
+            if failed == 0:
+                for i in range(nb):
+                    target[i] += trial[i]
+                continue
+            work.failures[0] -= failed     # not failures: the adaptive route takes the piece over
+        problem = (frame, x0, x1, y0, y1, terms, start, period, lo_bin, nb, kind, tau_a, span,
+                   inner_rtol, angles, arcs, inner)
+        integrate(_cut_integrand, problem, 0.0, 1.0, rtol, nb, target, work, resolution)
 
 
 @njit(cache=True, error_model="numpy")
-def _pair_entries(frame, x0, x1, y0, y1, terms, start, period, count, first, bins, rtol,
-                  out, work, inner, angles):
-    """out[i] = A[(k, first + i), p] for one (sensor, pixel); True if the smooth path served."""
+def _pair_entries(frame, x0, x1, y0, y1, low, high, terms, start, period, count, first, bins, rtol,
+                  out, work, inner, angles, arcs):
+    """out[i] = A[(k, first + i), p] for one (sensor, pixel); True if the smooth path served.
+
+    [low, high] is the pixel's range of d (:func:`analytic.isochrone.rectangle_range`).
+    """
     for i in range(bins):
         out[i] = 0.0
-    low, high = rectangle_range(frame, x0, x1, y0, y1)
-    if (not _kernel_cut(low, high, start, period, first, bins, terms.duration)
-            and _clear_of_feet(frame, x0, x1, y0, y1)):
+    clear = _clear_of_feet(frame, x0, x1, y0, y1)
+    if clear and not _kernel_cut(low, high, start, period, first, bins, terms.duration):
         problem = (frame, terms, start, period, first, bins)
         if tensor_integrate(_smooth_integrand, problem, x0, x1, y0, y1, rtol, bins, out, work):
             return True
+    # Near x* the isochrones are small (and, with low points, needles): an arc
+    # inside the pixel is a large part of its ellipse and varies faster in φ
+    # than in τ, so there the φ-integrals stay adaptive.
+    xs, ys = first_arrival_point(frame)
+    side = FOOT_CLEARANCE * max(x1 - x0, y1 - y0)
+    dx = max(x0 - xs, 0.0, xs - x1)
+    dy = max(y0 - ys, 0.0, ys - y1)
+    smooth_arcs = clear and dx * dx + dy * dy >= side * side
     _cut_entries(frame, x0, x1, y0, y1, low, high, terms, start, period, count, first, bins, rtol,
-                 out, work, inner, angles)
+                 smooth_arcs, out, work, inner, angles, arcs)
     return False
 
 
@@ -284,7 +359,8 @@ def _count(source, sensors, mode, size, pixels, start, period, count, duration, 
         most = 0
         for k in range(sensor_count):
             frame = make_frame(source, sensors[k], mode)
-            bins = _pixel_bins(frame, x0, x1, y0, y1, start, period, count, duration)[1]
+            low, high = rectangle_range(frame, x0, x1, y0, y1)
+            bins = _pixel_bins(low, high, start, period, count, duration)[1]
             total += bins
             most = max(most, bins)
         per_pixel[p] = total
@@ -301,19 +377,21 @@ def _fill(source, sensors, mode, size, pixels, start, period, count, terms, rtol
         work = make_workspace(width)
         inner = make_workspace(1)
         angles = np.empty(8)
+        arcs = np.empty((4, 2))
         served = 0
         for p in range(begin + block, end, blocks):
             x0, x1, y0, y1 = _pixel_box(size, pixels, p)
             offset = indptr[p]
             for k in range(sensor_count):
                 frame = make_frame(source, sensors[k], mode)
-                first, bins = _pixel_bins(frame, x0, x1, y0, y1, start, period, count, terms.duration)
+                low, high = rectangle_range(frame, x0, x1, y0, y1)
+                first, bins = _pixel_bins(low, high, start, period, count, terms.duration)
                 if bins == 0:
                     continue
                 for i in range(bins):
                     rows[offset + i] = k * count + first + i
-                if _pair_entries(frame, x0, x1, y0, y1, terms, start, period, count, first, bins, rtol,
-                                 data[offset:offset + bins], work, inner, angles):
+                if _pair_entries(frame, x0, x1, y0, y1, low, high, terms, start, period, count, first, bins,
+                                 rtol, data[offset:offset + bins], work, inner, angles, arcs):
                     served += 1
                 offset += bins
         failures[block] += work.failures[0] + inner.failures[0]
@@ -490,7 +568,7 @@ def system_matrix(scene: Scene, *, tolerance: float | None = None, memory_limit:
         bar = tqdm(total=columns, desc="system matrix", unit="pixel", leave=False)
     for begin, end in zip(bounds[:-1], bounds[1:]):
         _fill(source, sensors, mode, scene.size, scene.pixels, sampling.start_opl, sampling.bin_width_opl,
-              sampling.count, terms, tolerance, width, int(begin), int(end), indptr, rows, data,
+              sampling.count, terms, SAFETY * tolerance, width, int(begin), int(end), indptr, rows, data,
               failures, smooth)
         if bar is not None:
             bar.update(int(end - begin))
@@ -510,6 +588,98 @@ def _threads() -> int:
     import numba
 
     return int(numba.get_num_threads())
+
+
+#: Quadrature routes of :func:`pair_entries`.
+METHODS = ("auto", "smooth", "isochrone", "adaptive")
+
+
+@njit(cache=True, error_model="numpy")
+def _pair_by_method(frame, x0, x1, y0, y1, low, high, terms, start, period, count, first, bins, rtol,
+                    method, out, work, inner, angles, arcs):
+    """One pair's entries by one route (index into METHODS); -1 if the smooth rule does not apply,
+    -2 if it did not converge, else the number of quadrature failures."""
+    for i in range(bins):
+        out[i] = 0.0
+    if method == 0:
+        _pair_entries(frame, x0, x1, y0, y1, low, high, terms, start, period, count, first, bins, rtol,
+                      out, work, inner, angles, arcs)
+    elif method == 1:
+        if (_kernel_cut(low, high, start, period, first, bins, terms.duration)
+                or not _clear_of_feet(frame, x0, x1, y0, y1)):
+            return -1
+        if not tensor_integrate(_smooth_integrand, (frame, terms, start, period, first, bins), x0, x1, y0,
+                                y1, rtol, bins, out, work):
+            return -2
+    else:
+        _cut_entries(frame, x0, x1, y0, y1, low, high, terms, start, period, count, first, bins, rtol,
+                     method == 2, out, work, inner, angles, arcs)
+    return work.failures[0] + inner.failures[0]
+
+
+def pair_entries(scene: Scene, sensor: int, pixel: int, *, method: str = "auto",
+                 tolerance: float | None = None) -> tuple[int, np.ndarray]:
+    """The non-zero run of column ``pixel`` for one sensor, by a chosen quadrature route.
+
+    For tests and diagnosis: each fast route can be checked against the
+    adaptive one on the same pair.
+
+    Parameters
+    ----------
+    scene : Scene
+    sensor : int
+        Sensor index k.
+    pixel : int
+        Column p = r M + c.
+    method : {"auto", "smooth", "isochrone", "adaptive"}
+        "auto": what :func:`system_matrix` does. "smooth": the tensor rule
+        on the whole pixel (only where no kernel breakpoint crosses it and
+        it is clear of the feet). "isochrone": the cut quadrature with the
+        tensor rule in (τ, φ) on each τ-piece. "adaptive": the cut
+        quadrature with adaptive φ-integrals inside adaptive τ-integrals.
+    tolerance : float, optional
+        As for :func:`system_matrix`.
+
+    Returns
+    -------
+    first : int
+        The first bin n of the run.
+    values : numpy.ndarray
+        A[(k, first + i), p], units of A.
+
+    Raises
+    ------
+    ValueError
+        An unknown method, index out of range, or "smooth" where it does not
+        apply or does not converge.
+    """
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    if not 0 <= sensor < scene.sensor_count or not 0 <= pixel < scene.pixels ** 2:
+        raise ValueError(f"sensor {sensor} or pixel {pixel} out of range")
+    tolerance = check_tolerance(scene.tolerance if tolerance is None else tolerance)
+    waveform, mode, source, sensors = _prepare(scene)
+    terms = waveform.terms
+    sampling = scene.sampling
+    frame = make_frame(source, sensors[sensor], mode)
+    x0, x1, y0, y1 = _pixel_box(scene.size, scene.pixels, pixel)
+    low, high = rectangle_range(frame, x0, x1, y0, y1)
+    first, bins = _pixel_bins(low, high, sampling.start_opl, sampling.bin_width_opl, sampling.count,
+                              terms.duration)
+    out = np.zeros(bins)
+    status = _pair_by_method(frame, x0, x1, y0, y1, low, high, terms, sampling.start_opl,
+                             sampling.bin_width_opl, sampling.count, first, bins, SAFETY * tolerance,
+                             METHODS.index(method), out, make_workspace(max(bins, 1)), make_workspace(1),
+                             np.empty(8), np.empty((4, 2)))
+    if status == -1:
+        raise ValueError(f"the smooth rule does not apply to pixel {pixel}, sensor {sensor}: a kernel "
+                         f"breakpoint crosses it or a foot is near")
+    if status == -2:
+        raise ValueError(f"the smooth rule did not converge on pixel {pixel}, sensor {sensor}")
+    if status > 0:
+        warnings.warn(f"{status} quadrature pieces stopped refining before reaching tolerance "
+                      f"{tolerance:g}", QuadratureWarning, stacklevel=2)
+    return first, out
 
 
 def forward(scene: Scene, matrix=None) -> np.ndarray:

@@ -121,9 +121,7 @@ def ellipse(frame, tau):
     hk2 = frame.sensor_height * frame.sensor_height
     tmin = frame.first_arrival
     tau2 = tau * tau
-    first = (tau - tmin) * (tau + tmin)
-    if first < 0.0:
-        first = 0.0
+    first = max((tau - tmin) * (tau + tmin), 0.0)
     # τ² - D² and τ² - t_2² from τ² - t_min² without cancellation: with low
     # points t_min, t_2 and D agree to many digits.
     den = first + (frame.source_height + frame.sensor_height) ** 2

@@ -37,6 +37,7 @@ exactly, per column, before anything of that size is allocated.
 
 from __future__ import annotations
 
+import itertools
 import math
 import os
 import warnings
@@ -566,7 +567,7 @@ def system_matrix(scene: Scene, *, tolerance: float | None = None, memory_limit:
     if progress:
         from tqdm import tqdm
         bar = tqdm(total=columns, desc="system matrix", unit="pixel", leave=False)
-    for begin, end in zip(bounds[:-1], bounds[1:]):
+    for begin, end in itertools.pairwise(bounds):
         _fill(source, sensors, mode, scene.size, scene.pixels, sampling.start_opl, sampling.bin_width_opl,
               sampling.count, terms, SAFETY * tolerance, width, int(begin), int(end), indptr, rows, data,
               failures, smooth)

@@ -56,7 +56,8 @@ from .isochrone import ellipse, point_on_ellipse, rectangle_crossings
 
 __all__ = ["Workspace", "make_workspace", "adapt", "ladder_rule", "integrate", "isochrone_rule",
            "tensor_integrate", "arc_value", "arc_integrand", "pixel_arcs", "pixel_isochrone_integral",
-           "piece_map", "LINEAR", "ROOT_START", "ROOT_END", "ROOT_BOTH", "GAUSS_NODES", "GAUSS_WEIGHTS", "LADDER_LEVELS", "TENSOR_LEVELS"]
+           "piece_map", "LINEAR", "ROOT_START", "ROOT_END", "ROOT_BOTH", "GAUSS_NODES", "GAUSS_WEIGHTS",
+           "LADDER_LEVELS", "TENSOR_LEVELS", "MAX_PIECES"]
 
 #: Largest Gauss–Legendre order tabulated.
 MAX_ORDER = 12

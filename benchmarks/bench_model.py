@@ -49,7 +49,8 @@ from analytic.system import MIN_TOLERANCE, QuadratureWarning, system_matrix  # n
 from supersampled import supersampled  # noqa: E402
 
 FORWARD = "{python} -m validation.cli forward {scene} --out {out} --quiet"
-BRUTE = "{python} " + str(Path(__file__).resolve().parent / "supersampled.py") + " {scene} --factor {factor} --out {out}"
+BRUTE = ("{python} " + str(Path(__file__).resolve().parent / "supersampled.py")
+         + " {scene} --factor {factor} --out {out}")
 
 
 def machine() -> str:

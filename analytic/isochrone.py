@@ -20,66 +20,89 @@ outside x* once; its Jacobian J(τ, φ) = |∂x/∂τ × ∂x/∂φ| equals
 |∂x/∂φ| / |∇d| (the coarea factor of DESIGN.md section 3.1), and stays finite
 as τ -> t_min. Area integrals become ∫ dτ ∫ dφ (...) J.
 
-Everything here is scalar and compiled with Numba; ``frame`` arrays hold a
-source-sensor pair (see :func:`make_frame`).
+Everything here is scalar and compiled with Numba; a source-sensor pair is a
+:class:`Frame` record (see :func:`make_frame`).
+
+Heights
+-------
+The attenuation under a source (or sensor) at height h is a peak of width h:
+∫ h / (r² + h²)^{3/2} dx = 2π however small h is, so as h -> 0 the response
+tends to a finite limit (2 ρ cos θ_k / d_k² from the foot, DESIGN.md section
+2). Resolving the peak needs h to span many roundings of the plane
+coordinates and path lengths, which are as large as the scene:
+:data:`MIN_HEIGHT_FRACTION` of the scene's extent is the smallest height the
+model supports (:func:`check_heights`); at that height the peak is still
+~10⁶ float64 roundings wide.
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
-__all__ = ["make_frame", "ellipse", "point_on_ellipse", "jacobian", "attenuation_at",
-           "path_length_at", "first_arrival_point", "LAMBERTIAN", "PAPER"]
+from .attenuation import LAMBERTIAN, PAPER, attenuation_at
 
-LAMBERTIAN, PAPER = 0, 1
+__all__ = ["Frame", "make_frame", "ellipse", "point_on_ellipse", "jacobian", "path_length_at",
+           "first_arrival_point", "segment_minimum", "rectangle_range", "rectangle_crossings",
+           "scene_extent", "minimum_height", "check_heights", "MIN_HEIGHT_FRACTION",
+           "LAMBERTIAN", "PAPER", "attenuation_at"]
 
-# frame layout
-SX, SY, HS, KX, KY, HK, E1, E2, DIST, TMIN, T2SQ, MODE = range(12)
+#: Smallest height of the source or a sensor, as a fraction of :func:`scene_extent`.
+MIN_HEIGHT_FRACTION = 1e-9
 
 
-@njit(cache=True)
+class Frame(NamedTuple):
+    """A source-sensor pair as the compiled kernels use it (metres)."""
+
+    source_x: float
+    source_y: float
+    source_height: float
+    sensor_x: float
+    sensor_y: float
+    sensor_height: float
+    axis_x: float           # e, the unit vector from the source's foot to the sensor's
+    axis_y: float
+    foot_distance: float    # D
+    first_arrival: float    # t_min
+    mode: int               # attenuation code, analytic.attenuation.LAMBERTIAN or PAPER
+
+
+@njit(cache=True, error_model="numpy")
 def make_frame(source, sensor, mode):
-    """Pack a source-sensor pair for the compiled kernels.
+    """A source-sensor pair as a :class:`Frame`.
 
     Parameters
     ----------
     source, sensor : float64[3]
         Positions, metres (z > 0).
     mode : int
-        LAMBERTIAN (0) or PAPER (1) attenuation.
+        Attenuation code, :data:`analytic.attenuation.LAMBERTIAN` or ``PAPER``.
 
     Returns
     -------
-    float64[12]
-        Feet, heights, unit axis e, foot distance D, t_min, t_2², mode.
+    Frame
     """
-    frame = np.empty(12)
-    frame[SX], frame[SY], frame[HS] = source[0], source[1], source[2]
-    frame[KX], frame[KY], frame[HK] = sensor[0], sensor[1], sensor[2]
     dx = sensor[0] - source[0]
     dy = sensor[1] - source[1]
     dist = math.hypot(dx, dy)
     if dist > 0.0:
-        frame[E1], frame[E2] = dx / dist, dy / dist
+        axis_x, axis_y = dx / dist, dy / dist
     else:  # feet coincide: the isochrones are circles, any axis will do
-        frame[E1], frame[E2] = 1.0, 0.0
-    frame[DIST] = dist
-    frame[TMIN] = math.hypot(dist, source[2] + sensor[2])
-    frame[T2SQ] = dist * dist + (source[2] - sensor[2]) ** 2
-    frame[MODE] = mode
-    return frame
+        axis_x, axis_y = 1.0, 0.0
+    return Frame(source[0], source[1], source[2], sensor[0], sensor[1], sensor[2], axis_x, axis_y,
+                 dist, math.hypot(dist, source[2] + sensor[2]), mode)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def ellipse(frame, tau):
     """Centre, semi-axes and Jacobian coefficients of the isochrone at τ.
 
     Parameters
     ----------
-    frame : float64[12]
+    frame : Frame
         From :func:`make_frame`.
     tau : float
         Path length, metres; τ >= t_min.
@@ -93,22 +116,22 @@ def ellipse(frame, tau):
     j0, j1, j2 : float
         J(τ, φ) = j0 cos φ + j1 cos² φ + j2 sin² φ, metres (m² per m per rad).
     """
-    dist = frame[DIST]
-    hs2 = frame[HS] * frame[HS]
-    hk2 = frame[HK] * frame[HK]
-    tmin = frame[TMIN]
+    dist = frame.foot_distance
+    hs2 = frame.source_height * frame.source_height
+    hk2 = frame.sensor_height * frame.sensor_height
+    tmin = frame.first_arrival
     tau2 = tau * tau
-    den = tau2 - dist * dist
-    first = (tau - tmin) * (tau + tmin)
-    if first < 0.0:
-        first = 0.0
-    second = tau2 - frame[T2SQ]
+    first = max((tau - tmin) * (tau + tmin), 0.0)
+    # τ² - D² and τ² - t_2² from τ² - t_min² without cancellation: with low
+    # points t_min, t_2 and D agree to many digits.
+    den = first + (frame.source_height + frame.sensor_height) ** 2
+    second = first + 4.0 * frame.source_height * frame.sensor_height
     q = first * second
     a2 = tau2 * q / (4.0 * den * den)
     b2 = q / (4.0 * den)
     shift = 0.5 * dist * (1.0 + (hs2 - hk2) / den)
-    cx = frame[SX] + shift * frame[E1]
-    cy = frame[SY] + shift * frame[E2]
+    cx = frame.source_x + shift * frame.axis_x
+    cy = frame.source_y + shift * frame.axis_y
     dq = 2.0 * tau * (second + first)
     da2 = ((2.0 * tau * q + tau2 * dq) * den - 4.0 * tau * tau2 * q) / (4.0 * den * den * den)
     db2 = (dq * den - 2.0 * tau * q) / (4.0 * den * den)
@@ -122,16 +145,16 @@ def ellipse(frame, tau):
     return cx, cy, a, b, j0, j1, j2
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def point_on_ellipse(frame, cx, cy, a, b, phi):
     """The point x(τ, φ) on an isochrone, metres."""
     c = math.cos(phi)
     s = math.sin(phi)
-    return (cx + a * c * frame[E1] - b * s * frame[E2],
-            cy + a * c * frame[E2] + b * s * frame[E1])
+    return (cx + a * c * frame.axis_x - b * s * frame.axis_y,
+            cy + a * c * frame.axis_y + b * s * frame.axis_x)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def jacobian(j0, j1, j2, phi):
     """J(τ, φ) = |∂x/∂(τ, φ)|, metres."""
     c = math.cos(phi)
@@ -139,37 +162,23 @@ def jacobian(j0, j1, j2, phi):
     return abs(j0 * c + j1 * c * c + j2 * s * s)
 
 
-@njit(cache=True)
-def attenuation_at(frame, x, y):
-    """a_k(x) of DESIGN.md section 2 at a plane point, 1/m⁴.
-
-    lambertian: cos θ_s cos θ_k / (π d_s² d_k²) = h_s h_k / (π d_s³ d_k³);
-    paper (eq. 1): cos θ_s / (d_s² d_k²) = h_s / (d_s³ d_k²).
-    """
-    ds2 = (x - frame[SX]) ** 2 + (y - frame[SY]) ** 2 + frame[HS] ** 2
-    dk2 = (x - frame[KX]) ** 2 + (y - frame[KY]) ** 2 + frame[HK] ** 2
-    if frame[MODE] == LAMBERTIAN:
-        return frame[HS] * frame[HK] / (math.pi * ds2 * math.sqrt(ds2) * dk2 * math.sqrt(dk2))
-    return frame[HS] / (ds2 * math.sqrt(ds2) * dk2)
-
-
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def path_length_at(frame, x, y):
     """d(x) = |x - p_s| + |x - p_k| for a plane point, metres."""
-    ds = math.sqrt((x - frame[SX]) ** 2 + (y - frame[SY]) ** 2 + frame[HS] ** 2)
-    dk = math.sqrt((x - frame[KX]) ** 2 + (y - frame[KY]) ** 2 + frame[HK] ** 2)
+    ds = math.sqrt((x - frame.source_x) ** 2 + (y - frame.source_y) ** 2 + frame.source_height ** 2)
+    dk = math.sqrt((x - frame.sensor_x) ** 2 + (y - frame.sensor_y) ** 2 + frame.sensor_height ** 2)
     return ds + dk
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def first_arrival_point(frame):
     """x*, the plane point of shortest path (d(x*) = t_min), metres."""
-    ratio = frame[HS] / (frame[HS] + frame[HK])
-    return (frame[SX] + frame[E1] * frame[DIST] * ratio,
-            frame[SY] + frame[E2] * frame[DIST] * ratio)
+    ratio = frame.source_height / (frame.source_height + frame.sensor_height)
+    return (frame.source_x + frame.axis_x * frame.foot_distance * ratio,
+            frame.source_y + frame.axis_y * frame.foot_distance * ratio)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def segment_minimum(frame, x0, y0, x1, y1):
     """Minimum of d on the segment [(x0, y0), (x1, y1)]: (value, inside).
 
@@ -181,12 +190,12 @@ def segment_minimum(frame, x0, y0, x1, y1):
     length = math.hypot(x1 - x0, y1 - y0)
     ux = (x1 - x0) / length
     uy = (y1 - y0) / length
-    us = (frame[SX] - x0) * ux + (frame[SY] - y0) * uy
-    uk = (frame[KX] - x0) * ux + (frame[KY] - y0) * uy
-    rho_s = math.sqrt(((frame[SX] - x0) - us * ux) ** 2 + ((frame[SY] - y0) - us * uy) ** 2
-                      + frame[HS] ** 2)
-    rho_k = math.sqrt(((frame[KX] - x0) - uk * ux) ** 2 + ((frame[KY] - y0) - uk * uy) ** 2
-                      + frame[HK] ** 2)
+    us = (frame.source_x - x0) * ux + (frame.source_y - y0) * uy
+    uk = (frame.sensor_x - x0) * ux + (frame.sensor_y - y0) * uy
+    rho_s = math.sqrt(((frame.source_x - x0) - us * ux) ** 2 + ((frame.source_y - y0) - us * uy) ** 2
+                      + frame.source_height ** 2)
+    rho_k = math.sqrt(((frame.sensor_x - x0) - uk * ux) ** 2 + ((frame.sensor_y - y0) - uk * uy) ** 2
+                      + frame.sensor_height ** 2)
     u = (us * rho_k + uk * rho_s) / (rho_s + rho_k)
     inside = 0.0 < u < length
     if u < 0.0:
@@ -196,7 +205,7 @@ def segment_minimum(frame, x0, y0, x1, y1):
     return path_length_at(frame, x0 + u * ux, y0 + u * uy), inside
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def rectangle_range(frame, x0, x1, y0, y1):
     """[min, max] of d over the rectangle [x0, x1] x [y0, y1], metres.
 
@@ -207,7 +216,7 @@ def rectangle_range(frame, x0, x1, y0, y1):
     top = max(max(path_length_at(frame, x0, y0), path_length_at(frame, x1, y0)),
               max(path_length_at(frame, x0, y1), path_length_at(frame, x1, y1)))
     if x0 <= xs <= x1 and y0 <= ys <= y1:
-        return frame[TMIN], top
+        return frame.first_arrival, top
     low = segment_minimum(frame, x0, y0, x1, y0)[0]
     low = min(low, segment_minimum(frame, x1, y0, x1, y1)[0])
     low = min(low, segment_minimum(frame, x0, y1, x1, y1)[0])
@@ -215,7 +224,7 @@ def rectangle_range(frame, x0, x1, y0, y1):
     return low, top
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def rectangle_crossings(frame, cx, cy, a, b, x0, x1, y0, y1, out):
     """Angles φ where the isochrone crosses the rectangle's four edge lines.
 
@@ -223,8 +232,8 @@ def rectangle_crossings(frame, cx, cy, a, b, x0, x1, y0, y1, out):
     line gives at most two angles. Writes sorted angles in [0, 2π) into
     ``out`` and returns how many.
     """
-    e1 = frame[E1]
-    e2 = frame[E2]
+    e1 = frame.axis_x
+    e2 = frame.axis_y
     r1 = math.hypot(a * e1, b * e2)
     psi1 = math.atan2(b * e2, a * e1)
     r2 = math.hypot(a * e2, b * e1)
@@ -259,3 +268,59 @@ def rectangle_crossings(frame, cx, cy, a, b, x0, x1, y0, y1, out):
             j -= 1
         out[j + 1] = value
     return count
+
+
+def scene_extent(size: float, source, sensors) -> float:
+    """The scene's length scale: the largest of the plane's side and every coordinate's magnitude, metres.
+
+    Plane coordinates and path lengths are as large as this, so it sets the
+    float64 rounding of everything the model computes.
+    """
+    points = np.vstack([np.reshape(np.asarray(source, dtype=np.float64), (1, 3)),
+                        np.reshape(np.asarray(sensors, dtype=np.float64), (-1, 3))])
+    return float(max(abs(float(size)), float(np.max(np.abs(points)))))
+
+
+def minimum_height(size: float, source, sensors) -> float:
+    """Smallest supported height of the source and the sensors, metres: MIN_HEIGHT_FRACTION x extent."""
+    return MIN_HEIGHT_FRACTION * scene_extent(size, source, sensors)
+
+
+def check_heights(size: float, source, sensors) -> None:
+    """Refuse a source or sensor too close to the plane for float64 to resolve its response.
+
+    Parameters
+    ----------
+    size : float
+        Plane side L, metres.
+    source : array_like
+        (x, y, z), metres.
+    sensors : array_like
+        ``(K, 3)``, metres.
+
+    Raises
+    ------
+    analytic.scene.SceneError
+        Naming ``source.position`` or ``sensors.positions[k]`` and the
+        smallest height supported.
+
+    Notes
+    -----
+    Criterion: h >= MIN_HEIGHT_FRACTION x extent (:func:`scene_extent`). The
+    attenuation's peak under a point at height h has width h; below the
+    criterion it spans fewer than ~10⁶ roundings of the plane coordinates
+    and path lengths, and the quadrature can no longer find it (at 1e-300
+    it would silently return ~0 instead of the finite limit).
+    """
+    from .scene import SceneError
+
+    floor = minimum_height(size, source, sensors)
+    checks = [("source.position", np.asarray(source, dtype=np.float64))]
+    checks += [(f"sensors.positions[{k}]", p) for k, p in
+               enumerate(np.reshape(np.asarray(sensors, dtype=np.float64), (-1, 3)))]
+    for key, point in checks:
+        if not point[2] >= floor:
+            raise SceneError(key, f"height {point[2]:.3g} m is below the smallest height supported, "
+                             f"{floor:.3g} m ({MIN_HEIGHT_FRACTION:g} of the scene's extent "
+                             f"{floor / MIN_HEIGHT_FRACTION:.3g} m): float64 cannot resolve the light "
+                             f"under a point that low; raise it to at least {floor:.3g} m")

@@ -1,4 +1,4 @@
-"""Continuous impulse responses g_k(t) from the contour (coarea) form.
+"""Continuous impulse responses g_k(t) from the contour (coarea) form, and the samples they give.
 
     g_k(t) = ∫ f a_k δ(t - d_k) dx = ∮_{d_k = t} f a_k / |∇d_k| ds     (coarea formula)
 
@@ -10,17 +10,20 @@ first-arrival point to about 2 far from it.
 
 The isochrone is cut where it crosses pixel edges, so each arc sees one
 reflectance value and a smooth integrand, integrated by Gauss–Legendre on
-pieces of at most ``max_arc`` radians.
+pieces of at most ``max_arc`` radians. :func:`binned_contour_model`
+integrates g_k over each bin: the samples y_k[n] for the impulse
+illumination by a route independent of the system matrix's quadrature.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .isochrone import LAMBERTIAN, PAPER, ellipse, make_frame
+from .attenuation import attenuation, attenuation_code
+from .isochrone import ellipse, make_frame
 from .scene import Scene
 
-__all__ = ["impulse_response"]
+__all__ = ["impulse_response", "binned_contour_model"]
 
 
 def impulse_response(scene: Scene, sensor: int, times, *, coarea: bool = True, nodes: int = 24,
@@ -50,14 +53,14 @@ def impulse_response(scene: Scene, sensor: int, times, *, coarea: bool = True, n
         With ``coarea=False`` the units differ (per metre of arc length).
     """
     times = np.atleast_1d(np.asarray(times, dtype=np.float64))
-    mode = LAMBERTIAN if scene.attenuation == "lambertian" else PAPER
+    mode = attenuation_code(scene.attenuation)
     source = np.asarray(scene.source, dtype=np.float64)
     position = np.asarray(scene.sensors[sensor], dtype=np.float64)
     frame = make_frame(source, position, mode)
     unit_nodes, unit_weights = np.polynomial.legendre.leggauss(nodes)
     out = np.zeros(times.shape)
     for i, t in enumerate(times.ravel()):
-        if t <= frame[9]:
+        if t <= frame.first_arrival:
             continue
         out.flat[i] = _contour(scene, frame, source, position, t, coarea, unit_nodes, unit_weights, max_arc)
     return out
@@ -65,7 +68,7 @@ def impulse_response(scene: Scene, sensor: int, times, *, coarea: bool = True, n
 
 def _contour(scene, frame, source, sensor, t, coarea, unit_nodes, unit_weights, max_arc):
     cx, cy, a, b, *_ = ellipse(frame, t)
-    e1, e2 = frame[6], frame[7]
+    e1, e2 = frame.axis_x, frame.axis_y
     size, pixels = scene.size, scene.pixels
     delta = scene.pixel_size
     lines = np.arange(pixels + 1) * delta
@@ -98,17 +101,53 @@ def _contour(scene, frame, source, sensor, t, coarea, unit_nodes, unit_weights, 
     column = np.clip(np.floor(xm / delta).astype(int), 0, pixels - 1)
     row = np.clip(np.floor((size - ym) / delta).astype(int), 0, pixels - 1)
     reflectance = np.where(inside, scene.reflectance[row, column], 0.0)
-    dxs, dys = x - source[0], y - source[1]
-    dxk, dyk = x - sensor[0], y - sensor[1]
-    d_source = np.sqrt(dxs**2 + dys**2 + source[2] ** 2)
-    d_sensor = np.sqrt(dxk**2 + dyk**2 + sensor[2] ** 2)
-    if scene.attenuation == "lambertian":
-        atten = source[2] * sensor[2] / (np.pi * d_source**3 * d_sensor**3)
-    else:
-        atten = source[2] / (d_source**3 * d_sensor**2)
+    atten = attenuation(np.stack([x, y], axis=-1), source, sensor, scene.attenuation)
     speed = np.sqrt((a * sin_phi) ** 2 + (b * cos_phi) ** 2)        # |dx/dφ|
     integrand = atten * speed
     if coarea:
-        gradient = np.hypot(dxs / d_source + dxk / d_sensor, dys / d_source + dyk / d_sensor)
+        # |∇d| projected on the plane: the sum of the unit vectors from the source and the sensor
+        d_source = np.sqrt((x - source[0]) ** 2 + (y - source[1]) ** 2 + source[2] ** 2)
+        d_sensor = np.sqrt((x - sensor[0]) ** 2 + (y - sensor[1]) ** 2 + sensor[2] ** 2)
+        gradient = np.hypot((x - source[0]) / d_source + (x - sensor[0]) / d_sensor,
+                            (y - source[1]) / d_source + (y - sensor[1]) / d_sensor)
         integrand = integrand / gradient
     return float(np.sum(reflectance[:, None] * integrand * weight))
+
+
+def binned_contour_model(scene: Scene, *, coarea: bool = True, pieces: int = 8, nodes: int = 8) -> np.ndarray:
+    """y for the impulse illumination from the contour form: ∫_bin g_k(t) dt, ``(K, N)``.
+
+    Parameters
+    ----------
+    scene : Scene
+        A scene with the impulse illumination.
+    coarea : bool
+        False integrates the paper's eq. (3) instead (no 1/|∇d|): a
+        deliberately wrong model for the cross-check's own tests.
+    pieces, nodes : int
+        Composite Gauss–Legendre over each bin: ``pieces`` equal pieces of
+        ``nodes`` points.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(K, N)``, units of y.
+
+    Notes
+    -----
+    y_k[n] = ∫_{t_n}^{t_{n+1}} g_k(t) dt for s = δ (DESIGN.md section 2);
+    g_k is zero before the first arrival, where it contributes nothing.
+    """
+    if scene.illumination.waveform != "impulse":
+        raise ValueError("binned_contour_model: only the impulse illumination")
+    unit, weights = np.polynomial.legendre.leggauss(nodes)
+    edges = scene.sampling.edges
+    y = np.zeros((scene.sensor_count, scene.sampling.count))
+    for k in range(scene.sensor_count):
+        for n in range(scene.sampling.count):
+            cuts = np.linspace(edges[n], edges[n + 1], pieces + 1)
+            centres, halves = 0.5 * (cuts[1:] + cuts[:-1]), 0.5 * np.diff(cuts)
+            t = (centres[:, None] + halves[:, None] * unit[None, :]).ravel()
+            values = impulse_response(scene, k, t, coarea=coarea).reshape(pieces, nodes)
+            y[k, n] = float(np.sum(values * weights[None, :] * halves[:, None]))
+    return y

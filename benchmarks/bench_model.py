@@ -1,147 +1,310 @@
-"""Speed, memory and accuracy of the analytic system matrix.
+"""Speed, memory and accuracy of the exact system matrix A, against a brute force.
 
     python benchmarks/bench_model.py --out out/bench_model [--quick]
+        [--forward-command "{python} -m validation.cli forward {scene} --out {out} --quiet"]
 
-Measures (warm: Numba kernels compiled and cached before timing):
-- the default scene's A (M = 50, K = 16) at tolerance 1e-6, and M = 256;
-- memory: bytes of A against nnz, and the process's peak resident memory;
-- build time against achieved accuracy over the tolerance setting, beside a
-  brute-force supersampled grid (S x S point samples per pixel) — achieved
-  error is max |A - A_ref| / (row max), A_ref the tolerance-1e-7 assembly
-  (itself checked against an independent QUADPACK reference in the tests).
-Prints markdown tables and writes ``results.json`` in --out.
+Measures, on this machine (named in the output, with its load average):
+
+1. Where ``forward``'s time goes: Python start, imports, Numba's first
+   dispatch (cache load), A, y = A f, and the rest of the command (writing
+   files, the figure), each in a fresh process.
+2. A's build against NumPy midpoint supersampling (benchmarks/supersampled.py),
+   in one process (ratios): 32 x 32 samples per pixel at M = 50 and 8 x 8 at
+   M = 256, K = 16, with every entry's error relative to its row's largest
+   against a tight assembly (tolerance MIN_TOLERANCE).
+3. The same end to end, process start to files written: ``forward`` (the
+   command above; the CLI is being restructured, so it is a parameter) and
+   the brute-force script, on the same scene file.
+4. Scaling: time, CPU time, non-zeros, time per non-zero and peak memory
+   against M (64 ... 1024, K = 16) and against K (1 ... 64, M = 256), each
+   in a fresh process.
+5. The tolerance setting: build time and achieved error (against the tight
+   assembly) from 1e-2 to 1e-8 on the default scene.
+
+Prints markdown tables and writes ``results.json`` in --out. Timings on a
+shared machine are provisional: compare ratios taken in the same run.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import os
 import platform
-import resource
+import shlex
+import subprocess
 import sys
+import tempfile
 import time
 import warnings
 from pathlib import Path
 
-import numpy as np
-import scipy.sparse
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from analytic.io import save_json  # noqa: E402
-from analytic.binning import bin_index  # noqa: E402
 from analytic.scene import default_scene  # noqa: E402
-from analytic.system import QuadratureWarning, system_matrix  # noqa: E402
+from analytic.system import MIN_TOLERANCE, QuadratureWarning, system_matrix  # noqa: E402
+from supersampled import supersampled  # noqa: E402
+
+FORWARD = "{python} -m validation.cli forward {scene} --out {out} --quiet"
+BRUTE = ("{python} " + str(Path(__file__).resolve().parent / "supersampled.py")
+         + " {scene} --factor {factor} --out {out}")
 
 
 def machine() -> str:
     model = "unknown CPU"
     try:
-        for line in open("/proc/cpuinfo"):
-            if line.startswith("model name"):
-                model = line.split(":", 1)[1].strip()
-                break
+        with open("/proc/cpuinfo") as handle:
+            for line in handle:
+                if line.startswith("model name"):
+                    model = line.split(":", 1)[1].strip()
+                    break
     except OSError:
         pass
-    import os
     return f"{model}, {os.cpu_count()} cores, Python {platform.python_version()}"
 
 
-def timed(function, repeats=3):
-    best = np.inf
-    result = None
+def load() -> str:
+    try:
+        return " ".join(open("/proc/loadavg").read().split()[:3])
+    except OSError:
+        return "unknown"
+
+
+def scene_file(folder: Path, pixels: int, grid: int) -> Path:
+    """The default scene's geometry (source 1 m above the centre, grid x grid sensors of extent 1 m,
+    T = 0.1 m, 40 bins from 0, impulse, lambertian) with M = pixels and a uniform reflectance."""
+    path = folder / f"scene_M{pixels}_K{grid * grid}.toml"
+    path.write_text(f"""[plane]
+size = 1.0
+pixels = {pixels}
+reflectance = 0.5
+
+[source]
+position = [0.5, 0.5, 1.0]
+
+[illumination]
+waveform = "impulse"
+
+[sensors]
+grid = [{grid}, {grid}]
+extent = 1.0
+center = [0.5, 0.5, 1.0]
+
+[sampling]
+period = 0.1
+start = 0.0
+count = 40
+
+[model]
+attenuation = "lambertian"
+""")
+    return path
+
+
+def run(command: str) -> float:
+    """Wall seconds of a command, process start to exit (it must succeed)."""
+    environment = dict(os.environ, PYTHONPATH=str(ROOT))
+    started = time.perf_counter()
+    subprocess.run(shlex.split(command), check=True, env=environment, stdout=subprocess.DEVNULL)
+    return time.perf_counter() - started
+
+
+def child(code: str) -> dict:
+    """Run a Python snippet in a fresh process; it prints one JSON object."""
+    environment = dict(os.environ, PYTHONPATH=str(ROOT))
+    done = subprocess.run([sys.executable, "-c", code], check=True, env=environment, capture_output=True,
+                          text=True)
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+BREAKDOWN = """
+import time, json
+t0 = time.perf_counter()
+import numpy, scipy.sparse
+t1 = time.perf_counter()
+import numba
+t2 = time.perf_counter()
+from analytic.scene import load_scene
+from analytic.system import system_matrix
+t3 = time.perf_counter()
+scene = load_scene({scene!r})
+system_matrix(scene.replace(pixels=2, reflectance=0.5))
+t4 = time.perf_counter()
+matrix = system_matrix(scene)
+t5 = time.perf_counter()
+y = matrix @ scene.reflectance.ravel()
+t6 = time.perf_counter()
+print(json.dumps(dict(numpy_scipy=t1 - t0, numba=t2 - t1, analytic=t3 - t2, first_dispatch=t4 - t3,
+                      matrix=t5 - t4, product=t6 - t5)))
+"""
+
+SCALING = """
+import time, json, resource, warnings
+from analytic.scene import load_scene
+from analytic.system import system_matrix
+
+def resident_kib(field):
+    with open("/proc/self/status") as handle:
+        for line in handle:
+            if line.startswith(field + ":"):
+                return int(line.split()[1])
+
+scene = load_scene({scene!r})
+system_matrix(scene.replace(pixels=2, reflectance=0.5))
+with open("/proc/self/clear_refs", "w") as handle:     # reset the peak (VmHWM) to the current size
+    handle.write("5")
+before = resident_kib("VmRSS")
+wall = time.perf_counter()
+cpu = time.process_time()
+matrix = system_matrix(scene)
+wall = time.perf_counter() - wall
+cpu = time.process_time() - cpu
+peak = resident_kib("VmHWM")
+print(json.dumps(dict(seconds=wall, cpu_seconds=cpu, nnz=int(matrix.nnz), rss_before_kib=before, rss_peak_kib=peak,
+                      matrix_bytes=int(matrix.data.nbytes + matrix.indices.nbytes + matrix.indptr.nbytes))))
+"""
+
+
+def best(function, repeats):
+    times, result = [], None
     for _ in range(repeats):
         started = time.perf_counter()
         result = function()
-        best = min(best, time.perf_counter() - started)
-    return best, result
+        times.append(time.perf_counter() - started)
+    return min(times), result
 
 
-def matrix_bytes(matrix) -> int:
-    return matrix.data.nbytes + matrix.indices.nbytes + matrix.indptr.nbytes
-
-
-def supersampled(scene, factor: int):
-    """Brute force: factor² point samples per pixel, binned with the shared binning (impulse)."""
-    size, pixels = scene.size, scene.pixels
-    delta = size / pixels
-    count = scene.sampling.count
-    offsets = (np.arange(factor) + 0.5) / factor
-    cells = np.arange(pixels)
-    x = ((cells[:, None] + offsets[None, :]) * delta).ravel()             # column-major within pixels
-    y = (size - (cells[:, None] + offsets[None, :]) * delta).ravel()       # row r from the top
-    xx, yy = np.meshgrid(x, y)
-    pixel = (np.arange(pixels * factor) // factor)
-    index = (pixel[:, None] * pixels + pixel[None, :]).ravel()
-    weight_area = (delta / factor) ** 2
-    blocks = []
-    source = scene.source
-    for k, sensor in enumerate(scene.sensors):
-        ds = np.sqrt((xx - source[0]) ** 2 + (yy - source[1]) ** 2 + source[2] ** 2)
-        dk = np.sqrt((xx - sensor[0]) ** 2 + (yy - sensor[1]) ** 2 + sensor[2] ** 2)
-        a = source[2] * sensor[2] / (np.pi * ds**3 * dk**3) * weight_area
-        n, inside = bin_index(ds + dk, scene.sampling.start_opl, scene.sampling.bin_width_opl, count)
-        rows = (k * count + n[inside]).astype(np.int64).ravel()
-        blocks.append(scipy.sparse.coo_array((a[inside].ravel(), (rows, index[inside.ravel()])),
-                                             shape=(scene.sensor_count * count, pixels * pixels)))
-    return sum(block.tocsr() for block in blocks)
-
-
-def relative_error(matrix, reference) -> float:
-    row_max = reference.max(axis=1).toarray().ravel()
+def error_against(matrix, reference) -> float:
+    """max over entries of |A - A_ref| / (its row's largest |A_ref|)."""
+    row_max = abs(reference).max(axis=1).toarray().ravel()
     row_max[row_max == 0] = 1.0
-    difference = abs(matrix - reference).max(axis=1).toarray().ravel()
-    return float((difference / row_max).max())
+    return float((abs(matrix - reference).max(axis=1).toarray().ravel() / row_max).max())
+
+
+def tight(scene):
+    with warnings.catch_warnings():     # a few pieces stop at float64's rounding at this tolerance
+        warnings.simplefilter("ignore", QuadratureWarning)
+        return system_matrix(scene, tolerance=MIN_TOLERANCE)
+
+
+def table(header, rows):
+    print("| " + " | ".join(header) + " |")
+    print("|" + "---|" * len(header))
+    for row in rows:
+        print("| " + " | ".join(row) + " |")
+    print()
 
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default="out/bench_model")
-    parser.add_argument("--quick", action="store_true", help="skip M = 256")
+    parser.add_argument("--quick", action="store_true", help="skip M = 512, 1024 and K = 64; fewer repeats")
+    parser.add_argument("--forward-command", default=FORWARD,
+                        help="end-to-end command; {python}, {scene} and {out} are filled in")
     args = parser.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    results = {"machine": machine()}
-    scene = default_scene(noise=None)
-    system_matrix(scene.replace(pixels=4, reflectance=0.5))   # compile / load the cached kernels
+    repeats = 2 if args.quick else 3
+    results = {"machine": machine(), "load_average_start": load(), "forward_command": args.forward_command}
+    print(f"machine: {results['machine']}; load average at start {results['load_average_start']} "
+          f"(shared machine: timings provisional)\n")
+    system_matrix(default_scene(pixels=2, noise=None))       # compile or load the cached kernels
+    work = Path(tempfile.mkdtemp(prefix="bench_model_"))
+    python = shlex.quote(sys.executable)
 
-    seconds, matrix = timed(lambda: system_matrix(scene))
-    dense = scene.sensor_count * scene.sampling.count * scene.pixels**2 * 8
-    results["default"] = {"M": 50, "K": 16, "seconds": seconds, "nnz": int(matrix.nnz),
-                          "bytes": matrix_bytes(matrix), "dense_bytes": dense}
-    print(f"machine: {results['machine']}\n")
-    print("| scene | M | K | build (s) | nnz | A (MiB) | dense would be (MiB) |")
-    print("|---|---|---|---|---|---|---|")
-    print(f"| default | 50 | 16 | {seconds:.2f} | {matrix.nnz:,} | {matrix_bytes(matrix) / 2**20:.2f} | "
-          f"{dense / 2**20:.0f} |")
-    if not args.quick:
-        big = default_scene(pixels=256, noise=None)
-        seconds, matrix = timed(lambda: system_matrix(big), repeats=1)
-        dense = big.sensor_count * big.sampling.count * big.pixels**2 * 8
-        results["M256"] = {"M": 256, "K": 16, "seconds": seconds, "nnz": int(matrix.nnz),
-                           "bytes": matrix_bytes(matrix), "dense_bytes": dense}
-        print(f"| default | 256 | 16 | {seconds:.2f} | {matrix.nnz:,} | {matrix_bytes(matrix) / 2**20:.2f} | "
-              f"{dense / 2**20:.0f} |")
-        del matrix
-    results["peak_rss_mib"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    print(f"\npeak resident memory of this process: {results['peak_rss_mib']:.0f} MiB\n")
+    # 1. where forward's time goes
+    scene50 = scene_file(work, 50, 4)
+    startup = min(run(f"{python} -c pass") for _ in range(repeats))
+    parts = [child(BREAKDOWN.format(scene=str(scene50))) for _ in range(repeats)]
+    parts = {key: min(p[key] for p in parts) for key in parts[0]}
+    total = min(run(args.forward_command.format(python=python, scene=scene50, out=work / "forward"))
+                for _ in range(repeats))
+    parts = {"python_start": startup, **parts}
+    parts["rest_of_command"] = total - sum(parts.values())
+    results["forward_breakdown"] = {**parts, "total": total}
+    print("Where forward's time goes (M = 50, K = 16; each part best of fresh processes):\n")
+    table(["part", "seconds", "share"], [[key.replace("_", " "), f"{value:.3f}", f"{value / total:.0%}"]
+                                         for key, value in parts.items()] + [["total", f"{total:.3f}", ""]])
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", QuadratureWarning)
-        reference = system_matrix(scene, tolerance=1e-7)
+    # 2. A against the brute force, in this process
+    rows, comparison = [], []
+    for pixels, factor in ((50, 32), (256, 8)):
+        scene = default_scene(pixels=pixels, noise=None)
+        reference = tight(scene)
+        exact_seconds, exact = best(lambda scene=scene: system_matrix(scene), repeats)
+        sampling = scene.sampling
+        brute_seconds, brute = best(
+            lambda scene=scene, pixels=pixels, factor=factor, sampling=sampling: supersampled(
+                scene.size, pixels, scene.source, scene.sensors, sampling.start_opl, sampling.bin_width_opl,
+                sampling.count, factor), repeats)
+        entry = {"M": pixels, "K": scene.sensor_count, "factor": factor, "exact_seconds": exact_seconds,
+                 "exact_error": error_against(exact, reference), "brute_seconds": brute_seconds,
+                 "brute_error": error_against(brute, reference), "ratio": exact_seconds / brute_seconds,
+                 "nnz": int(exact.nnz)}
+        comparison.append(entry)
+        rows.append([str(pixels), f"{factor}x{factor}", f"{exact_seconds:.3f}", f"{entry['exact_error']:.1e}",
+                     f"{brute_seconds:.3f}", f"{entry['brute_error']:.1e}", f"{entry['ratio']:.2f}"])
+    results["against_brute_force"] = comparison
+    print("A's build against midpoint supersampling (K = 16, tolerance 1e-6; same process, best of "
+          f"{repeats}; error = max |A - A_tight| / row max):\n")
+    table(["M", "brute force", "exact (s)", "exact error", "brute (s)", "brute error", "exact / brute"], rows)
+
+    # 3. end to end
+    rows, ends = [], []
+    for pixels, factor in ((50, 32), (256, 8)):
+        path = scene_file(work, pixels, 4)
+        forward_seconds = min(run(args.forward_command.format(python=python, scene=path, out=work / f"f{pixels}"))
+                              for _ in range(repeats))
+        brute_seconds = min(run(BRUTE.format(python=python, scene=path, factor=factor, out=work / f"b{pixels}"))
+                            for _ in range(repeats))
+        ends.append({"M": pixels, "factor": factor, "forward_seconds": forward_seconds,
+                     "brute_seconds": brute_seconds, "ratio": forward_seconds / brute_seconds})
+        rows.append([str(pixels), f"{factor}x{factor}", f"{forward_seconds:.2f}", f"{brute_seconds:.2f}",
+                     f"{forward_seconds / brute_seconds:.2f}"])
+    results["end_to_end"] = ends
+    print(f"End to end, process start to files written (best of {repeats}); forward = "
+          f"`{args.forward_command}`:\n")
+    table(["M", "brute force", "forward (s)", "brute script (s)", "forward / brute"], rows)
+
+    # 4. scaling
+    sizes = (64, 128, 256) if args.quick else (64, 128, 256, 512, 1024)
+    grids = (1, 2, 4) if args.quick else (1, 2, 4, 8)
+    scaling = []
+    for pixels, grid in [(m, 4) for m in sizes] + [(256, g) for g in grids if g != 4]:
+        entry = child(SCALING.format(scene=str(scene_file(work, pixels, grid))))
+        entry.update(M=pixels, K=grid * grid)
+        scaling.append(entry)
+    results["scaling"] = scaling
+    print("Scaling (fresh process each; memory = growth of the peak resident size while A is built, "
+          "A itself included):\n")
     rows = []
-    for tolerance in (1e-2, 1e-3, 1e-4, 1e-5, 1e-6):
-        seconds, matrix = timed(lambda: system_matrix(scene, tolerance=tolerance))
-        rows.append({"method": "isochrone quadrature", "setting": f"tolerance {tolerance:g}",
-                     "seconds": seconds, "error": relative_error(matrix, reference)})
-    for factor in (2, 4, 8, 16, 32):
-        seconds, matrix = timed(lambda: supersampled(scene, factor), repeats=1)
-        rows.append({"method": "supersampled grid", "setting": f"{factor}x{factor} per pixel",
-                     "seconds": seconds, "error": relative_error(matrix, reference)})
-    results["accuracy"] = rows
-    print("| method | setting | build (s) | max error / row max |")
-    print("|---|---|---|---|")
-    for row in rows:
-        print(f"| {row['method']} | {row['setting']} | {row['seconds']:.3f} | {row['error']:.1e} |")
+    for entry in sorted(scaling, key=lambda e: (e["K"] != 16, e["K"], e["M"])):
+        growth = max(entry["rss_peak_kib"] - entry["rss_before_kib"], 0) * 1024
+        rows.append([str(entry["M"]), str(entry["K"]), f"{entry['seconds']:.2f}", f"{entry['cpu_seconds']:.2f}",
+                     f"{entry['nnz']:,}", f"{entry['seconds'] / entry['nnz'] * 1e6:.2f}",
+                     f"{growth / 2**20:.0f}", f"{growth / entry['nnz']:.0f}",
+                     f"{entry['matrix_bytes'] / 2**20:.1f}"])
+    table(["M", "K", "wall (s)", "CPU (s)", "nnz", "µs per nnz (wall)", "memory (MiB)", "bytes per nnz",
+           "A (MiB)"], rows)
+
+    # 5. tolerance
+    scene = default_scene(noise=None)
+    reference = tight(scene)
+    rows, sweep = [], []
+    for tolerance in (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8):
+        seconds, matrix = best(lambda tolerance=tolerance: system_matrix(scene, tolerance=tolerance), repeats)
+        error = error_against(matrix, reference)
+        sweep.append({"tolerance": tolerance, "seconds": seconds, "error": error})
+        rows.append([f"{tolerance:g}", f"{seconds:.3f}", f"{error:.1e}", f"{tolerance / error:.1f}"])
+    results["tolerance"] = sweep
+    print(f"Tolerance (default scene, M = 50, K = 16; reference: tolerance {MIN_TOLERANCE:g}; best of {repeats}):\n")
+    table(["tolerance", "build (s)", "achieved error", "tolerance / error"], rows)
+
+    results["load_average_end"] = load()
+    print(f"load average at end {results['load_average_end']}")
     save_json(out / "results.json", results)
 
 

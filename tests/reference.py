@@ -1,10 +1,13 @@
 """Independent high-precision references for the analytic model's tests.
 
-Nothing here shares code with ``analytic.system`` or ``analytic.isochrone``:
-distances and attenuation are written out again, isochrone crossings are
-found by bracketing root search on d along each line (not from the ellipse
-formulas), and integrals use SciPy's adaptive QUADPACK instead of the
-Gauss–Kronrod kernels.
+Nothing here shares code with ``analytic``: distances and attenuation are
+written out again, pixel boxes follow DESIGN.md section 1 directly,
+isochrone crossings are found by bracketing root search on d along each
+line (not from the ellipse formulas), integrals use SciPy's adaptive
+QUADPACK instead of the model's Gauss ladders, and the waveforms' S(u) comes
+from ``waveform_reference`` (the Butterworth pulse as an mpmath state-space
+model, interpolated here by Chebyshev polynomials for speed and checked
+against it), not from ``analytic.waveforms``.
 
 A[(k, n), p] = ∫_{x0}^{x1} dx ∫_{y ∈ [y0, y1]} a(x, y) κ_n(d(x, y)) dy, where
 for fixed x the inner integrand is smooth between the roots of
@@ -20,6 +23,99 @@ import warnings
 
 import numpy as np
 from scipy import integrate, optimize
+from waveform_reference import ButterworthReference
+
+
+def pixel_box(size, pixels, p):
+    """(x0, x1, y0, y1) of pixel p = r M + c: image[r, c] covers x in [cΔ, (c+1)Δ), y in [L-(r+1)Δ, L-rΔ)."""
+    delta = size / pixels
+    r, c = divmod(int(p), pixels)
+    return c * delta, (c + 1) * delta, size - (r + 1) * delta, size - r * delta
+
+
+def _clenshaw(coefficients, scale, shift, u):
+    """Σ c_j T_j(x) at x = scale u + shift, by Clenshaw's recurrence (scalar, pure Python)."""
+    x = scale * u + shift
+    twice = 2.0 * x
+    upper = lower = 0.0
+    for c in coefficients[:0:-1]:
+        upper, lower = twice * upper - lower + c, upper
+    return x * upper - lower + coefficients[0]
+
+
+def _chebyshev(function, low, high, degree):
+    """Coefficients, scale and shift of the Chebyshev interpolant of ``function`` on [low, high]."""
+    nodes = np.polynomial.chebyshev.chebpts1(degree + 1)
+    scale = 2.0 / (high - low)
+    shift = -1.0 - scale * low
+    values = [function((x - shift) / scale) for x in nodes]
+    return [float(c) for c in np.polynomial.chebyshev.chebfit(nodes, values, degree)], scale, shift
+
+
+@functools.lru_cache(maxsize=16)
+def _butterworth_cumulative(order, cutoff, duration):
+    """S(u) on [0, duration] from the mpmath reference, checked to 1e-13 relative.
+
+    An all-pole filter of order n starts as t^(n-1), so S(u) = u^n g(u) with
+    g smooth: on the first quarter g is interpolated (keeping S relatively
+    accurate as u -> 0, where the first-arrival bins sample it), on the rest
+    S itself, each by a Chebyshev series.
+    """
+    pulse = ButterworthReference(order, cutoff, duration)
+    split = 0.25 * duration
+    head = _chebyshev(lambda u: pulse.cumulative(u) / u**order, 0.0, split, 32)
+    tail = _chebyshev(pulse.cumulative, split, duration, 32)
+
+    def function(u):
+        if u < split:
+            return u**order * _clenshaw(*head, u)
+        return _clenshaw(*tail, u)
+
+    for u in np.concatenate([np.geomspace(1e-9, 1e-2, 5), np.linspace(0.0, 1.0, 13)[1:] - 1 / 29]) * duration:
+        exact = pulse.cumulative(u)
+        assert abs(function(u) - exact) <= 1e-13 * abs(exact), "Chebyshev interpolant of S(u) too coarse"
+    return function
+
+
+def cumulative(illumination, period):
+    """S(u) of a scene's ``[illumination]`` (defaults resolved from ``period`` as DESIGN.md states), and its duration.
+
+    Returns
+    -------
+    function, float
+        S as a scalar function of u (metres), and the pulse's duration (0
+        for the impulse): S has breakpoints at 0 and at the duration.
+    """
+    if illumination.waveform == "impulse":
+        return (lambda u: 1.0 if u > 0 else 0.0), 0.0
+    if illumination.waveform == "square":
+        width = period / 5.0 if illumination.width is None else illumination.width
+        return (lambda u: min(max(u, 0.0), width)), width
+    cutoff = 0.5 / period if illumination.cutoff is None else illumination.cutoff
+    duration = 3.0 / cutoff if illumination.duration is None else illumination.duration
+    order = 3 if illumination.order is None else illumination.order
+    inside = _butterworth_cumulative(int(order), float(cutoff), float(duration))
+    end = inside(duration)
+    return (lambda u: 0.0 if u <= 0 else end if u >= duration else inside(u)), duration
+
+
+def bin_kernel(illumination, start, period, n):
+    """κ_n(τ) = S(t_{n+1} - τ) - S(t_n - τ) with t_n = start + n period, and where it is not smooth.
+
+    Returns
+    -------
+    function, list of float
+        κ_n as a scalar function of τ (metres), and its breakpoints.
+    """
+    lower = start + period * n
+    upper = start + period * (n + 1)
+    function, duration = cumulative(illumination, period)
+
+    def kernel(tau):
+        return function(upper - tau) - function(lower - tau)
+
+    breakpoints = [lower, upper] + ([lower - duration, upper - duration] if duration > 0 else [])
+    return kernel, breakpoints
 
 
 def distance_sum(x, y, source, sensor):
@@ -120,10 +216,6 @@ def pixel_entry(box, source, sensor, kernel, breakpoints, kind="lambertian", eps
         if hi > lo:
             value += integrate.quad(inner, lo, hi, epsabs=0.0, epsrel=epsrel, limit=400)[0]
     return value
-
-
-def box_kernel(lower, upper):
-    return lambda tau: 1.0 if lower <= tau < upper else 0.0
 
 
 @_quiet

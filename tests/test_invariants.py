@@ -7,10 +7,10 @@ import pytest
 from reference import contour_response
 from scipy import integrate
 
-from analytic.attenuation import attenuation
-from analytic.isochrone import attenuation_at, make_frame
+from analytic.attenuation import LAMBERTIAN, PAPER, attenuation, attenuation_at
+from analytic.isochrone import MIN_HEIGHT_FRACTION, make_frame, scene_extent
 from analytic.response import impulse_response
-from analytic.scene import Illumination, Sampling, Scene, default_scene
+from analytic.scene import Illumination, Sampling, Scene, SceneError, default_scene
 from analytic.system import system_matrix
 from analytic.waveforms import make_waveform
 
@@ -87,8 +87,8 @@ def test_paper_and_lambertian_differ_by_pi_over_cos(rng):
     ratio = attenuation(points, source, sensor, "paper") / attenuation(points, source, sensor, "lambertian")
     d_sensor = np.sqrt(((points - sensor[:2]) ** 2).sum(axis=1) + sensor[2] ** 2)
     np.testing.assert_allclose(ratio, np.pi * d_sensor / sensor[2], rtol=1e-13)
-    # the compiled twin used by the quadrature agrees pointwise
-    for mode, kind in ((0, "lambertian"), (1, "paper")):
+    # the compiled (Numba) form used by the quadrature agrees pointwise
+    for mode, kind in ((LAMBERTIAN, "lambertian"), (PAPER, "paper")):
         frame = make_frame(source, sensor, mode)
         compiled = np.array([attenuation_at(frame, *p) for p in points])
         np.testing.assert_allclose(compiled, attenuation(points, source, sensor, kind), rtol=1e-13)
@@ -127,17 +127,6 @@ def test_paper_contour_without_coarea_factor_is_measurably_wrong():
     assert np.max(np.abs(wrong / right - 1)) > 0.3
 
 
-def test_adjoint_passes_dot_test(rng):
-    scene = default_scene(pixels=16, noise=None)
-    matrix = system_matrix(scene)
-    u = rng.standard_normal(matrix.shape[1])
-    v = rng.standard_normal(matrix.shape[0])
-    left = np.dot(matrix @ u, v)
-    right = np.dot(u, matrix.T @ v)
-    assert abs(left - right) <= 1e-6 * max(abs(left), abs(right))
-    assert matrix.dtype == np.float64
-
-
 def test_image_orientation_top_left_pixel_is_nearest_to_a_sensor_above_it():
     """image[0, 0] covers x ∈ [0, Δ), y ∈ [L - Δ, L): a sensor above (0, L) sees it first."""
     scene = Scene(pixels=8, source=(0.05, 0.95, 0.3), sensors=[(0.0, 1.0, 0.3)],
@@ -146,3 +135,42 @@ def test_image_orientation_top_left_pixel_is_nearest_to_a_sensor_above_it():
     first_bins = np.array([np.nonzero(matrix[:, p])[0].min() for p in range(64)])
     assert np.argmin(first_bins) == 0
     assert first_bins[0] < first_bins[7] and first_bins[0] < first_bins[56]
+
+
+def _foot_scene(height, *, low="source", pixels=10):
+    """A uniform plane (ρ = 0.5) over its whole response, with the source or the sensor at ``height``."""
+    low_point, other = (0.37, 0.52, height), (0.8, 0.3, 0.7)
+    source, sensor = (low_point, other) if low == "source" else (other, low_point)
+    return Scene(pixels=pixels, reflectance=0.5, source=source, sensors=[sensor],
+                 sampling=Sampling(bin_width_opl=0.05, start_opl=0.5, count=40))
+
+
+@pytest.mark.parametrize("low", ["source", "sensor"])
+def test_response_tends_to_its_limit_as_a_point_nears_the_plane(low):
+    """Σ_n y[n] -> 2 ρ cos θ / d² (d, θ from the foot to the other point) as the height -> 0.
+
+    Under a point at height h the attenuation is a peak of area 2π h_other /
+    (π d³) whatever h; the rest of the plane contributes O(h). The model must
+    reach the limit down to the smallest supported height, MIN_HEIGHT_FRACTION
+    of the scene's extent (just above it here).
+    """
+    foot, other = np.array([0.37, 0.52]), np.array([0.8, 0.3, 0.7])
+    distance = np.sqrt(np.sum((foot - other[:2]) ** 2) + other[2] ** 2)
+    limit = 2.0 * 0.5 * other[2] / distance**3
+    deviations = []
+    for height in (1e-3, 1e-6, 2 * MIN_HEIGHT_FRACTION):
+        scene = _foot_scene(height, low=low)
+        total = float(np.sum(system_matrix(scene) @ scene.reflectance.ravel()))
+        deviations.append(abs(total / limit - 1.0))
+    assert deviations[-1] <= 1e-5
+    assert deviations == sorted(deviations, reverse=True)
+
+
+@pytest.mark.parametrize("low", ["source", "sensor"])
+@pytest.mark.parametrize("height", [1e-300, 5e-324, 0.5 * MIN_HEIGHT_FRACTION])
+def test_heights_below_the_supported_floor_are_refused(low, height):
+    scene = _foot_scene(height, low=low)
+    assert MIN_HEIGHT_FRACTION * scene_extent(scene.size, scene.source, scene.sensors) > height
+    key = "source.position" if low == "source" else r"sensors.positions\[0\]"
+    with pytest.raises(SceneError, match=key + ".*smallest height supported"):
+        system_matrix(scene)

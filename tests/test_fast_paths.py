@@ -1,0 +1,112 @@
+"""Each fast quadrature route of the system matrix agrees with the adaptive one.
+
+A's entries are computed by three routes (analytic.system): the tensor rule
+on a whole pixel that no kernel breakpoint crosses ("smooth"), the tensor
+rule in (τ, φ) on each τ-piece of a cut pixel ("isochrone"), and adaptive
+φ-integrals inside adaptive τ-integrals ("adaptive", the slowest and most
+general). On random scenes, pixels, sensors and waveforms every route must
+give the adaptive route's entries to 1e-9 of the pair's largest.
+"""
+
+import numpy as np
+import pytest
+
+from analytic.isochrone import first_arrival_point, make_frame
+from analytic.scene import Illumination, Sampling, Scene
+from analytic.system import pair_entries
+
+AGREEMENT = 1e-9
+TOLERANCE = 1e-10
+
+
+def _random_scene(rng, waveform):
+    """A plane seen by two sensors at random places and heights, sampled over its whole response."""
+    source = (rng.uniform(-0.3, 1.3), rng.uniform(-0.3, 1.3), rng.uniform(0.15, 1.5))
+    sensors = [(rng.uniform(-0.3, 1.3), rng.uniform(-0.3, 1.3), rng.uniform(0.15, 1.5)) for _ in range(2)]
+    corners = np.array([(0, 0), (1, 0), (0, 1), (1, 1), (0.5, 0.5)], dtype=float)
+    lengths = [np.hypot(np.hypot(*(corners - np.array(p[:2])).T), p[2]) for p in [source]]
+    reach = max(np.max(lengths[0] + np.hypot(np.hypot(*(corners - np.array(s[:2])).T), s[2]))
+                for s in sensors)
+    period = rng.uniform(0.02, 0.3)
+    return Scene(pixels=int(rng.integers(4, 40)), source=source, sensors=sensors,
+                 illumination=Illumination(waveform=waveform),
+                 sampling=Sampling(bin_width_opl=period, start_opl=0.0,
+                                   count=int(np.ceil((reach + 1.0) / period))))
+
+
+def _pairs(rng, count):
+    """(scene, sensor, pixel) triples over random scenes and all three waveforms."""
+    triples = []
+    while len(triples) < count:
+        scene = _random_scene(rng, str(rng.choice(["impulse", "square", "butterworth"])))
+        for _ in range(4):
+            triples.append((scene, int(rng.integers(scene.sensor_count)), int(rng.integers(scene.pixels**2))))
+    return triples[:count]
+
+
+def _clear_of_feet_and_birth(scene, sensor, pixel):
+    """Whether the (τ, φ) tensor rule applies: no foot within a pixel side, x* outside the pixel."""
+    delta = scene.pixel_size
+    r, c = divmod(pixel, scene.pixels)
+    x0, x1, y0, y1 = c * delta, (c + 1) * delta, scene.size - (r + 1) * delta, scene.size - r * delta
+    for point in (scene.source, scene.sensors[sensor]):
+        dx = max(x0 - point[0], 0.0, point[0] - x1)
+        dy = max(y0 - point[1], 0.0, point[1] - y1)
+        if dx * dx + dy * dy + point[2] ** 2 < delta**2:
+            return False
+    xs, ys = first_arrival_point(make_frame(np.asarray(scene.source, float),
+                                            np.asarray(scene.sensors[sensor], float), 0))
+    return not (x0 <= xs <= x1 and y0 <= ys <= y1)
+
+
+def _assert_agree(fast, adaptive, label):
+    first_fast, values_fast = fast
+    first_adaptive, values_adaptive = adaptive
+    assert first_fast == first_adaptive and len(values_fast) == len(values_adaptive), label
+    scale = np.max(np.abs(values_adaptive)) if len(values_adaptive) else 0.0
+    assert np.max(np.abs(values_fast - values_adaptive), initial=0.0) <= AGREEMENT * scale, label
+
+
+def test_smooth_route_agrees_with_adaptive(rng):
+    checked = 0
+    for scene, sensor, pixel in _pairs(rng, 120):
+        try:
+            smooth = pair_entries(scene, sensor, pixel, method="smooth", tolerance=TOLERANCE)
+        except ValueError:      # a breakpoint crosses this pixel, or a foot is near
+            continue
+        adaptive = pair_entries(scene, sensor, pixel, method="adaptive", tolerance=TOLERANCE)
+        _assert_agree(smooth, adaptive, (scene.illumination.waveform, sensor, pixel))
+        checked += 1
+    assert checked >= 30
+
+
+def test_isochrone_route_agrees_with_adaptive(rng):
+    checked = 0
+    for scene, sensor, pixel in _pairs(rng, 40):
+        if not _clear_of_feet_and_birth(scene, sensor, pixel):
+            continue
+        isochrone = pair_entries(scene, sensor, pixel, method="isochrone", tolerance=TOLERANCE)
+        adaptive = pair_entries(scene, sensor, pixel, method="adaptive", tolerance=TOLERANCE)
+        _assert_agree(isochrone, adaptive, (scene.illumination.waveform, sensor, pixel))
+        checked += 1
+    assert checked >= 20
+
+
+@pytest.mark.parametrize("waveform", ["impulse", "square", "butterworth"])
+def test_assembly_route_agrees_with_adaptive(rng, waveform):
+    """What system_matrix does (whichever route each pair takes) against the adaptive route."""
+    scene = _random_scene(rng, waveform)
+    for sensor in range(scene.sensor_count):
+        for pixel in rng.choice(scene.pixels**2, size=8, replace=False):
+            auto = pair_entries(scene, sensor, int(pixel), method="auto", tolerance=TOLERANCE)
+            adaptive = pair_entries(scene, sensor, int(pixel), method="adaptive", tolerance=TOLERANCE)
+            _assert_agree(auto, adaptive, (waveform, sensor, pixel))
+
+
+def test_unknown_route_and_inapplicable_smooth_route_are_refused():
+    scene = Scene(pixels=4, source=(0.5, 0.5, 1.0), sensors=[(0.5, 0.5, 1.0)],
+                  sampling=Sampling(bin_width_opl=0.001, start_opl=1.9, count=400))
+    with pytest.raises(ValueError, match="method"):
+        pair_entries(scene, 0, 0, method="fast")
+    with pytest.raises(ValueError, match="does not apply"):     # 1 mm bins cross every pixel
+        pair_entries(scene, 0, 5, method="smooth")

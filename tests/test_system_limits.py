@@ -1,0 +1,82 @@
+"""Extreme but legal inputs give the right numbers; impossible ones are refused before any work.
+
+Resource limits are checked before anything of A's size is allocated (the
+column and row pointers first, then the exactly counted non-zeros), and the
+message names the setting, what it needs and the limit.
+"""
+
+import time
+
+import numpy as np
+import pytest
+
+from analytic.scene import Illumination, Sampling, Scene, SceneError
+from analytic.system import MIN_TOLERANCE, count_entries, forward, system_matrix
+
+
+def _scene(**changes):
+    base = dict(pixels=6, reflectance=0.5, source=(0.4, 0.6, 0.8), sensors=[(0.7, 0.3, 0.6)],
+                sampling=Sampling(bin_width_opl=0.1, start_opl=0.5, count=30))
+    base.update(changes)
+    return Scene(**base)
+
+
+def test_too_many_pixels_for_the_column_index_is_refused_before_counting():
+    scene = _scene(pixels=2000)
+    started = time.perf_counter()
+    with pytest.raises(SceneError, match=r"plane\.pixels.*GiB.*limit") as raised:
+        system_matrix(scene, memory_limit=10 * 2**20)
+    assert time.perf_counter() - started < 1.0          # refused before the per-pixel count
+    assert raised.value.key == "plane.pixels"
+
+
+def test_too_many_bins_for_the_row_index_is_refused():
+    scene = _scene(sampling=Sampling(bin_width_opl=0.1, start_opl=0.5, count=10**9))
+    with pytest.raises(SceneError, match=r"sampling\.count.*GiB.*limit"):
+        system_matrix(scene, memory_limit=2**30)
+
+
+def test_too_many_entries_is_refused_after_the_exact_count():
+    scene = _scene(sampling=Sampling(bin_width_opl=1e-5, start_opl=0.5, count=200000))
+    with pytest.raises(SceneError, match=r"sampling.*entries.*GiB.*limit"):
+        system_matrix(scene, memory_limit=4 * 2**20)
+
+
+def test_count_is_exact_and_memory_follows_it():
+    scene = _scene(illumination=Illumination(waveform="butterworth"))
+    per_column = count_entries(scene)
+    matrix = system_matrix(scene)
+    assert per_column.sum() >= matrix.nnz >= 0.9 * per_column.sum()   # only exact zeros are dropped
+    assert matrix.data.nbytes + matrix.indices.nbytes <= 12 * per_column.sum()
+
+
+@pytest.mark.parametrize("tolerance", [1e-300, 0.0, -1e-6, 0.5, MIN_TOLERANCE / 10, float("nan")])
+def test_tolerance_outside_the_supported_range_is_refused_at_once(tolerance):
+    started = time.perf_counter()
+    with pytest.raises(SceneError, match="model.tolerance"):
+        system_matrix(_scene(), tolerance=tolerance)
+    assert time.perf_counter() - started < 1.0
+
+
+def test_square_pulse_wider_than_the_window_equals_any_other_wider_than_it():
+    """Inside a 3 m window a 1e100 m and a 100 m square pulse are the same step."""
+    narrow = system_matrix(_scene(illumination=Illumination(waveform="square", width=100.0)))
+    wide = system_matrix(_scene(illumination=Illumination(waveform="square", width=1e100)))
+    assert narrow.nnz > 0
+    assert abs(narrow - wide).max() <= 1e-12 * abs(narrow).max()
+
+
+def test_window_long_before_any_light_is_all_zero():
+    """t0 = -1e308: every bin edge rounds to -1e308, long before the first arrival."""
+    y = forward(_scene(sampling=Sampling(bin_width_opl=0.1, start_opl=-1e308, count=30)))
+    assert np.all(y == 0.0)
+
+
+def test_huge_period_puts_all_light_in_one_bin():
+    """T = 1e307: the first bin holds all the light of the impulse (its later edges overflow to inf)."""
+    scene = _scene(sampling=Sampling(bin_width_opl=1e307, start_opl=0.0, count=40))
+    y = forward(scene)
+    reference = forward(_scene(sampling=Sampling(bin_width_opl=10.0, start_opl=0.0, count=1)))
+    assert np.all(np.isfinite(y))
+    assert y[0, 0] == pytest.approx(reference[0, 0], rel=1e-6)
+    assert np.all(y[0, 1:] == 0.0)

@@ -30,9 +30,9 @@ The attenuation under a source (or sensor) at height h is a peak of width h:
 tends to a finite limit (2 ρ cos θ_k / d_k² from the foot, DESIGN.md section
 2). Resolving the peak needs h to span many roundings of the plane
 coordinates and path lengths, which are as large as the scene:
-:data:`MIN_HEIGHT_FRACTION` of the scene's extent is the smallest height the
-model supports (:func:`check_heights`); at that height the peak is still
-~10⁶ float64 roundings wide.
+:data:`analytic.scene.MIN_HEIGHT_FRACTION` of the scene's extent is the
+smallest height the model supports (:func:`analytic.scene.check_heights`);
+at that height the peak is still ~10⁶ float64 roundings wide.
 """
 
 from __future__ import annotations
@@ -40,19 +40,13 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-import numpy as np
 from numba import njit
 
 from .attenuation import LAMBERTIAN, PAPER, attenuation_at
 
 __all__ = ["Frame", "make_frame", "ellipse", "point_on_ellipse", "jacobian", "path_length_at",
            "first_arrival_point", "segment_minimum", "rectangle_range", "rectangle_crossings",
-           "scene_extent", "minimum_height", "check_heights", "MIN_HEIGHT_FRACTION",
            "LAMBERTIAN", "PAPER", "attenuation_at"]
-
-#: Smallest height of the source or a sensor, as a fraction of :func:`scene_extent`.
-MIN_HEIGHT_FRACTION = 1e-9
-
 
 class Frame(NamedTuple):
     """A source-sensor pair as the compiled kernels use it (metres)."""
@@ -268,59 +262,3 @@ def rectangle_crossings(frame, cx, cy, a, b, x0, x1, y0, y1, out):
             j -= 1
         out[j + 1] = value
     return count
-
-
-def scene_extent(size: float, source, sensors) -> float:
-    """The scene's length scale: the largest of the plane's side and every coordinate's magnitude, metres.
-
-    Plane coordinates and path lengths are as large as this, so it sets the
-    float64 rounding of everything the model computes.
-    """
-    points = np.vstack([np.reshape(np.asarray(source, dtype=np.float64), (1, 3)),
-                        np.reshape(np.asarray(sensors, dtype=np.float64), (-1, 3))])
-    return float(max(abs(float(size)), float(np.max(np.abs(points)))))
-
-
-def minimum_height(size: float, source, sensors) -> float:
-    """Smallest supported height of the source and the sensors, metres: MIN_HEIGHT_FRACTION x extent."""
-    return MIN_HEIGHT_FRACTION * scene_extent(size, source, sensors)
-
-
-def check_heights(size: float, source, sensors) -> None:
-    """Refuse a source or sensor too close to the plane for float64 to resolve its response.
-
-    Parameters
-    ----------
-    size : float
-        Plane side L, metres.
-    source : array_like
-        (x, y, z), metres.
-    sensors : array_like
-        ``(K, 3)``, metres.
-
-    Raises
-    ------
-    analytic.scene.SceneError
-        Naming ``source.position`` or ``sensors.positions[k]`` and the
-        smallest height supported.
-
-    Notes
-    -----
-    Criterion: h >= MIN_HEIGHT_FRACTION x extent (:func:`scene_extent`). The
-    attenuation's peak under a point at height h has width h; below the
-    criterion it spans fewer than ~10⁶ roundings of the plane coordinates
-    and path lengths, and the quadrature can no longer find it (at 1e-300
-    it would silently return ~0 instead of the finite limit).
-    """
-    from .scene import SceneError
-
-    floor = minimum_height(size, source, sensors)
-    checks = [("source.position", np.asarray(source, dtype=np.float64))]
-    checks += [(f"sensors.positions[{k}]", p) for k, p in
-               enumerate(np.reshape(np.asarray(sensors, dtype=np.float64), (-1, 3)))]
-    for key, point in checks:
-        if not point[2] >= floor:
-            raise SceneError(key, f"height {point[2]:.3g} m is below the smallest height supported, "
-                             f"{floor:.3g} m ({MIN_HEIGHT_FRACTION:g} of the scene's extent "
-                             f"{floor / MIN_HEIGHT_FRACTION:.3g} m): float64 cannot resolve the light "
-                             f"under a point that low; raise it to at least {floor:.3g} m")

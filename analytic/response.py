@@ -49,8 +49,9 @@ def impulse_response(scene: Scene, sensor: int, times, *, coarea: bool = True, n
     Returns
     -------
     numpy.ndarray
-        g_k(t) in units of y per metre of path length (1/m³ per unit source).
-        With ``coarea=False`` the units differ (per metre of arc length).
+        g_k(t) = I ∫ f a_k δ(t - d_k) dx, the source's intensity I included:
+        units of y per metre of path length (W m⁻²). With ``coarea=False``
+        the units differ (per metre of arc length).
     """
     times = np.atleast_1d(np.asarray(times, dtype=np.float64))
     mode = attenuation_code(scene.attenuation)
@@ -63,7 +64,7 @@ def impulse_response(scene: Scene, sensor: int, times, *, coarea: bool = True, n
         if t <= frame.first_arrival:
             continue
         out.flat[i] = _contour(scene, frame, source, position, t, coarea, unit_nodes, unit_weights, max_arc)
-    return out
+    return scene.intensity * out
 
 
 def _contour(scene, frame, source, sensor, t, coarea, unit_nodes, unit_weights, max_arc):

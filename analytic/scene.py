@@ -11,9 +11,10 @@ Limits (each a clean error, not a silently wrong number):
 
 - every length and coordinate within ±``MAX_LENGTH`` (1e12 m) and every
   positive length at least ``MIN_LENGTH`` (1e-9 m), the source and sensors
-  at least ``MIN_HEIGHT`` (1e-9 m) above the plane: beyond these, path
-  lengths and their differences leave the range where float64 resolves the
-  response;
+  at least ``MIN_HEIGHT_FRACTION`` (1e-9) of the scene's extent above the
+  plane (:func:`check_heights`): beyond these, path lengths and their
+  differences leave the range where float64 resolves the response;
+- the model's tolerance in [1e-10, 0.1) (:func:`check_tolerance`);
 - bins resolvable in float64: T ≥ 1e-12 × the largest |path length| of the
   window;
 - at most ``MAX_SENSORS`` sensors (the renderer compiles one deposit per
@@ -33,7 +34,8 @@ from .reflectance import builtin_reflectance
 from .resources import require_memory
 
 __all__ = ["SceneError", "Illumination", "Sampling", "Noise", "Scene", "default_scene", "sensor_grid",
-           "WAVEFORMS", "ATTENUATIONS", "NOISE_KINDS", "MAX_LENGTH", "MIN_LENGTH", "MIN_HEIGHT", "MAX_SENSORS",
+           "WAVEFORMS", "ATTENUATIONS", "NOISE_KINDS", "MAX_LENGTH", "MIN_LENGTH", "MIN_HEIGHT_FRACTION", "MAX_SENSORS", "MIN_TOLERANCE", "MAX_TOLERANCE",
+           "check_heights", "check_tolerance", "scene_extent", "minimum_height",
            "DEFAULT_ARRAY"]
 
 WAVEFORMS = ("impulse", "square", "butterworth")
@@ -44,12 +46,15 @@ NOISE_KINDS = ("gaussian", "poisson")
 MAX_LENGTH = 1e12
 #: Smallest positive length accepted (plane size, bin width), metres.
 MIN_LENGTH = 1e-9
-#: Smallest height of the source or a sensor above the plane, metres.
-MIN_HEIGHT = 1e-9
+#: Smallest height of the source or a sensor, as a fraction of the scene's extent (:func:`check_heights`).
+MIN_HEIGHT_FRACTION = 1e-9
 #: Largest Gaussian noise σ: m σ² (the discrepancy rule's target) stays finite.
 MAX_SIGMA = 1e150
-#: Smallest relative accuracy of A's entries that float64 quadrature can reach.
+#: Relative accuracy of A's entries: below MIN_TOLERANCE float64 quadrature stops converging.
 MIN_TOLERANCE = 1e-10
+MAX_TOLERANCE = 0.1
+#: Largest source intensity, W/sr: y (and the squares the λ rules form) stay finite.
+MAX_INTENSITY = 1e30
 #: Most sensors a scene may have.
 MAX_SENSORS = 1024
 #: Relative resolution a bin edge needs in float64 (T against |t|).
@@ -103,10 +108,71 @@ def _point(key: str, value: Any) -> np.ndarray:
     point = np.array([_number(f"{key}[{i}]", v, length=True) for i, v in enumerate(value)])
     if not point[2] > 0.0:
         raise SceneError(key, f"z = {point[2]} must be > 0 (strictly above the plane)")
-    if point[2] < MIN_HEIGHT:
-        raise SceneError(key, f"z = {point[2]:g} m is below the smallest height supported, {MIN_HEIGHT:g} m "
-                              f"(below it float64 path lengths cannot resolve the response under the point)")
     return point
+
+
+def scene_extent(size: float, source, sensors) -> float:
+    """The scene's length scale: the largest of the plane's side and every coordinate's magnitude, metres.
+
+    Plane coordinates and path lengths are as large as this, so it sets the
+    float64 rounding of everything the model computes.
+    """
+    points = np.vstack([np.reshape(np.asarray(source, dtype=np.float64), (1, 3)),
+                        np.reshape(np.asarray(sensors, dtype=np.float64), (-1, 3))])
+    return float(max(abs(float(size)), float(np.max(np.abs(points)))))
+
+
+def minimum_height(size: float, source, sensors) -> float:
+    """Smallest supported height of the source and the sensors, metres: MIN_HEIGHT_FRACTION x extent."""
+    return MIN_HEIGHT_FRACTION * scene_extent(size, source, sensors)
+
+
+def check_heights(size: float, source, sensors) -> None:
+    """Refuse a source or sensor too close to the plane for float64 to resolve its response.
+
+    Parameters
+    ----------
+    size : float
+        Plane side L, metres.
+    source : array_like
+        (x, y, z), metres.
+    sensors : array_like
+        ``(K, 3)``, metres.
+
+    Raises
+    ------
+    SceneError
+        Naming ``source.position`` or ``sensors.positions[k]`` and the
+        smallest height supported.
+
+    Notes
+    -----
+    Criterion: h >= MIN_HEIGHT_FRACTION x extent (:func:`scene_extent`). The
+    attenuation's peak under a point at height h has width h; below the
+    criterion it spans fewer than ~10⁶ roundings of the plane coordinates
+    and path lengths, and the quadrature can no longer find it (at 1e-300
+    it would silently return ~0 instead of the finite limit).
+    """
+    floor = minimum_height(size, source, sensors)
+    checks = [("source.position", np.asarray(source, dtype=np.float64))]
+    checks += [(f"sensors.positions[{k}]", p) for k, p in
+               enumerate(np.reshape(np.asarray(sensors, dtype=np.float64), (-1, 3)))]
+    for key, point in checks:
+        if not point[2] >= floor:
+            raise SceneError(key, f"height {point[2]:.3g} m is below the smallest height supported, "
+                             f"{floor:.3g} m ({MIN_HEIGHT_FRACTION:g} of the scene's extent "
+                             f"{floor / MIN_HEIGHT_FRACTION:.3g} m): float64 cannot resolve the light "
+                             f"under a point that low; raise it to at least {floor:.3g} m")
+
+
+def check_tolerance(tolerance: float) -> float:
+    """The tolerance as a float, or SceneError("model.tolerance") outside [MIN_TOLERANCE, MAX_TOLERANCE)."""
+    tolerance = _number("model.tolerance", tolerance, positive=True)
+    if not MIN_TOLERANCE <= tolerance < MAX_TOLERANCE:
+        raise SceneError("model.tolerance", f"must be in [{MIN_TOLERANCE:g}, {MAX_TOLERANCE:g}), got "
+                         f"{tolerance:g}: below {MIN_TOLERANCE:g} float64 quadrature stops converging "
+                         f"(1e-12 already takes ~60 times as long as the default 1e-6)")
+    return tolerance
 
 
 def _choice(key: str, value: Any, options: tuple[str, ...]) -> str:
@@ -321,7 +387,11 @@ class Scene:
         object.__setattr__(self, "reflectance", image)
         object.__setattr__(self, "source", _point("source.position", self.source))
         self.source.setflags(write=False)
-        object.__setattr__(self, "intensity", _number("source.intensity", self.intensity, positive=True))
+        intensity = _number("source.intensity", self.intensity, positive=True)
+        if intensity > MAX_INTENSITY:
+            raise SceneError("source.intensity", f"{intensity:g} W/sr is beyond the {MAX_INTENSITY:g} W/sr "
+                                                 f"supported (y and its squares must stay finite)")
+        object.__setattr__(self, "intensity", intensity)
         if not isinstance(self.sensors, np.ndarray) and not isinstance(self.sensors, (list, tuple)):
             raise SceneError("sensors.positions", f"expected a list of [x, y, z], got {self.sensors!r}")
         sensors = list(self.sensors)
@@ -333,6 +403,7 @@ class Scene:
         points = np.array([_point(f"sensors.positions[{k}]", p) for k, p in enumerate(sensors)])
         points.setflags(write=False)
         object.__setattr__(self, "sensors", points)
+        check_heights(size, self.source, points)
         if not isinstance(self.illumination, Illumination):
             raise SceneError("illumination", "expected an Illumination")
         if not isinstance(self.sampling, Sampling):
@@ -342,12 +413,7 @@ class Scene:
                        f"{len(points)} sensors x sampling.count = {self.sampling.count} bins",
                        "use fewer bins (sampling.count) or sensors")
         _choice("model.attenuation", self.attenuation, ATTENUATIONS)
-        tolerance = _number("model.tolerance", self.tolerance, positive=True)
-        if not MIN_TOLERANCE <= tolerance < 0.1:
-            raise SceneError("model.tolerance", f"must be in [{MIN_TOLERANCE:g}, 0.1), got {tolerance:g} "
-                                                f"(below {MIN_TOLERANCE:g} the quadrature meets float64's "
-                                                f"rounding and cannot converge)")
-        object.__setattr__(self, "tolerance", tolerance)
+        object.__setattr__(self, "tolerance", check_tolerance(self.tolerance))
         if self.noise is not None and not isinstance(self.noise, Noise):
             raise SceneError("noise", "expected a Noise or None")
         if not isinstance(self.name, str):

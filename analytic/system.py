@@ -51,7 +51,6 @@ from __future__ import annotations
 
 import itertools
 import math
-import os
 import warnings
 
 import numpy as np
@@ -59,25 +58,24 @@ import scipy.sparse
 from numba import njit, prange
 
 from .attenuation import attenuation_code, attenuation_of_distances
-from .isochrone import (check_heights, ellipse, first_arrival_point, make_frame, path_length_at,
+from .isochrone import (ellipse, first_arrival_point, make_frame, path_length_at,
                         rectangle_range, segment_minimum)
 from .quadrature import (LINEAR, ROOT_BOTH, ROOT_END, ROOT_START, adapt, integrate, isochrone_rule,
                          make_workspace, piece_map, pixel_isochrone_integral, tensor_integrate)
-from .scene import Scene, SceneError
+from .errors import ResourceError
+from .resources import available_memory
+from .scene import MAX_TOLERANCE, MIN_TOLERANCE, Scene, check_heights, check_tolerance
 from .waveforms import cumulative_scalar, make_waveform
 
 __all__ = ["system_matrix", "forward", "count_entries", "check_tolerance", "pair_entries", "METHODS",
            "QuadratureWarning", "MIN_TOLERANCE", "MAX_TOLERANCE", "FOOT_CLEARANCE", "SAFETY"]
 
-#: Tightest tolerance supported. From 1e-9 down, a few dozen τ-pieces near
-#: tangencies stop at the rounding of their geometry (a QuadratureWarning
-#: says so); below 1e-10 the quadrature no longer converges: on the default
-#: scene 1e-11 takes about 10 times the time of 1e-6 with ~500 such pieces,
-#: 1e-12 about 60 times with ~5000, and 1e-300 would refine every piece to
-#: its limit.
-MIN_TOLERANCE = 1e-10
-#: Loosest tolerance accepted.
-MAX_TOLERANCE = 0.1
+# The tolerance's range (analytic.scene.MIN_TOLERANCE, MAX_TOLERANCE): from
+# 1e-9 down, a few dozen τ-pieces near tangencies stop at the rounding of
+# their geometry (a QuadratureWarning says so); below 1e-10 the quadrature no
+# longer converges: on the default scene 1e-11 takes about 10 times the time
+# of 1e-6 with ~500 such pieces, 1e-12 about 60 times with ~5000, and 1e-300
+# would refine every piece to its limit.
 #: A pixel is integrated as a smooth 2-D function only if every foot is at
 #: least this many pixel sides away, counting its height: sqrt(δ² + h²) >=
 #: FOOT_CLEARANCE x side, δ the foot's distance from the pixel. The
@@ -415,18 +413,6 @@ def _fill(source, sensors, mode, size, pixels, start, period, count, terms, rtol
         smooth[block] += served
 
 
-def _available_memory() -> int:
-    """Bytes of memory available now (MemAvailable), or the physical memory if unknown."""
-    try:
-        with open("/proc/meminfo") as handle:
-            for line in handle:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
-
-
 def _prepare(scene: Scene):
     waveform = make_waveform(scene.illumination, scene.sampling.bin_width_opl)
     source = np.ascontiguousarray(scene.source, dtype=np.float64)
@@ -449,12 +435,12 @@ def _check_layout(scene: Scene, limit: int) -> None:
     # counting: per-column non-zeros and widest pair; then CSC and CSR pointers
     needed = columns * (8 + 4) + (columns + 1) * 8 + (rows + 1) * 8
     if columns * 12 > limit or (columns + 1) * 8 > limit:
-        raise SceneError("plane.pixels", f"{scene.pixels}² pixels need {_gib(needed)} just to index "
-                         f"A's columns, over the {_gib(limit)} limit; use fewer pixels")
+        raise ResourceError(f"plane.pixels: {scene.pixels}² pixels need {_gib(needed)} just to index "
+                            f"A's columns, over the {_gib(limit)} limit; use fewer pixels")
     if needed > limit:
-        raise SceneError("sampling.count", f"{scene.sensor_count} sensors x {scene.sampling.count:,} "
-                         f"bins need {_gib(needed)} just to index A's rows, over the {_gib(limit)} "
-                         f"limit; use fewer bins")
+        raise ResourceError(f"sampling.count: {scene.sensor_count} sensors x {scene.sampling.count:,} "
+                            f"bins need {_gib(needed)} just to index A's rows, over the {_gib(limit)} "
+                            f"limit; use fewer bins")
 
 
 def count_entries(scene: Scene, *, memory_limit: int | None = None) -> np.ndarray:
@@ -474,16 +460,16 @@ def count_entries(scene: Scene, *, memory_limit: int | None = None) -> np.ndarra
 
     Raises
     ------
-    SceneError
+    ResourceError
         When A, or its index arrays alone, would not fit in ``memory_limit``
-        (a resource limit; the key names the setting to reduce).
+        (the message names the setting to reduce).
     """
     return _count_columns(scene, memory_limit)[0]
 
 
 def _count_columns(scene: Scene, memory_limit: int | None):
     """(non-zeros per column, most bins of one pair), refusing what would not fit."""
-    limit = memory_limit if memory_limit is not None else _available_memory() // 2
+    limit = memory_limit if memory_limit is not None else available_memory() // 2
     _check_layout(scene, limit)
     waveform, mode, source, sensors = _prepare(scene)
     sampling = scene.sampling
@@ -494,9 +480,9 @@ def _count_columns(scene: Scene, memory_limit: int | None):
     nnz = int(per_pixel.sum())
     needed = _matrix_bytes(nnz, scene)
     if needed > limit:
-        raise SceneError("sampling", f"the system matrix would hold {nnz:,} entries "
-                         f"({_gib(needed)} while it is assembled), over the {_gib(limit)} limit; "
-                         f"use fewer bins (sampling.count / period) or fewer pixels")
+        raise ResourceError(f"sampling: the system matrix would hold {nnz:,} entries "
+                            f"({_gib(needed)} while it is assembled), over the {_gib(limit)} limit; "
+                            f"use fewer bins (sampling.count / period) or fewer pixels")
     return per_pixel, int(widest.max()) if len(widest) else 0
 
 
@@ -506,16 +492,6 @@ def _matrix_bytes(nnz: int, scene: Scene) -> int:
     columns = scene.pixels ** 2
     index = _index_bytes(max(nnz, rows, columns))
     return 2 * nnz * (8 + index) + (columns + 1) * 8 + (rows + 1) * 8 + columns * 12
-
-
-def check_tolerance(tolerance: float) -> float:
-    """The tolerance as a float, or SceneError("model.tolerance") outside [MIN_TOLERANCE, MAX_TOLERANCE)."""
-    tolerance = float(tolerance)
-    if not MIN_TOLERANCE <= tolerance < MAX_TOLERANCE:
-        raise SceneError("model.tolerance", f"must be in [{MIN_TOLERANCE:g}, {MAX_TOLERANCE:g}), got "
-                         f"{tolerance:g}: below {MIN_TOLERANCE:g} float64 quadrature stops converging "
-                         f"(1e-12 already takes ~60 times as long as the default 1e-6)")
-    return tolerance
 
 
 def system_matrix(scene: Scene, *, tolerance: float | None = None, memory_limit: int | None = None,
@@ -539,14 +515,15 @@ def system_matrix(scene: Scene, *, tolerance: float | None = None, memory_limit:
     -------
     scipy.sparse.csr_array
         ``(K N, M²)`` float64; row k N + n, column r M + c; units of
-        a_k x area x path length: m⁻² · m (W/sr per unit source).
+        I x a_k x area x path length: W/sr x m⁻⁴ x m² x m = W m⁻¹ per unit
+        reflectance (the source's intensity I in W/sr is included).
 
     Raises
     ------
     SceneError
         A tolerance outside the supported range (``model.tolerance``), a
         source or sensor too low to resolve (see
-        :func:`analytic.isochrone.check_heights`), or an A that does not fit
+        :func:`analytic.scene.check_heights`), or an A that does not fit
         in memory.
 
     Warns
@@ -594,6 +571,8 @@ def system_matrix(scene: Scene, *, tolerance: float | None = None, memory_limit:
     if failures.sum():
         warnings.warn(f"{int(failures.sum())} quadrature pieces stopped refining before reaching "
                       f"tolerance {tolerance:g}", QuadratureWarning, stacklevel=2)
+    # the source emits I s(t): A scales with its peak intensity I exactly
+    data *= scene.intensity
     matrix = scipy.sparse.csc_array((data, rows, indptr.astype(index_type)), shape=shape)
     del data, rows
     matrix = matrix.tocsr()

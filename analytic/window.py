@@ -65,41 +65,34 @@ def window_share(scene: Scene) -> float:
     """Share of the light reaching the sensors that the scene's window holds.
 
     1.0 exactly when the window covers every path and the pulse's tail;
-    otherwise Σ_k y_k(window) / Σ_k y_k(all), two one-bin models of the
-    scene's own reflectance and attenuation.
+    otherwise Σ_k y_k(window) / Σ_k y_k(all), both from one-bin models of
+    the scene's own reflectance and attenuation: the window as one bin
+    (the box prefilter is additive over adjacent bins), and all the light
+    as the pulse's energy ∫ s dt times the impulse's one bin that holds
+    every path (so a pulse of any length needs no bin longer than the paths).
     """
+    from .scene import Illumination
     from .system import forward
     from .waveforms import make_waveform
 
     sampling = scene.sampling
     low, high = response_range(scene)
-    duration = make_waveform(scene.illumination, sampling.bin_width_opl).duration
+    waveform = make_waveform(scene.illumination, sampling.bin_width_opl)
     end = sampling.start_opl + sampling.count * sampling.bin_width_opl
-    if sampling.start_opl <= low and end >= high + duration:
+    if sampling.start_opl <= low and end >= high + waveform.duration:
         return 1.0
-    if end <= low or sampling.start_opl >= high + duration:
+    if end <= low:
         return 0.0
-    # one bin on the same edges' grid, so that both models integrate the same pulse
-    width = sampling.bin_width_opl
-    first = math.floor((min(low, sampling.start_opl) - sampling.start_opl) / width)
-    last = math.ceil((max(high + duration, end) - sampling.start_opl) / width)
-    everything = Sampling(bin_width_opl=(last - first) * width,
-                          start_opl=sampling.start_opl + first * width, count=1)
-    window = Sampling(bin_width_opl=sampling.count * width, start_opl=sampling.start_opl, count=1)
-    # the one-bin pulses differ from the scene's (their default widths follow the period): pin them
-    illumination = _pinned(scene, width)
-    total = float(np.sum(forward(scene.replace(sampling=everything, illumination=illumination))))
-    held = float(np.sum(forward(scene.replace(sampling=window, illumination=illumination))))
+    margin = 1e-6 * max(high - low, abs(high))
+    paths = Sampling(bin_width_opl=(high - low) + 2 * margin, start_opl=low - margin, count=1)
+    window = Sampling(bin_width_opl=sampling.count * sampling.bin_width_opl, start_opl=sampling.start_opl,
+                      count=1)
+    # the one-bin window's pulse must be the scene's, whose defaults follow the scene's period
+    pinned = Illumination(waveform=scene.illumination.waveform, **waveform.parameters)
+    total = waveform.energy * float(np.sum(forward(scene.replace(sampling=paths,
+                                                                 illumination=Illumination()))))
+    held = float(np.sum(forward(scene.replace(sampling=window, illumination=pinned))))
     return held / total if total > 0 else 0.0
-
-
-def _pinned(scene: Scene, period: float):
-    """The scene's illumination with its period-dependent defaults written out."""
-    from .scene import Illumination
-    from .waveforms import make_waveform
-
-    return Illumination(waveform=scene.illumination.waveform,
-                        **make_waveform(scene.illumination, period).parameters)
 
 
 def warn_if_cut(scene: Scene, share: float) -> None:

@@ -30,13 +30,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from analytic.errors import SceneError
-from analytic.response import impulse_response
+from analytic.response import binned_contour_model, impulse_response
 from analytic.scene import Scene
 from analytic.system import QuadratureWarning, forward, system_matrix
 from validation.compare import Agreement, compare_transients
 
 __all__ = ["SceneCheck", "check_scene", "simplification_costs", "model_convergence",
-           "binned_contour_model", "data_driven_rule", "reconstruct_from_noisy_data"]
+           "data_driven_rule", "reconstruct_from_noisy_data"]
 
 TOLERANCES = (1e-2, 1e-4, 1e-6)
 REFERENCE_TOLERANCE = 1e-7
@@ -125,29 +125,6 @@ def simplification_costs(scene: Scene, y_lambertian: np.ndarray, *, sensors: int
         wrong = wrong * np.linalg.norm(right) / max(np.linalg.norm(wrong), 1e-300)
         result["no_coarea_factor"] = float(np.linalg.norm(wrong - right) / np.linalg.norm(right))
     return result
-
-
-def binned_contour_model(scene: Scene, *, coarea: bool = True, pieces: int = 8, nodes: int = 8) -> np.ndarray:
-    """y for the impulse illumination from the contour form: ∫_bin g_k(t) dt, ``(K, N)``.
-
-    ``coarea=False`` integrates the paper's eq. (3) instead (no 1/|∇d|): a
-    deliberately wrong model for the harness's tests. Composite
-    Gauss–Legendre over each bin (``pieces`` x ``nodes`` points); bins
-    outside [t_min, d_max] are skipped.
-    """
-    if scene.illumination.waveform != "impulse":
-        raise ValueError("binned_contour_model: only the impulse illumination")
-    unit, weights = np.polynomial.legendre.leggauss(nodes)
-    edges = scene.sampling.edges
-    y = np.zeros((scene.sensor_count, scene.sampling.count))
-    for k in range(scene.sensor_count):
-        for n in range(scene.sampling.count):
-            cuts = np.linspace(edges[n], edges[n + 1], pieces + 1)
-            centres, halves = 0.5 * (cuts[1:] + cuts[:-1]), 0.5 * np.diff(cuts)
-            t = (centres[:, None] + halves[:, None] * unit[None, :]).ravel()
-            values = impulse_response(scene, k, t, coarea=coarea).reshape(pieces, nodes)
-            y[k, n] = float(np.sum(values * weights[None, :] * halves[:, None]))
-    return y
 
 
 def data_driven_rule(scene: Scene, requested="auto") -> tuple:

@@ -8,7 +8,6 @@ import os
 import subprocess
 import sys
 import textwrap
-import time
 
 import pytest
 
@@ -91,9 +90,7 @@ def test_a_scheduler_nobody_runs_is_one_line(tmp_path, capsys):
     (tmp_path / "base.toml").write_text(GOOD)
     sweep = tmp_path / "sweep.toml"
     sweep.write_text('scene = "base.toml"\nsamples = 1000\n[grid]\n"sampling.period" = [0.1]\n')
-    started = time.perf_counter()
     assert main(["sweep", str(sweep), "--scheduler", "tcp://127.0.0.1:9", "--out",
                  str(tmp_path / "out"), "--quiet"]) == 2
     assert "--scheduler" in _one_error(capsys)
-    assert time.perf_counter() - started < 60
     assert not (tmp_path / "out").exists()

@@ -6,7 +6,8 @@ import pytest
 from analytic.system import forward
 from transient.render import render
 from validation.compare import compare_transients
-from validation.harness import binned_contour_model, check_scene, data_driven_rule
+from analytic.response import binned_contour_model
+from validation.harness import check_scene, data_driven_rule
 from validation.suite import hard_cases, validation_suite
 
 SPP = dict((scene.name, spp) for scene, spp in validation_suite())["outside"]   # the suite's count

@@ -42,7 +42,9 @@ def _reference(scene, row, pixel):
     k, n = divmod(row, scene.sampling.count)
     kernel, breakpoints = bin_kernel(scene.illumination, scene.sampling.start_opl, scene.sampling.bin_width_opl, n)
     box = pixel_box(scene.size, scene.pixels, pixel)
-    return pixel_entry(box, scene.source, scene.sensors[k], kernel, breakpoints, scene.attenuation)
+    # the source emits I s(t): every entry carries its intensity I
+    return scene.intensity * pixel_entry(box, scene.source, scene.sensors[k], kernel, breakpoints,
+                                         scene.attenuation)
 
 
 # The reference needs minutes for a pulse spread over many of the far plane's fine bins.

@@ -14,9 +14,26 @@ Importing this package does not import Mitsuba or Dr.Jit: that happens in
 :func:`select_variant`, after the libLLVM has been chosen.
 """
 
-from .backend import BackendError, select_variant
-from .chunks import ChunkPlan, ReplicaAccumulator, ReplicaLayout
-from .render import RenderResult, RenderStateError, render, render_loaded
+import importlib
 
-__all__ = ["BackendError", "select_variant", "RenderResult", "RenderStateError", "render", "render_loaded",
-           "ReplicaLayout", "ChunkPlan", "ReplicaAccumulator"]
+# public name -> submodule that defines it (loaded on first use, so that
+# importing one module of this package does not import the others)
+_EXPORTS = {"BackendError": "backend", "select_variant": "backend", "ReplicaLayout": "chunks",
+            "ChunkPlan": "chunks", "ReplicaAccumulator": "chunks", "RenderResult": "render",
+            "RenderStateError": "render", "render": "render", "render_loaded": "render",
+            "export_scene": "export"}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'transient' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(__all__))

@@ -45,7 +45,6 @@ import numpy as np
 
 from analytic.io import save_exr, save_text, staged_writes
 from analytic.scene import Scene, SceneError
-from analytic.waveforms import make_waveform
 
 __all__ = ["export_scene", "FORMATS", "RADIUS", "SPP", "plane_to_world_matrix"]
 
@@ -130,6 +129,8 @@ def _our_integrator(root, scene: Scene) -> None:
     # The plugin resolves defaults against bin_width_opl as the scene does
     # (make_waveform), so the scene's own fields give the same pulse.
     if illumination.waveform == "square":
+        from analytic.waveforms import make_waveform
+
         width = make_waveform(illumination, sampling.bin_width_opl).duration
         _add(integrator, "float", "pulse_width", value=_number(width))
     elif illumination.waveform == "butterworth":

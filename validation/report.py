@@ -97,7 +97,8 @@ def write_report(out: Path, checks: list, corner: dict | None = None, *, false_a
                        f"PSNR {recon['render']['psnr']:.1f} dB"),
                       ("oracle λ (a bound)", recon["oracle"]["image"], f"PSNR {recon['oracle']['psnr']:.1f} dB")]
             plot_reconstructions(folder / "reconstructions.png",
-                                 f"{check.name}: flat image {recon['flat_psnr']:.1f} dB", check.scene.reflectance,
+                                 f"{check.name}: reconstructions (the best flat image scores {recon['flat_psnr']:.1f} dB)",
+                                 check.scene.reflectance,
                                  panels)
             lines += ["", recon["data"], "", f"![reconstructions]({check.name}/reconstructions.png)"]
         metrics["scenes"][check.name] = check.metrics

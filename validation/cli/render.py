@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from .common import add_quiet, load_scene_argument, samples_type, seed_type, show_progress
+from .common import UsageError, add_quiet, load_scene_argument, samples_type, seed_type, show_progress
 
 __all__ = ["add_commands", "command_render"]
 
@@ -13,7 +13,12 @@ def command_render(args) -> int:
     from analytic.window import warn_if_cut, window_share
     from transient.render import render
 
+    from pathlib import Path
+
     scene = load_scene_argument(args.scene)
+    if args.resume and not Path(args.resume).is_dir():
+        raise UsageError(f"--resume {args.resume}: no such folder; give the --out folder of the "
+                         f"interrupted render")
     warn_if_cut(scene, window_share(scene))
     folder = args.resume if args.resume else args.out
     option = "--resume" if args.resume else "--out"

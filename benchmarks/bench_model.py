@@ -127,7 +127,7 @@ import numpy, scipy.sparse
 t1 = time.perf_counter()
 import numba
 t2 = time.perf_counter()
-from analytic.scene import load_scene
+from analytic.scene_file import load_scene
 from analytic.system import system_matrix
 t3 = time.perf_counter()
 scene = load_scene({scene!r})
@@ -143,7 +143,7 @@ print(json.dumps(dict(numpy_scipy=t1 - t0, numba=t2 - t1, analytic=t3 - t2, firs
 
 SCALING = """
 import time, json, resource, warnings
-from analytic.scene import load_scene
+from analytic.scene_file import load_scene
 from analytic.system import system_matrix
 
 def resident_kib(field):

@@ -37,7 +37,8 @@ from analytic.system import QuadratureWarning, forward
 from transient.backend import select_variant
 from transient.chunks import ChunkPlan, ReplicaLayout
 from validation.bench import plane_scene
-from validation.suite import hard_cases, response_range
+from analytic.window import response_range
+from validation.suite import hard_cases
 
 
 def low_scene(which: str) -> Scene:
@@ -47,12 +48,12 @@ def low_scene(which: str) -> Scene:
         source = (0.3, 0.4, 1e-3)
     else:
         sensor = (0.7, 0.6, 1e-3)
-    low, high = response_range(source, sensor, 1.0)
+    scene = Scene(name=f"low {which}", size=1.0, pixels=10, reflectance=hard_cases(pixels=10)["low"].reflectance,
+                  source=source, sensors=[sensor])
+    low, high = response_range(scene)
     count = 40
     period = (high - low) / (count - 4)
-    return Scene(name=f"low {which}", size=1.0, pixels=10, reflectance=hard_cases(pixels=10)["low"].reflectance,
-                 source=source, sensors=[sensor],
-                 sampling=Sampling(bin_width_opl=period, start_opl=low - 2 * period, count=count))
+    return scene.replace(sampling=Sampling(bin_width_opl=period, start_opl=low - 2 * period, count=count))
 
 
 def replica_means(loaded, layout: ReplicaLayout, seed: int) -> tuple[np.ndarray, float]:
@@ -148,13 +149,10 @@ def main(argv=None) -> int:
 
 
 def _plot(path, results):
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from validation.plots import new_figure, save_figure
 
-    from analytic.io import save_figure
-
-    figure, axis = plt.subplots(figsize=(6, 4))
+    figure = new_figure(6, 4)
+    axis = figure.add_subplot()
     for result in results:
         samples = np.array([r["samples"] for r in result["rows"]], float)
         errors = np.array([r["rms_error"] for r in result["rows"]])
@@ -164,7 +162,6 @@ def _plot(path, results):
     axis.set_ylabel("RMS relative L2 error vs exact model")
     axis.legend(fontsize=6)
     axis.set_title("renderer convergence (slopes of log error against log N)", fontsize=9)
-    figure.tight_layout()
     save_figure(figure, path)
 
 

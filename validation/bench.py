@@ -44,7 +44,7 @@ import numpy as np
 
 from analytic.io import atomic_write, save_json
 from analytic.scene import Sampling, Scene, default_scene, sensor_grid
-from validation.plots import save_figure
+from validation.plots import plot_speed_against_error
 
 __all__ = ["plane_scene", "throughput_scene", "MitransientRuns", "run_mitransient", "device_name",
            "speed_against_error", "TARGETS"]
@@ -389,7 +389,7 @@ def speed_against_error(out: str | Path, *, powers=range(16, 27, 2), variant: st
     markdown = _markdown(report)
     atomic_write(out / "bench.md", lambda temporary: Path(temporary).write_text(markdown + "\n"))
     save_json(out / "metrics.json", report)
-    _plot(out / "bench.png", report)
+    plot_speed_against_error(out / "bench.png", report)
     return dict(report, markdown=markdown)
 
 
@@ -435,22 +435,3 @@ def _markdown(report: dict) -> str:
     lines += ["", "### Model (plane 1x1)", "", "| tolerance | seconds | max error / peak |", "|---|---|---|"]
     lines += [f"| {r['tolerance']:g} | {r['seconds']:.4f} | {r['max_error_over_peak']:.2e} |" for r in report["model"]]
     return "\n".join(lines)
-
-
-def _plot(path: Path, report: dict):
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    figure, axes = plt.subplots(1, len(report["scenes"]), figsize=(10, 3.8), squeeze=False)
-    for axis, (name, entry) in zip(axes[0], report["scenes"].items()):
-        for label, rows in (("ours", entry["ours"]), ("mitransient", entry.get("mitransient", []))):
-            if rows:
-                axis.loglog([r["seconds"] for r in rows], [r["rms_error"] for r in rows], "o-", label=label)
-        axis.set_xlabel("wall time (s)")
-        axis.set_ylabel("RMS relative L2 error")
-        axis.set_title(name, fontsize=9)
-        axis.legend(fontsize=8)
-    figure.suptitle(f"speed against error ({report['device']})", fontsize=9)
-    figure.tight_layout()
-    save_figure(figure, path)

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from analytic.errors import SceneError
-from analytic.response import binned_contour_model, impulse_response
+from analytic.response import impulse_response
 from analytic.scene import Scene
 from analytic.system import QuadratureWarning, forward, system_matrix
 from validation.compare import Agreement, compare_transients

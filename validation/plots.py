@@ -16,7 +16,8 @@ from analytic.io import atomic_write
 
 __all__ = ["save_figure", "new_figure", "plot_transients", "plot_z_map", "plot_convergence",
            "plot_reconstructions", "plot_reconstruction", "plot_criterion", "plot_conditioning",
-           "plot_panels", "plot_check_transients", "plot_check_z", "NANOSECONDS_PER_METRE", "Y_LABEL"]
+           "plot_panels", "plot_check_transients", "plot_check_z", "plot_speed_against_error",
+           "NANOSECONDS_PER_METRE", "Y_LABEL"]
 
 #: Light travels 1 m of path in 3.3356 ns.
 NANOSECONDS_PER_METRE = 1e9 / 299_792_458.0
@@ -444,4 +445,29 @@ def plot_check_z(path: str | Path, result) -> Path:
         axis.set_ylabel("z (normal equivalent of t)" if result.dof is not None else "z", fontsize=9)
         axis.tick_params(labelsize=7)
     axes[1].set_xlabel(f"bin k·N + n (sensor-major, N = {bins})", fontsize=9)
+    return save_figure(figure, path)
+
+
+def plot_speed_against_error(path: str | Path, report: dict) -> Path:
+    """RMS error against wall time, ours and mitransient's, one panel per bench scene.
+
+    Parameters
+    ----------
+    report : dict
+        :func:`validation.bench.speed_against_error`'s report: ``scenes`` ->
+        {``ours``, ``mitransient``: rows with ``seconds`` and ``rms_error``},
+        and ``device``.
+    """
+    scenes = report["scenes"]
+    figure = new_figure(5.0 * len(scenes), 3.9)
+    axes = np.atleast_1d(figure.subplots(1, len(scenes), squeeze=False)[0])
+    for axis, (name, entry) in zip(axes, scenes.items()):
+        for label, rows in (("ours", entry["ours"]), ("mitransient", entry.get("mitransient", []))):
+            if rows:
+                axis.loglog([r["seconds"] for r in rows], [r["rms_error"] for r in rows], "o-", label=label)
+        axis.set_xlabel("wall time (s)")
+        axis.set_ylabel("RMS relative L2 error against the model")
+        axis.set_title(name, fontsize=9)
+        axis.legend(fontsize=8)
+    figure.suptitle(f"speed against error ({report['device']})", fontsize=9)
     return save_figure(figure, path)

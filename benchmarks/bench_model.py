@@ -239,7 +239,7 @@ def main():
         brute_seconds, brute = best(
             lambda scene=scene, pixels=pixels, factor=factor, sampling=sampling: supersampled(
                 scene.size, pixels, scene.source, scene.sensors, sampling.start_opl, sampling.bin_width_opl,
-                sampling.count, factor), repeats)
+                sampling.count, factor, scene.intensity), repeats)
         entry = {"M": pixels, "K": scene.sensor_count, "factor": factor, "exact_seconds": exact_seconds,
                  "exact_error": error_against(exact, reference), "brute_seconds": brute_seconds,
                  "brute_error": error_against(brute, reference), "ratio": exact_seconds / brute_seconds,

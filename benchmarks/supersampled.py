@@ -36,11 +36,11 @@ def sensor_positions(sensors: dict) -> np.ndarray:
 
 
 def supersampled(size: float, pixels: int, source, sensors, start_opl: float, bin_width_opl: float,
-                 count: int, factor: int) -> scipy.sparse.csr_array:
+                 count: int, factor: int, intensity: float = 1.0) -> scipy.sparse.csr_array:
     """A from factor² midpoint samples per pixel: row k N + n, column r M + c (DESIGN.md section 2).
 
-    Each sample x of a pixel adds a_k(x) (Δ/factor)² to the bin of its path
-    length d_k(x); a_k = h_s h_k / (π d_s³ d_k³).
+    Each sample x of a pixel adds I a_k(x) (Δ/factor)² to the bin of its path
+    length d_k(x); a_k = h_s h_k / (π d_s³ d_k³), I the source's intensity (W/sr).
     """
     delta = size / pixels
     u = (np.arange(pixels * factor) + 0.5) * (delta / factor)
@@ -51,7 +51,7 @@ def supersampled(size: float, pixels: int, source, sensors, start_opl: float, bi
     area = (delta / factor) ** 2
     source = np.asarray(source, dtype=np.float64)
     d_source = np.sqrt((x - source[0]) ** 2 + (y - source[1]) ** 2 + source[2] ** 2)
-    from_source = source[2] / d_source**3 * (area / np.pi)
+    from_source = intensity * source[2] / d_source**3 * (area / np.pi)
     blocks = []
     for sensor in np.asarray(sensors, dtype=np.float64):
         d_sensor = np.sqrt((x - sensor[0]) ** 2 + (y - sensor[1]) ** 2 + sensor[2] ** 2)
@@ -75,7 +75,7 @@ def main():
     plane, sampling = scene["plane"], scene["sampling"]
     matrix = supersampled(plane["size"], plane["pixels"], scene["source"]["position"],
                           sensor_positions(scene["sensors"]), sampling["start"], sampling["period"],
-                          sampling["count"], args.factor)
+                          sampling["count"], args.factor, scene["source"].get("intensity", 1.0))
     image = np.full(plane["pixels"] ** 2, float(plane["reflectance"]))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

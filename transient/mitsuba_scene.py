@@ -198,7 +198,7 @@ def irradiancemeter_correction(radius: float = METER_RADIUS) -> tuple[float, flo
 
 
 def mitransient_scene_dict(*, planes: list[dict], source, sensors, sampling: Sampling, max_depth: int,
-                           samples: int, radius: float = METER_RADIUS) -> dict:
+                           samples: int, radius: float = METER_RADIUS, intensity: float = 1.0) -> dict:
     """A scene for mitransient's ``transient_path`` with irradiancemeter spheres as sensors.
 
     Parameters
@@ -206,7 +206,7 @@ def mitransient_scene_dict(*, planes: list[dict], source, sensors, sampling: Sam
     planes : list of dict
         ``{"to_world": transform, "bsdf": dict}`` per rectangle.
     source : array_like
-        Point emitter position (intensity 1 W/sr), metres.
+        Point emitter position, metres.
     sensors : array_like
         ``(K, 3)`` meter centres, metres.
     sampling : Sampling
@@ -219,6 +219,8 @@ def mitransient_scene_dict(*, planes: list[dict], source, sensors, sampling: Sam
         Samples per render (the meter's sampler ``sample_count``).
     radius : float
         Meter radius, metres.
+    intensity : float
+        The point emitter's intensity, W/sr.
     """
     _, offset = irradiancemeter_correction(radius)
     film = {"type": "transient_hdr_film", "width": 1, "height": 1, "temporal_bins": int(sampling.count),
@@ -226,7 +228,8 @@ def mitransient_scene_dict(*, planes: list[dict], source, sensors, sampling: Sam
             "rfilter": {"type": "box"}}
     entries = {"type": "scene", "integrator": {"type": "transient_path", "max_depth": int(max_depth) + 1,
                                                "rr_depth": int(max_depth) + 2},
-               "source": {"type": "point", "position": [float(v) for v in source], "intensity": 1.0}}
+               "source": {"type": "point", "position": [float(v) for v in source],
+                          "intensity": float(intensity)}}
     for i, plane in enumerate(planes):
         entries[f"plane_{i}"] = {"type": "rectangle", "to_world": plane["to_world"], "bsdf": plane["bsdf"]}
     for k, centre in enumerate(np.asarray(sensors, dtype=np.float64)):

@@ -97,7 +97,8 @@ else:
 def load(samples):
     return mi.load_dict(mitransient_scene_dict(planes=planes, source=spec["source"], sensors=spec["sensors"],
                                                sampling=sampling, max_depth=int(spec["max_depth"]),
-                                               samples=samples, radius=float(spec["radius"])))
+                                               samples=samples, radius=float(spec["radius"]),
+                                               intensity=float(spec["intensity"])))
 warm = load(2**12)
 for k in range(len(warm.sensors())):
     warm.integrator().render(warm, sensor=k, seed=0)
@@ -163,7 +164,7 @@ def run_mitransient(*, source, sensors, sampling: Sampling, samples: int, seeds,
     Parameters
     ----------
     source : array_like
-        Point emitter (1 W/sr), metres.
+        Point emitter, metres (the intensity is ``scene``'s, else 1 W/sr).
     sensors : array_like
         ``(K, 3)`` meter centres, metres.
     sampling : Sampling
@@ -203,7 +204,8 @@ def run_mitransient(*, source, sensors, sampling: Sampling, samples: int, seeds,
                  source=np.asarray(source, dtype=np.float64), sensors=np.asarray(sensors, dtype=np.float64),
                  start_opl=np.float64(sampling.start_opl), bin_width_opl=np.float64(sampling.bin_width_opl),
                  count=np.int64(sampling.count), max_depth=np.int64(max_depth), samples=np.int64(samples),
-                 seeds=np.asarray(list(seeds), dtype=np.int64), radius=np.float64(METER_RADIUS))
+                 seeds=np.asarray(list(seeds), dtype=np.int64), radius=np.float64(METER_RADIUS),
+                 intensity=np.float64(scene.intensity if scene is not None else 1.0))
         # The subprocess imports this very copy of the packages.
         environment = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
         done = subprocess.run([sys.executable, "-c", _MITRANSIENT, str(spec), str(result)], capture_output=True,

@@ -113,7 +113,7 @@ def write_report(out: Path, checks: list, corner: dict | None = None, *, false_a
                         errors={"render, 1 bounce": arrays["one_se"], "render, 3 bounces": arrays["many_se"]},
                         title="corner: one-bounce model against renders")
     metrics["all_agree"] = all(check.agreement.agrees for check in checks) and (
-        corner is None or corner["one_bounce_agrees"])
+        corner is None or (corner["one_bounce_agrees"] and corner["mitransient"].get("agrees") is not False))
     if headline:
         (check,) = checks
         metrics.update({key: check.metrics[key] for key in ("agreement", "window_share", "reconstruction")

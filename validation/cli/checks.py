@@ -38,13 +38,20 @@ def command_validate(args) -> int:
             # Reconstruction needs an array of sensors; a hard case's one or two cannot image.
             checks.append(check_scene(scene, spp=spp, seed=args.seed, convergence=not args.fast,
                                       reconstruction=scene.pixels <= 64 and scene.sensor_count >= 4))
-        corner = None if args.scene else check_corner(spp=args.spp or DEFAULT_SAMPLES, seed=args.seed)
+        # the corner's three bounces against mitransient, an independent renderer, when it is installed
+        import importlib.util
+
+        independent = 2**20 if importlib.util.find_spec("mitransient") is not None else None
+        corner = None if args.scene else check_corner(spp=args.spp or DEFAULT_SAMPLES, seed=args.seed,
+                                                      mitransient_samples=independent)
         with staged_writes():
             metrics = write_report(out, checks, corner)
     failed = [check for check in checks if not check.agreement.agrees]
     if corner is not None and not corner["one_bounce_agrees"]:
         print("diffuse-imaging: corner: the one-bounce render disagrees with the one-bounce model",
               file=sys.stderr)
+    if corner is not None and corner["mitransient"].get("agrees") is False:
+        print("diffuse-imaging: corner: our three-bounce render disagrees with mitransient's", file=sys.stderr)
     for check in failed:
         worst = ", ".join(f"sensor {k} bin {n} (z = {z:+.1f})" for k, n, z in check.agreement.worst[:5])
         print(f"diffuse-imaging: {check.name} DISAGREES: {worst}", file=sys.stderr)

@@ -8,6 +8,7 @@ metres of path length and nanoseconds; every image has a colour bar.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -60,6 +61,27 @@ def _nanosecond_axis(axis) -> None:
     secondary.set_xlabel("ns", fontsize=6, labelpad=1, loc="right")
 
 
+def _readable_axes(edges: np.ndarray, values: np.ndarray) -> tuple[float, int]:
+    """An origin for the path-length axis and a power of ten for y, so that no tick needs an offset.
+
+    A window far from 0 (a span under 1 % of its start, such as 1.5 mm at
+    800 m) is drawn relative to a round origin, and y values outside
+    [1e-3, 1e4] in a power of ten named in the label: matplotlib's offset
+    and multiplier texts would otherwise collide with the nanosecond axis.
+    """
+    span = float(edges[-1] - edges[0])
+    start = float(edges[0])
+    origin = 0.0
+    if span > 0 and abs(start) > 100 * span:
+        step = 10.0 ** math.floor(math.log10(span))
+        origin = math.floor(start / step) * step
+    peak = float(np.nanmax(np.abs(values))) if values.size and np.isfinite(values).any() else 0.0
+    power = 0
+    if peak > 0 and not 1e-3 <= peak < 1e4:
+        power = int(math.floor(math.log10(peak)))
+    return origin, power
+
+
 def plot_transients(path: str | Path, sampling, transients: dict[str, np.ndarray], *,
                     errors: dict[str, np.ndarray] | None = None, title: str = "",
                     max_panels: int = 8) -> Path:
@@ -90,9 +112,13 @@ def plot_transients(path: str | Path, sampling, transients: dict[str, np.ndarray
     sensors = reference.shape[0]
     chosen = np.unique(np.linspace(0, sensors - 1, min(sensors, max_panels)).round().astype(int))
     first, last = _lit_bins(list(transients.values()), sampling)
-    edges = sampling.edges[first:last + 1]
+    origin, power = _readable_axes(sampling.edges[first:last + 1], reference[:, first:last])
+    scale = 10.0 ** -power
+    edges = sampling.edges[first:last + 1] - origin
     centres = 0.5 * (edges[:-1] + edges[1:])
-    window = (sampling.edges[0], sampling.edges[-1])
+    window = (sampling.edges[0] - origin, sampling.edges[-1] - origin)
+    x_label = "path length (m)" if origin == 0 else f"path length − {origin:g} m (m)"
+    y_label = Y_LABEL if power == 0 else Y_LABEL.replace("(W", f"(1e{power} W")
     columns = min(len(chosen), 4)
     rows = int(np.ceil(len(chosen) / columns))
     residual = bool(errors)
@@ -108,11 +134,11 @@ def plot_transients(path: str | Path, sampling, transients: dict[str, np.ndarray
         cell = grid[row, column].subgridspec(2, 1, height_ratios=[3, 1], hspace=0.08) if residual else None
         axis = figure.add_subplot(cell[0] if residual else grid[row, column])
         for i, label in enumerate(labels):
-            data = np.atleast_2d(transients[label])[k, first:last]
+            data = np.atleast_2d(transients[label])[k, first:last] * scale
             if i == 0:
                 axis.stairs(data, edges, label=label, color="C0", lw=1.2)
             elif label in errors:
-                axis.errorbar(centres, data, yerr=np.atleast_2d(errors[label])[k, first:last], fmt="o",
+                axis.errorbar(centres, data, yerr=np.atleast_2d(errors[label])[k, first:last] * scale, fmt="o",
                               ms=2.5, color=f"C{i}", label=f"{label} ±1 se", elinewidth=1.0, capsize=1.5)
             else:
                 axis.plot(centres, data, "o", ms=2.5, color=f"C{i}", label=label)
@@ -122,8 +148,8 @@ def plot_transients(path: str | Path, sampling, transients: dict[str, np.ndarray
         axis.set_title(f"sensor {k}", fontsize=8, loc="left")
         axis.tick_params(labelsize=6)
         if column == 0:
-            axis.set_ylabel(Y_LABEL, fontsize=7)
-        if row == 0:
+            axis.set_ylabel(y_label, fontsize=7)
+        if row == 0 and origin == 0:
             _nanosecond_axis(axis)
         if slot == 0:
             axis.legend(fontsize=6, loc="upper right")
@@ -144,9 +170,9 @@ def plot_transients(path: str | Path, sampling, transients: dict[str, np.ndarray
             if column == 0:
                 strip.set_ylabel("z", fontsize=7)
             strip.tick_params(labelsize=6)
-            strip.set_xlabel("path length (m)", fontsize=7)
+            strip.set_xlabel(x_label, fontsize=7)
         else:
-            axis.set_xlabel("path length (m)", fontsize=7)
+            axis.set_xlabel(x_label, fontsize=7)
     if title:
         figure.suptitle(title + ("" if not any(e <= edges[-1] and e >= edges[0] for e in window)
                                  else "  (dotted: the window's edges)"), fontsize=9)
@@ -162,19 +188,26 @@ def plot_z_map(path: str | Path, z: np.ndarray, threshold: float, sampling, titl
     first, last = (int(columns[0]), int(columns[-1]) + 1) if columns.size else (0, z.shape[1])
     shown = z[:, first:last]
     limit = max(threshold, float(np.nanmax(np.abs(shown))) if np.isfinite(shown).any() else threshold)
-    figure = new_figure(7.5, 0.3 * z.shape[0] + 2.0)
+    figure = new_figure(7.5, max(0.3 * z.shape[0] + 2.0, 3.2))
     axis = figure.add_subplot()
     from matplotlib import colormaps
+    from matplotlib.ticker import MaxNLocator
 
     cmap = colormaps["RdBu_r"].with_extremes(bad="0.85")
-    edges = sampling.edges[first:last + 1]
+    origin, _ = _readable_axes(sampling.edges[first:last + 1], np.zeros(0))
+    edges = sampling.edges[first:last + 1] - origin
     image = axis.pcolormesh(edges, np.arange(z.shape[0] + 1) - 0.5, np.ma.masked_invalid(shown),
                             cmap=cmap, vmin=-limit, vmax=limit)
-    figure.colorbar(image, ax=axis, label=f"z = (render − model) / se  (limit ±{threshold:.2f})")
-    axis.set_xlabel("path length (m)")
+    figure.colorbar(image, ax=axis, label=f"z = (render − model) / se\n(limit ±{threshold:.2f})")
+    axis.set_xlabel("path length (m)" if origin == 0 else f"path length − {origin:g} m (m)")
     axis.set_ylabel("sensor k")
+    if z.shape[0] <= 16:
+        axis.set_yticks(range(z.shape[0]))
+    else:
+        axis.yaxis.set_major_locator(MaxNLocator(integer=True))
     axis.invert_yaxis()
-    _nanosecond_axis(axis)
+    if origin == 0:
+        _nanosecond_axis(axis)
     figure.legend(handles=[Patch(color="0.85", label="not judged: too few samples (se ≥ 0.1 y) or none")],
                   fontsize=7, loc="outside lower center", frameon=False)
     axis.set_title(title, fontsize=9)

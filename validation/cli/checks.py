@@ -58,7 +58,10 @@ def command_validate(args) -> int:
     if not args.quiet:
         print(f"validate: {len(checks) - len(failed)} of {len(checks)} scenes agree"
               + ("" if corner is None else f"; corner: further bounces carry "
-                 f"{100 * corner['further_bounce_share']:.1f} % of the light")
+                 f"{100 * corner['further_bounce_share']:.1f} % of the light"
+                 + {True: ", its three bounces agree with mitransient's",
+                    False: ", its three bounces DISAGREE with mitransient's"}.get(
+                     corner["mitransient"].get("agrees"), ""))
               + f" -> {Path(args.out) / 'report.md'}")
     return 0 if metrics["all_agree"] else 1
 

@@ -42,7 +42,7 @@ from analytic.scene import Sampling, Scene
 from validation.compare import Agreement, compare_transients
 
 __all__ = ["Fit", "CheckResult", "check_transient", "fit_scale_offset", "read_data",
-           "read_stderr", "diagnose", "write_check_report", "KNOWN_SCALES", "MAX_RELATIVE_STDERR"]
+           "read_stderr", "stderr_beside", "diagnose", "write_check_report", "KNOWN_SCALES", "MAX_RELATIVE_STDERR"]
 
 #: Bins are judged (and fitted) only where se < this x |y_data| (as compare_transients).
 MAX_RELATIVE_STDERR = 0.1
@@ -274,6 +274,30 @@ def read_data(path: str | Path, scene: Scene) -> np.ndarray:
         bad = int(np.sum(~np.isfinite(data)))
         raise DataError(f"{path}: {bad} value(s) are NaN or infinite; re-render or drop the file")
     return data
+
+
+def stderr_beside(path: str | Path, scene: Scene) -> tuple[np.ndarray, int | None] | None:
+    """Our render's own standard error for its output (folder, ``transient.npy`` or ``.exr``).
+
+    Returns
+    -------
+    tuple or None
+        (``stderr.npy`` beside the data, the render's ``dof`` from
+        ``meta.json``, None when absent), or None when ``path`` is not one of
+        our render's outputs.
+    """
+    path = Path(path)
+    folder = path if path.is_dir() else path.parent
+    if not (path.is_dir() or path.name in ("transient.npy", "transient.exr")):
+        return None
+    if not (folder / "stderr.npy").is_file():
+        return None
+    dof = None
+    try:
+        dof = json.loads((folder / "meta.json").read_text(encoding="utf-8")).get("dof")
+    except (OSError, ValueError, AttributeError):
+        pass
+    return read_stderr(folder / "stderr.npy", scene), dof if isinstance(dof, int) and dof >= 1 else None
 
 
 def read_stderr(path: str | Path, scene: Scene) -> np.ndarray:
@@ -685,8 +709,8 @@ def diagnose(fit: Fit, *, agrees: bool, agrees_after_fit: bool, bin_width_opl: f
     return f"agrees after {scale_text} and {offset_text}: {explanation}."
 
 
-def check_transient(scene: Scene, data, *, stderr=None, shape_only: bool = False, model=None,
-                    false_alarm: float = 1e-3, shape_tolerance: float = 1e-2) -> CheckResult:
+def check_transient(scene: Scene, data, *, stderr=None, dof: int | None = None, shape_only: bool = False,
+                    model=None, false_alarm: float = 1e-3, shape_tolerance: float = 1e-2) -> CheckResult:
     """Judge a transient against the exact model of ``scene`` and fit its conventions.
 
     Parameters
@@ -699,6 +723,10 @@ def check_transient(scene: Scene, data, *, stderr=None, shape_only: bool = False
     stderr : array_like, optional
         ``(K, N)`` standard error of a single transient (units of y).
         Refused with replicas, whose error comes from their spread.
+    dof : int, optional
+        Degrees of freedom of ``stderr`` when it comes from replicas (our
+        render's: ``replicas - 1``): z is then judged as Student's t.
+        None: z is judged as normal.
     shape_only : bool
         Judge a single transient without ``stderr`` by shape only: relative
         L2 error against ``shape_tolerance``, unweighted fit. Refused
@@ -757,7 +785,7 @@ def check_transient(scene: Scene, data, *, stderr=None, shape_only: bool = False
     y_model = model_at(0.0)
     if y_model.shape != shape:
         raise DataError(f"model: shape {y_model.shape}, expected {shape}")
-    dof = None
+    dof = dof if stderr is not None else None        # replicas set their own below
     replica_data = data if replicas > 1 else None
     if replicas > 1:
         mean = data.mean(axis=0)
@@ -769,6 +797,8 @@ def check_transient(scene: Scene, data, *, stderr=None, shape_only: bool = False
             raise DataError(f"stderr: shape {error.shape} does not match the data's {shape}")
         if not np.all(np.isfinite(error)) or np.any(error < 0):
             raise DataError("stderr: must be finite and >= 0 in every bin")
+        if dof is not None and not (isinstance(dof, (int, np.integer)) and dof >= 1):
+            raise DataError(f"dof: the standard error's degrees of freedom must be an integer >= 1, got {dof!r}")
         judged_by = "stderr"
     else:
         judged_by, error = "shape", None
@@ -851,7 +881,8 @@ def write_check_report(out: str | Path, result: CheckResult, *, scene_name: str 
                   f"| after the fit | {result.relative_l2_after_fit:.3e} |"]
     else:
         source = (f"{result.replicas} independent replicas (z ~ Student's t, {result.dof} dof)"
-                  if result.judged_by == "replicas" else "the standard error given with the data")
+                  if result.judged_by == "replicas" else "the standard error given with the data"
+                  + ("" if result.dof is None else f" (z ~ Student's t, {result.dof} dof)"))
         given, after = result.as_given, result.after_fit
         low, high = given.chi2_interval
         lines += [f"Per-bin error from {source}. Thresholds: χ²/dof in [{low:.3f}, {high:.3f}] and max |z| ≤ "

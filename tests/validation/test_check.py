@@ -154,6 +154,27 @@ def test_our_render_passes_with_no_fit_needed(scene, model):
     assert result.agrees, result.summary()
 
 
+def test_check_command_takes_our_renders_own_standard_error(tmp_path, scene_file, scene):
+    """`check` on our render's folder or transient.npy judges with its stderr.npy and Student's t."""
+    from analytic.scene_file import load_scene
+
+    assert main(["render", str(scene_file), "--spp", str(2**20), "--seed", "5", "--out", str(tmp_path / "r"),
+                 "--quiet"]) == 0
+    dof = json.loads((tmp_path / "r" / "meta.json").read_text())["dof"]
+    for data in (tmp_path / "r", tmp_path / "r" / "transient.npy"):
+        out = tmp_path / f"check_{data.name}"
+        assert run_check(scene_file, "--data", data, "--out", out) == 0
+        metrics = json.loads((out / "metrics.json").read_text())
+        assert metrics["agrees"] is True and metrics["judged_by"] == "stderr" and metrics["dof"] == dof
+    # the same numbers passed by hand, and a bare (K, N) .npy elsewhere still needs --stderr
+    mean, stderr = np.load(tmp_path / "r" / "transient.npy"), np.load(tmp_path / "r" / "stderr.npy")
+    by_hand = check_transient(load_scene(scene_file), mean, stderr=stderr, dof=dof)
+    assert by_hand.dof == dof and by_hand.chi2_per_dof == pytest.approx(metrics["chi2_per_dof"], rel=1e-12)
+    assert check_transient(scene, mean, stderr=stderr).dof is None          # without dof: normal z
+    np.save(tmp_path / "bare.npy", mean)
+    assert run_check(scene_file, "--data", tmp_path / "bare.npy", "--out", tmp_path / "bare") == 2
+
+
 # ---------------------------------------------------------------- what is refused
 
 def test_a_single_transient_without_errors_is_refused(scene, model):

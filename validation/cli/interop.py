@@ -17,7 +17,7 @@ def command_check(args) -> int:
     import numpy as np
 
     from analytic.io import output_folder
-    from validation.check import check_transient, read_data, read_stderr, write_check_report
+    from validation.check import check_transient, read_data, read_stderr, stderr_beside, write_check_report
 
     scene = load_scene_argument(args.scene)
     if args.stderr is not None and len(args.data) > 1:
@@ -27,8 +27,12 @@ def command_check(args) -> int:
         raise UsageError("--shape-only: only for one --data file without --stderr")
     arrays = [read_data(path, scene) for path in args.data]
     stderr = read_stderr(args.stderr, scene) if args.stderr is not None else None
+    dof = None
+    if stderr is None and len(arrays) == 1 and not args.shape_only:
+        # our render's output carries its own standard error (and the replicas' degrees of freedom)
+        stderr, dof = stderr_beside(args.data[0], scene) or (None, None)
     data = arrays[0] if len(arrays) == 1 else np.stack(arrays)
-    result = check_transient(scene, data, stderr=stderr, shape_only=args.shape_only)
+    result = check_transient(scene, data, stderr=stderr, dof=dof, shape_only=args.shape_only)
     with output_folder(args.out) as out:
         write_check_report(out, result, scene_name=scene.name, data_paths=args.data)
     if not args.quiet:
@@ -75,7 +79,9 @@ def add_commands(commands) -> None:
                        help="transient file(s): our transient.npy/.exr/.h5 or their folder, a (K, N) .npy, "
                             "tal's HDF5, mitransient's saved film (K, 1, 1, N, C) or save_frames folder; "
                             "several files are independent replicas")
-    check.add_argument("--stderr", metavar="FILE", help="per-bin standard error of a single --data file")
+    check.add_argument("--stderr", metavar="FILE",
+                       help="per-bin standard error of a single --data file (default for our render's "
+                            "output: its stderr.npy, judged with its replicas' degrees of freedom)")
     check.add_argument("--shape-only", action="store_true",
                        help="judge a single file without errors by shape only (relative L2)")
     check.add_argument("--out", required=True, help="output folder (report.md, metrics.json, figures)")

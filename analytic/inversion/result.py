@@ -15,6 +15,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse
 
+from ..errors import DataError
+
 __all__ = ["RankDeficiencyWarning", "RegularizationWarning", "Reconstruction", "Problem",
            "record_warning", "parse_rule"]
 
@@ -101,6 +103,10 @@ def parse_rule(rule, rules: tuple) -> float | None:
     return None
 
 
+#: Powers of two that data and image scales must lie within (about 1e-150 .. 1e150): their squares stay normal.
+SCALE_RANGE = (2.0**-500, 2.0**500)
+
+
 def _power_of_two_near(value: float) -> float:
     return 1.0 if not value > 0 else float(2.0 ** round(math.log2(value)))
 
@@ -145,6 +151,10 @@ class Problem:
         ------
         ValueError
             Naming the argument: shapes that disagree, a non-finite value.
+        analytic.errors.DataError
+            (a ValueError) Data, or the image they imply, beyond about
+            1e±150: results and the λ rules' squared criteria could not be
+            given back in the caller's units.
         """
         if not (scipy.sparse.issparse(matrix) or isinstance(matrix, np.ndarray)):
             matrix = np.asarray(matrix, dtype=np.float64)
@@ -162,8 +172,24 @@ class Problem:
         values = matrix.data if scipy.sparse.issparse(matrix) else matrix
         if not np.all(np.isfinite(values)):
             raise ValueError("matrix: contains NaN or infinity")
-        a = _power_of_two_near(float(np.max(np.abs(values))) if values.size else 0.0)
-        c = _power_of_two_near(float(np.max(np.abs(y))) if y.size else 0.0)
+        largest_entry = float(np.max(np.abs(values))) if values.size else 0.0
+        largest_sample = float(np.max(np.abs(y))) if y.size else 0.0
+        a, c = _power_of_two_near(largest_entry), _power_of_two_near(largest_sample)
+        # Results go back to the caller's units: residuals by c, images by c / a, and the λ
+        # rules' criteria by their squares, which must stay normal float64 numbers.
+        if largest_entry > 0 and not SCALE_RANGE[0] <= a <= SCALE_RANGE[1]:
+            raise ValueError(f"matrix: largest |entry| is {largest_entry:.3g}, outside [1e-150, 1e150] where "
+                             f"λ (which scales with its square) stays a float64 number; rescale the matrix")
+        if not SCALE_RANGE[0] <= c <= SCALE_RANGE[1]:
+            raise DataError(f"data: largest |y| is {largest_sample:.3g}, outside [1e-150, 1e150] where "
+                            f"the λ rules' squared residuals stay float64 numbers; rescale the data "
+                            f"(y is linear in the source's intensity)")
+        if not SCALE_RANGE[0] <= c / a <= SCALE_RANGE[1]:
+            raise DataError(f"data: the image would be of order {c / a:.1g} (largest |y| {largest_sample:.3g} "
+                            f"over A's largest entry {largest_entry:.3g}), outside [1e-150, 1e150] where its "
+                            f"squares stay float64 numbers; rescale the data or the source's intensity")
         scaled = matrix / a if a != 1.0 else matrix
         live = np.asarray(abs(scaled).sum(axis=1)).ravel() > 0
+        if not live.any():
+            raise ValueError("matrix: no row sees the plane (every entry is 0): nothing to reconstruct")
         return cls(scaled, y / c, pixels, a, c, live)

@@ -48,10 +48,13 @@ def default_grid(largest: float, smallest: float, count: int = DEFAULT_LAMBDA_CO
     Parameters
     ----------
     largest, smallest : float
-        Largest and smallest non-zero singular values s of the operator.
+        Largest and smallest non-zero singular values s of the operator
+        (``largest`` 0 when the operator is 0: a grid around 1).
     count : int
         Number of λ values.
     """
+    if not largest > 0:         # the data see only the image's mean: λ changes nothing
+        largest = 1.0
     low = max(smallest, 1e-7 * largest)
     if not low > 0:
         low = 1e-7 * largest

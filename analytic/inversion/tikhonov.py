@@ -45,7 +45,8 @@ import scipy.sparse
 import scipy.sparse.linalg
 
 from .laplacian import dct2, idct2, laplacian_eigenvalues
-from .result import (Problem, RankDeficiencyWarning, Reconstruction, parse_rule, record_warning)
+from .result import (Problem, RankDeficiencyWarning, Reconstruction, RegularizationWarning, parse_rule,
+                     record_warning)
 from .rules import RULES, choose_iterative, choose_spectral, curvature, default_grid
 
 __all__ = ["reconstruct", "reconstruct_rules", "METHODS", "DEFAULT_MEMORY_LIMIT"]
@@ -416,12 +417,20 @@ def reconstruct_rules(matrix, data, pixels: int, *, rules=RULES, truth=None,
     if method != "svd" and "gcv" in [rule for rule, fixed in parsed if fixed is None]:
         # sweep once with GCV's probes first, so the other rules reuse that sweep
         solver.sweep(default, probes=gcv_probes)
+    # rank 1: the data fix one number (the image's mean, or one weighted sum of it), which the constant
+    # image meets at every λ; a rule would search a flat criterion (and the L-curve divide 0 by 0)
+    one_number = method == "svd" and solver.rank <= 1
     results = []
     warned = False
     for rule, fixed in parsed:
         begun = time.perf_counter()
         messages: list[str] = []
         scaled_fixed = None if fixed is None else fixed / a**2
+        if one_number and fixed is None:
+            record_warning(messages, f"A has rank 1: the data fix one number of the image, every λ gives "
+                                     f"the same flat image, and the {rule} rule has nothing to choose",
+                           RegularizationWarning)
+            scaled_fixed = 1.0
         grid = default if (fixed is None or lambdas is not None) else np.array([scaled_fixed])
         if method == "svd":
             result = choose_spectral(solver, rule, scaled_fixed, truth_image, scaled_sigma, grid,

@@ -97,3 +97,47 @@ def test_collinear_sensors_warn_and_give_the_mirror_symmetric_answer(rng):
     with pytest.warns(RankDeficiencyWarning):
         few = reconstruct(matrix[:60], y[:60], pixels, rule=1e-6, method="lsqr")
     assert np.all(np.isfinite(few.image))
+
+
+@pytest.mark.parametrize("power", [-480, -100, 0, 100, 480])
+@pytest.mark.parametrize("rule", ["gcv", "lcurve", "discrepancy", "oracle", 1e-6])
+def test_data_of_any_representable_magnitude_scale_the_answer_exactly(small_scene, rng, power, rule):
+    """y -> 2^p y gives 2^p times the image and the same λ, for every rule: powers of two scale exactly."""
+    scene, matrix = small_scene
+    noise = 1e-3 * rng.standard_normal(matrix.shape[0])
+    y = matrix @ scene.reflectance.ravel() + noise
+    factor = 2.0**power
+    base = reconstruct(matrix, y, scene.pixels, rule=rule, truth=scene.reflectance, sigma=1e-3)
+    scaled = reconstruct(matrix, factor * y, scene.pixels, rule=rule, truth=factor * scene.reflectance,
+                         sigma=factor * 1e-3)
+    assert np.array_equal(scaled.image, factor * base.image)
+    assert scaled.lam == base.lam
+    assert np.all(np.isfinite(scaled.criterion)) or rule == 1e-6     # a given λ has no criterion (NaN)
+
+
+@pytest.mark.parametrize("power", [-520, 520])
+def test_data_whose_squares_float64_cannot_hold_are_refused(small_scene, power):
+    from analytic.errors import DataError
+
+    scene, matrix = small_scene
+    y = matrix @ scene.reflectance.ravel()
+    with pytest.raises(DataError, match=r"data: largest \|y\|"):
+        reconstruct(matrix, 2.0**power * y, scene.pixels, rule="gcv")
+    sign = 1 if power > 0 else -1                      # y and A each within range, y / A not
+    with pytest.raises(DataError, match="the image would be of order"):
+        reconstruct(2.0**(-450 * sign) * matrix, 2.0**(100 * sign) * y, scene.pixels, rule="gcv")
+
+
+@pytest.mark.filterwarnings("ignore::analytic.inversion.RankDeficiencyWarning",
+                            "ignore::analytic.inversion.RegularizationWarning")
+@pytest.mark.parametrize("rule", ["gcv", "lcurve", "oracle", 1.0])
+@pytest.mark.parametrize("method", ["svd", "lsqr"])
+def test_data_that_see_only_the_mean_give_the_flat_image(rule, method):
+    """Every row sums the whole image (each sensor's light in one bin): only the mean is seen, and the
+    Laplacian-regularised answer is the constant image with the least-squares sum, for every λ."""
+    pixels, weight = 4, 0.25
+    matrix = np.full((6, pixels * pixels), weight)
+    y = np.array([1.0, 1.1, 0.9, 1.05, 0.95, 1.0])
+    result = reconstruct(matrix, y, pixels, rule=rule, method=method, truth=np.full((pixels, pixels), 0.2))
+    expected = y.mean() / (weight * pixels * pixels)
+    assert np.allclose(result.image, expected, rtol=1e-9, atol=0)

@@ -150,6 +150,10 @@ def _peak_ratio(source: Technique, sensor, width: float, height: float) -> float
     sensor's own solid angle (the integrand's peak), which is accurate to
     far better than the factor this ratio is compared with.
     """
+    if _kind_for(sensor, width, height) == AREA:
+        # its h / d³ varies under AREA_SAMPLING_RATIO over the rectangle: no peak to tame (and a
+        # rectangle it sees under an unresolvably small solid angle has no spherical set-up)
+        return 1.0
     sx, sy, sh = source.point
     kx, ky, kh = sensor
     nearest = math.hypot(max(0.0, -kx, kx - width), max(0.0, -ky, ky - height))
@@ -449,7 +453,7 @@ class TransientPlaneIntegrator(mi.SamplingIntegrator):
         reflectance = self._reflectance(plane, x, y)
         # The balance heuristic: every point is weighted by the density of all techniques together.
         shares = [opaque_f64((bounds[t + 1] - bounds[t]) / size) for t in range(len(plan))]
-        weight_scale = intensity * math.pi * reflectance / self._mixture(plan, shares, x, y)
+        weight_scale = intensity * reflectance / self._mixture(plan, shares, x, y)
 
         histogram = dr.zeros(mi.Float64, layout.histogram_rows * K * N)
         mode = reduce_mode()
@@ -506,13 +510,17 @@ class TransientPlaneIntegrator(mi.SamplingIntegrator):
         return total
 
     def _reflectance(self, plane, x, y):
-        """ρ(x) / π from the rectangle's own BSDF (its texture, as Mitsuba stores it), Float64."""
+        """ρ(x) from the rectangle's own BSDF texture (as Mitsuba stores it: float32), Float64.
+
+        The texture itself, not the BSDF's value ρ / π cos θ: Mitsuba forms that in float32, and
+        its 1/π alone would bias every render by float32(1/π) π − 1 = −4.0e-8.
+        """
         interaction = dr.zeros(mi.SurfaceInteraction3f)
         interaction.uv = mi.Point2f(mi.Float(x / self.width), mi.Float(y / self.height))
         interaction.n = mi.Normal3f(0.0, 0.0, 1.0)
         interaction.sh_frame = mi.Frame3f(interaction.n)
         interaction.wi = mi.Vector3f(0.0, 0.0, 1.0)
-        value = plane.bsdf().eval(mi.BSDFContext(), interaction, mi.Vector3f(0.0, 0.0, 1.0))
+        value = plane.bsdf().eval_diffuse_reflectance(interaction)
         return mi.Float64(value[0])
 
 

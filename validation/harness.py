@@ -120,7 +120,8 @@ def simplification_costs(scene: Scene, y_lambertian: np.ndarray, *, sensors: int
         t = np.linspace(edges[lit[0]], edges[lit[-1] + 1], times + 2)[1:-1]
         right.append(impulse_response(scene, k, t))
         wrong.append(impulse_response(scene, k, t, coarea=False))
-    if right:
+    # a response narrower than the samples' spacing (a 1e-9 m plane) can fall between them: no figure
+    if right and np.linalg.norm(np.concatenate(right)) > 0:
         right, wrong = np.concatenate(right), np.concatenate(wrong)
         wrong = wrong * np.linalg.norm(right) / max(np.linalg.norm(wrong), 1e-300)
         result["no_coarea_factor"] = float(np.linalg.norm(wrong - right) / np.linalg.norm(right))
@@ -153,7 +154,7 @@ def data_driven_rule(scene: Scene, requested="auto") -> tuple:
 
 
 def reconstruct_from_noisy_data(matrix, scene: Scene, model: np.ndarray, rendered: np.ndarray, *,
-                                rule="auto") -> dict:
+                                rule="auto", lambdas=None) -> dict:
     """Reconstruct from the model's and the render's data, each with the scene's noise.
 
     The same noise draw (the scene's ``noise.seed``) is added to both; the
@@ -187,11 +188,12 @@ def reconstruct_from_noisy_data(matrix, scene: Scene, model: np.ndarray, rendere
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)     # rank-deficient A: regularised answer
         for key, data in (("model", model_data), ("render", render_data)):
-            result = reconstruct(matrix, data.ravel(), pixels, rule=rule, truth=truth, sigma=sigma)
+            result = reconstruct(matrix, data.ravel(), pixels, rule=rule, truth=truth, sigma=sigma,
+                                 lambdas=lambdas)
             results[key] = {"image": result.image, "lambda": float(result.lam),
                             **{k: v for k, v in image_metrics(result.image, truth).items()
                                if k in ("psnr", "ssim")}}
-        oracle = reconstruct(matrix, model_data.ravel(), pixels, rule="oracle", truth=truth)
+        oracle = reconstruct(matrix, model_data.ravel(), pixels, rule="oracle", truth=truth, lambdas=lambdas)
     rule_name = rule if isinstance(rule, str) else f"λ = {rule:g}"
     return {
         "noise": None if noise is None else {"kind": noise.kind, "sigma": noise.sigma,
@@ -208,7 +210,8 @@ def reconstruct_from_noisy_data(matrix, scene: Scene, model: np.ndarray, rendere
 
 
 def check_scene(scene: Scene, *, spp: int, seed: int = 0, convergence: bool = True,
-                reconstruction: bool = True, progress: bool = False, rule="auto") -> SceneCheck:
+                reconstruction: bool = True, progress: bool = False, rule="auto",
+                lambdas=None) -> SceneCheck:
     """Model, render and compare one scene; see the module docstring.
 
     Parameters
@@ -228,6 +231,8 @@ def check_scene(scene: Scene, *, spp: int, seed: int = 0, convergence: bool = Tr
     rule : str or float
         λ rule of the reconstructions: ``"auto"`` (:func:`data_driven_rule`),
         a rule's name, or λ itself.
+    lambdas : array_like, optional
+        The λ grid the rules search (default: from A's singular values).
     """
     from transient.render import render
 
@@ -266,7 +271,8 @@ def check_scene(scene: Scene, *, spp: int, seed: int = 0, convergence: bool = Tr
         check.metrics["render_convergence"] = rows
     check.metrics["simplifications"] = simplification_costs(scene, model)
     if reconstruction:
-        check.reconstructions = reconstruct_from_noisy_data(matrix, scene, model, result.mean, rule=rule)
+        check.reconstructions = reconstruct_from_noisy_data(matrix, scene, model, result.mean, rule=rule,
+                                                            lambdas=lambdas)
         check.metrics["reconstruction"] = {
             key: ({k: v for k, v in value.items() if k != "image"} if isinstance(value, dict) else value)
             for key, value in check.reconstructions.items()}

@@ -32,12 +32,13 @@ def _row(check) -> str:
     slope = f"{check.metrics['render_slope']:.2f}" if "render_slope" in check.metrics else "-"
     share = check.metrics.get("window_share")
     window = "-" if share is None else f"{100 * share:.2f} %" + (" **cut**" if share < FULL_SHARE else "")
+    coarea = f"{costs['no_coarea_factor']:.3f}" if "no_coarea_factor" in costs else "-"
     return (f"| {check.name} | **{'agree' if a.agrees else 'DISAGREE'}** | {check.spp:.3g} | "
             f"{a.chi2_per_dof:.3f} [{a.chi2_interval[0]:.2f}, {a.chi2_interval[1]:.2f}] | "
             f"{a.max_abs_z:.2f} (≤ {a.z_threshold:.2f}) | {a.bins} | {a.relative_l2:.2e} | {window} | "
             f"{model_noise} | {slope} | {costs.get('paper_attenuation', float('nan')):.2f} / "
-            f"{costs.get('paper_attenuation_shape', float('nan')):.3f} | "
-            f"{costs.get('no_coarea_factor', float('nan')):.3f} | {_reconstruction_cell(check)} |")
+            f"{costs.get('paper_attenuation_shape', float('nan')):.3f} | {coarea} | "
+            f"{_reconstruction_cell(check)} |")
 
 
 def write_report(out: Path, checks: list, corner: dict | None = None, *, false_alarm: float = 1e-3,

@@ -1,4 +1,5 @@
-"""The single-plane estimator (transient_opl) against the exact model: unbiased, and powerful enough to\nfail deliberately wrong models. Every render uses a fixed seed."""
+"""The single-plane estimator (transient_opl) against the exact model: unbiased, and powerful enough to
+fail deliberately wrong models. Every render uses a fixed seed."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ import numpy as np
 import pytest
 
 from analytic.scene import Illumination, Sampling, Scene
+from analytic.system import forward, system_matrix
 from render_checks import agreement, general_path_dict, model, render_dict
 from transient.render import render, render_loaded
 from validation.suite import hard_cases, validation_suite
@@ -124,6 +126,22 @@ def test_far_plane_bins_exactly():
     assert passes, f"chi2/dof {chi2_per_dof:.3f}, max|z| {largest:.2f} over {dof} bins"
     # Light lands only where the model has light.
     assert np.all(reference[result.mean > 0] > 0)
+
+
+def test_a_near_deterministic_render_carries_no_float32_constant():
+    """A 1e-9 m plane seen from 1 m: every sample has nearly the same value, so the render's standard
+    error is ~1e-13 of y and any float32 factor (Mitsuba's ρ/π is float32: float32(1/π) π − 1 = −4.0e-8)
+    would stand out by 1e5 standard errors. The sensor off to the side also takes the technique planner
+    past a rectangle too small for its solid angle to be resolved."""
+    scene = Scene(size=1e-9, pixels=2, reflectance=0.5, source=(0.5, 0.5, 1.0),
+                  sensors=[(0.25, 0.75, 1.0), (0.5, 0.5, 0.5)],
+                  sampling=Sampling(bin_width_opl=0.1, start_opl=0.0, count=40))
+    result = render(scene, spp=2**16, seed=3, progress=False)
+    reference = forward(scene, system_matrix(scene, tolerance=1e-10))
+    lit = reference > 0
+    assert np.all(result.stderr[lit] < 1e-11 * reference[lit])       # the test can see a 4e-8 bias
+    assert np.all(np.abs(result.mean - reference)[lit] < 5 * result.stderr[lit] + 1e-13 * reference[lit])
+    assert np.all(result.mean[~lit] == 0)
 
 
 @pytest.mark.parametrize("name", [scene.name for scene, _ in validation_suite()

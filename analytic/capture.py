@@ -46,6 +46,7 @@ with it True (tests/test_capture.py).
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -219,8 +220,14 @@ def _value(handle, key: str):
 
 
 def _scalar(value):
+    """A real number stored as a scalar or a one-element array; None when absent or anything else."""
+    if value is None:
+        return None
     array = np.asarray(value)
-    return array.reshape(-1)[0].item() if array.size == 1 else None
+    if array.size != 1 or not (np.issubdtype(array.dtype, np.number) or array.dtype == bool) \
+            or np.iscomplexobj(array):
+        return None
+    return array.reshape(-1)[0].item()
 
 
 def read_capture(path: str | Path) -> Capture:
@@ -265,7 +272,10 @@ def read_capture(path: str | Path) -> Capture:
         H = _value(handle, "H")
         if H is None:
             raise CaptureError(f"{name}: no H dataset (not a tal capture)")
-        H = np.asarray(H, dtype=np.float64)
+        H = np.asarray(H)
+        if not (np.issubdtype(H.dtype, np.floating) or np.issubdtype(H.dtype, np.integer)):
+            raise CaptureError(f"{name}: H holds {H.dtype} values, not real numbers")
+        H = H.astype(np.float64)
         code = _scalar(_value(handle, "H_format"))
         names = {value: key for key, value in H_FORMATS.items()}
         layout = names.get(int(code), "UNKNOWN") if code is not None else "UNKNOWN"
@@ -287,8 +297,11 @@ def read_capture(path: str | Path) -> Capture:
         transient = np.ascontiguousarray(H.reshape(H.shape[0], -1).T)
         start = _value(handle, "t_start")
         width = _value(handle, "delta_t")
-        if start is None or width is None or _scalar(start) is None or _scalar(width) is None:
-            raise CaptureError(f"{name}: no time axis (t_start and delta_t are needed)")
+        if _scalar(start) is None or _scalar(width) is None:
+            raise CaptureError(f"{name}: no time axis (t_start and delta_t, one number each, are needed)")
+        if not (math.isfinite(_scalar(start)) and math.isfinite(_scalar(width)) and _scalar(width) > 0):
+            raise CaptureError(f"{name}: time axis t_start = {_scalar(start)}, delta_t = {_scalar(width)}: "
+                               f"both must be finite and delta_t > 0")
         grid = _value(handle, "sensor_grid_xyz")
         sensors = None
         if grid is not None:

@@ -203,6 +203,8 @@ def output_folder(folder: str | Path, *, option: str = "--out") -> Iterator[Path
         When the folder is a file, cannot be created or written, or another
         command holds its lock (its process id is named).
     """
+    if not str(folder).strip():      # Path("") is the current folder: never write there unasked
+        raise ResourceError(f"{option}: an empty path; name the output folder")
     folder = Path(folder)
     created = not folder.exists()
     if folder.exists() and not folder.is_dir():

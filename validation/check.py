@@ -44,6 +44,9 @@ from validation.compare import Agreement, compare_transients
 __all__ = ["Fit", "CheckResult", "check_transient", "fit_scale_offset", "read_data",
            "read_stderr", "stderr_beside", "diagnose", "write_check_report", "KNOWN_SCALES", "MAX_RELATIVE_STDERR"]
 
+#: Largest |y| accepted: the squares that χ² and the L2 norms form stay float64 numbers.
+MAX_DATA = 1e150
+
 #: Bins are judged (and fitted) only where se < this x |y_data| (as compare_transients).
 MAX_RELATIVE_STDERR = 0.1
 
@@ -224,16 +227,14 @@ def read_data(path: str | Path, scene: Scene) -> np.ndarray:
 
     Raises
     ------
-    FileNotFoundError
-        No such file.
     DataError
-        Unknown format, wrong shape, a time axis, source or sensor
+        No such file, unknown format, wrong shape, a time axis, source or sensor
         positions other than the scene's, NaN or infinity.
     """
     path = Path(path)
     sensors, bins = scene.sensor_count, scene.sampling.count
     if not path.exists():
-        raise FileNotFoundError(f"no data file at {path}")
+        raise DataError(f"{path}: no such file or folder")
     name = str(path)
     if path.is_dir():
         ours = [path / n for n in ("transient.npy", "transient.exr") if (path / n).is_file()]
@@ -252,8 +253,8 @@ def read_data(path: str | Path, scene: Scene) -> np.ndarray:
             array = np.load(path, allow_pickle=False)
         except (ValueError, OSError) as error:
             raise DataError(f"{path}: not a readable .npy ({error})") from None
-        if not np.issubdtype(array.dtype, np.number):
-            raise DataError(f"{path}: dtype {array.dtype} is not numeric")
+        if not (np.issubdtype(array.dtype, np.floating) or np.issubdtype(array.dtype, np.integer)):
+            raise DataError(f"{path}: dtype {array.dtype} is not a real number type; save y as float64")
         array = np.asarray(array, dtype=np.float64)
         if array.ndim in (4, 5):
             data = _film_tensor(name, array, sensors)
@@ -406,7 +407,7 @@ class _Optimum:
 def _gauss_newton(data, sigma, mask, model_at, bin_width_opl: float, max_iterations: int) -> _Optimum:
     d, s_ = data[mask], sigma[mask]
     if d.size < 3:
-        raise ValueError("fit: fewer than 3 bins to fit a scale and an offset")
+        raise DataError("fit: fewer than 3 bins to fit a scale and an offset")
     step_h = 1e-3 * bin_width_opl
     limit = 0.5 * data.shape[1] * bin_width_opl
 
@@ -425,7 +426,8 @@ def _gauss_newton(data, sigma, mask, model_at, bin_width_opl: float, max_iterati
     y = whitened(offset)
     scale = float(y @ (d / s_)) / float(y @ y) if float(y @ y) > 0 else 0.0
     if scale == 0.0:
-        raise ValueError("fit: the model holds no light in the fitted bins")
+        raise DataError("fit: the data hold no light where the model does (or none at all): no scale to fit; "
+                        "check the file against the scene")
     current = chi2(scale, offset)
     converged, iterations = False, 0
     for iterations in range(1, max_iterations + 1):
@@ -769,6 +771,12 @@ def check_transient(scene: Scene, data, *, stderr=None, dof: int | None = None, 
                         f"(R, {shape[0]}, {shape[1]}) (R replicas) for the scene's sensors x bins")
     if not np.all(np.isfinite(data)):
         raise DataError("data: contains NaN or infinity; re-render or drop the replica")
+    largest = float(np.max(np.abs(data))) if data.size else 0.0
+    if largest > MAX_DATA:       # χ² and L2 norms square the values
+        raise DataError(f"data: largest |y| is {largest:.3g}, beyond {MAX_DATA:g}, where their squares overflow "
+                        f"float64; rescale the data")
+    if largest == 0:
+        raise DataError("data: every value is 0, no light to judge or fit; check the file against the scene")
     replicas = 1 if data.ndim == 2 else data.shape[0]
     if replicas == 2:
         raise DataError("data: two replicas give each bin's error one degree of freedom; give at least 3 "

@@ -36,7 +36,14 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import special, stats
 
-__all__ = ["Agreement", "compare_transients", "assert_transients_agree", "normal_scores", "combined_dof"]
+from analytic.errors import DataError
+
+#: Fewest samples for a render that is cross-checked (run, validate, a sweep with cross_check):
+#: 128 per replica, so that the bins with light have a standard error to judge them by.
+MIN_CHECK_SAMPLES = 2**12
+
+__all__ = ["Agreement", "compare_transients", "assert_transients_agree", "normal_scores", "combined_dof",
+           "MIN_CHECK_SAMPLES"]
 
 
 @dataclass(frozen=True)
@@ -193,7 +200,8 @@ def compare_transients(rendered, stderr, model, *, dof=np.inf, false_alarm: floa
     bins = int(judged.sum())
     skipped = int(sampled.sum()) - bins
     if bins == 0:
-        raise ValueError("no bin has a positive standard error: nothing to judge")
+        raise DataError(f"render: no bin has a standard error under {max_relative_stderr:g} of its value "
+                        f"({int(sampled.sum())} bins with samples): nothing to judge; render more samples")
     z = np.full(rendered.shape, np.nan)
     z[judged] = normal_scores((rendered[judged] - model[judged]) / stderr[judged], dof[judged])
     chi2 = float(np.sum(z[judged] ** 2))

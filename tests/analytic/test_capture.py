@@ -110,6 +110,24 @@ def test_files_that_are_not_captures_are_refused(tmp_path):
         read_capture(tmp_path / "missing.h5")
 
 
+@pytest.mark.parametrize("datasets, words", [
+    ({"H": np.ones((40, 1))}, "no time axis"),                                    # no t_start, delta_t
+    ({"H": np.ones((40, 1)), "t_start": 0.0, "delta_t": np.nan}, "finite"),
+    ({"H": np.ones((40, 1)), "t_start": np.inf, "delta_t": 0.1}, "finite"),
+    ({"H": np.ones((40, 1)), "t_start": 0.0, "delta_t": -0.1}, "delta_t > 0"),
+    ({"H": np.ones((40, 1)), "t_start": 0.0, "delta_t": np.array([0.1, 0.2])}, "one number each"),
+    ({"H": np.ones((40, 1)), "t_start": "zero", "delta_t": 0.1}, "one number each"),
+    ({"H": np.array([b"hello"] * 40).reshape(40, 1), "t_start": 0.0, "delta_t": 0.1}, "not real numbers"),
+    ({"H": np.ones((40, 1)) * (1 + 1j), "t_start": 0.0, "delta_t": 0.1}, "not real numbers"),
+])
+def test_captures_with_a_bad_time_axis_or_h_are_refused(tmp_path, datasets, words):
+    with h5py.File(tmp_path / "bad.h5", "w") as handle:
+        for key, value in datasets.items():
+            handle[key] = value
+    with pytest.raises(CaptureError, match=words):
+        read_capture(tmp_path / "bad.h5")
+
+
 _TAL_READ = r"""
 import json, sys
 import numpy as np, tal

@@ -152,9 +152,9 @@ def _scene(tmp_path):
     return str(write_scene(tmp_path))
 
 
-def _data(tmp_path):
-    data = tmp_path / "y.npy"
-    np.save(data, np.zeros((1, 40)))
+def _data(tmp_path, name="y.npy", values=None):
+    data = tmp_path / name
+    np.save(data, np.zeros((1, 40)) if values is None else values)
     return str(data)
 
 
@@ -213,6 +213,26 @@ CLI_CASES = [
                             "tv", "--lambda", "gcv"], "tv"),
     ("reconstruct method bogus", ["reconstruct", "{scene}", "--data", "{data}", "--out", "{out}", "--method",
                                   "cholesky"], "--method"),
+    ("run spp 64", ["run", "{scene}", "--spp", "64", "--out", "{out}"], "--spp"),
+    ("validate spp 64", ["validate", "{scene}", "--spp", "64", "--out", "{out}"], "--spp"),
+    ("run lambda discrepancy without noise", ["run", "{scene}", "--lambda", "discrepancy", "--out", "{out}"],
+     "noise.sigma"),
+    ("run lambda text", ["run", "{scene}", "--lambda", "best", "--out", "{out}"], "--lambda"),
+    ("forward out empty", ["forward", "{scene}", "--out", ""], "--out"),
+    ("render out empty", ["render", "{scene}", "--spp", "64", "--out", ""], "--out"),
+    ("reconstruct data huge", ["reconstruct", "{scene}", "--data", "{huge}", "--out", "{out}"], "largest |y|"),
+    ("reconstruct data complex", ["reconstruct", "{scene}", "--data", "{complex}", "--out", "{out}"],
+     "real number"),
+    ("reconstruct tv without a rule", ["reconstruct", "{scene}", "--data", "{data}", "--out", "{out}",
+                                       "--regularizer", "tv"], "--regularizer tv"),
+    ("check zeros by shape", ["check", "{scene}", "--data", "{data}", "--shape-only", "--out", "{out}"],
+     "every value is 0"),
+    ("check huge by shape", ["check", "{scene}", "--data", "{huge}", "--shape-only", "--out", "{out}"],
+     "largest |y|"),
+    ("check data complex", ["check", "{scene}", "--data", "{complex}", "--shape-only", "--out", "{out}"],
+     "real number"),
+    ("check data missing", ["check", "{scene}", "--data", "{out}.npy", "--shape-only", "--out", "{out}"],
+     "no such file"),
     ("sweep file missing", ["sweep", "{out}.toml", "--out", "{out}"], "sweep file"),
     ("sweep workers 0", ["sweep", "{scene}", "--workers", "0", "--out", "{out}"], "workers"),
 ]
@@ -221,7 +241,9 @@ CLI_CASES = [
 @pytest.mark.parametrize("argv, words", [case[1:] for case in CLI_CASES], ids=[case[0] for case in CLI_CASES])
 def test_command_line_value(tmp_path, capsys, argv, words):
     out = tmp_path / "out"
-    values = {"scene": _scene(tmp_path), "data": _data(tmp_path), "out": str(out)}
+    values = {"scene": _scene(tmp_path), "data": _data(tmp_path), "out": str(out),
+              "huge": _data(tmp_path, "huge.npy", np.full((1, 40), 1e160)),
+              "complex": _data(tmp_path, "complex.npy", np.ones((1, 40)) * (1 + 1j))}
     argv = [part.format(**values) for part in argv]
     try:
         status = main(argv)

@@ -230,7 +230,7 @@ def test_wrong_shape_nan_and_unknown_formats_are_refused(tmp_path, scene, model)
     (tmp_path / "data.csv").write_text("1,2\n")
     with pytest.raises(DataError, match="unknown format"):
         read_data(tmp_path / "data.csv", scene)
-    with pytest.raises(FileNotFoundError):
+    with pytest.raises(DataError, match="no such file"):
         read_data(tmp_path / "missing.npy", scene)
     np.save(tmp_path / "negative.npy", -np.ones_like(model))
     with pytest.raises(DataError, match="negative"):

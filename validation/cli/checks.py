@@ -5,7 +5,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from .common import add_quiet, load_scene_argument, samples_type, seed_type, show_progress
+from .common import add_quiet, check_samples_type, load_scene_argument, seed_type, show_progress
+from .reconstruct import add_lambda_options
 
 __all__ = ["add_commands", "command_validate", "command_run"]
 
@@ -75,9 +76,16 @@ def command_run(args) -> int:
     from validation.harness import check_scene
     from validation.report import write_report
 
+    from validation.harness import data_driven_rule
+
+    from .reconstruct import lambda_grid_of
+
     scene = load_scene_argument(args.scene)
+    data_driven_rule(scene, args.rule)            # a rule the scene cannot serve is refused before any work
+    grid = lambda_grid_of(args)
     with output_folder(args.out) as out:
-        check = check_scene(scene, spp=args.spp, seed=args.seed, progress=show_progress(args))
+        check = check_scene(scene, spp=args.spp, seed=args.seed, progress=show_progress(args), rule=args.rule,
+                            lambdas=grid)
         share = check.metrics["window_share"]
         with staged_writes():
             write_transient(out / "model", check.model, build_meta(scene, kind="model", window_share=share))
@@ -99,8 +107,9 @@ def add_commands(subparsers) -> None:
     validate = subparsers.add_parser("validate", help="cross-check renders against the model")
     validate.add_argument("scene", nargs="*", help="scene TOML files (default: the built-in suite)")
     validate.add_argument("--out", required=True, help="output folder (report.md, metrics.json, plots)")
-    validate.add_argument("--spp", type=samples_type,
-                          help=f"samples per render (default: the suite's, {DEFAULT_SAMPLES:,} for a file)")
+    validate.add_argument("--spp", type=check_samples_type,
+                          help=f"samples per render, at least 4,096 (default: the suite's, "
+                               f"{DEFAULT_SAMPLES:,} for a file)")
     validate.add_argument("--seed", type=seed_type, default=0, help="random seed in [0, 2^32) (default 0)")
     validate.add_argument("--fast", action="store_true", help="skip the convergence studies")
     add_quiet(validate)
@@ -109,8 +118,9 @@ def add_commands(subparsers) -> None:
     run = subparsers.add_parser("run", help="model, render, cross-check, reconstruct, report: one scene")
     run.add_argument("scene", nargs="?", help="scene TOML (default: the built-in scene)")
     run.add_argument("--out", required=True, help="output folder")
-    run.add_argument("--spp", type=samples_type, default=DEFAULT_SAMPLES,
-                     help=f"render samples (default {DEFAULT_SAMPLES:,})")
+    run.add_argument("--spp", type=check_samples_type, default=DEFAULT_SAMPLES,
+                     help=f"render samples, at least 4,096 (default {DEFAULT_SAMPLES:,})")
     run.add_argument("--seed", type=seed_type, default=0, help="random seed in [0, 2^32) (default 0)")
+    add_lambda_options(run, default="auto")
     add_quiet(run)
     run.set_defaults(run=command_run)

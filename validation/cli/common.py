@@ -14,7 +14,8 @@ import sys
 from analytic.errors import UserError
 
 __all__ = ["UsageError", "OneLineParser", "seed_type", "samples_type", "positive_float_type",
-           "load_scene_argument", "show_progress", "MAX_SAMPLES", "add_quiet"]
+           "load_scene_argument", "show_progress", "MAX_SAMPLES", "add_quiet",
+           "check_samples_type"]
 
 #: Most samples a render may be asked for: 2^44, about two days at 1e8 samples/s.
 MAX_SAMPLES = 2**44
@@ -49,6 +50,17 @@ def seed_type(text: str) -> int:
     value = _whole(text, "--seed")
     if not 0 <= value < 2**32:
         raise argparse.ArgumentTypeError(f"--seed: must be in [0, 2^32), got {text}")
+    return value
+
+
+def check_samples_type(text: str) -> int:
+    """``--spp`` of a command that cross-checks: at least MIN_CHECK_SAMPLES, so that bins can be judged."""
+    from validation.compare import MIN_CHECK_SAMPLES
+
+    value = samples_type(text)
+    if value < MIN_CHECK_SAMPLES:
+        raise argparse.ArgumentTypeError(f"--spp: the cross-check needs at least {MIN_CHECK_SAMPLES} samples "
+                                         f"(128 per replica) to judge its bins, got {text}")
     return value
 
 

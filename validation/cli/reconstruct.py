@@ -10,7 +10,8 @@ import numpy as np
 
 from .common import UsageError, add_quiet, load_scene_argument, positive_float_type, show_progress
 
-__all__ = ["add_commands", "command_reconstruct", "command_reproduce", "lambda_argument", "lambda_grid_of"]
+__all__ = ["add_commands", "command_reconstruct", "command_reproduce", "lambda_argument", "lambda_grid_of",
+           "add_lambda_options"]
 
 
 def lambda_argument(text: str):
@@ -61,6 +62,7 @@ def add_lambda_options(parser, *, default: str) -> None:
 
 def command_reconstruct(args) -> int:
     """Reconstruct the scene's image from a transient; write images, metrics, figures, report."""
+    from analytic.errors import SceneError
     from analytic.io import output_folder, save_exr, save_json, save_npy, save_png_image, staged_writes
     from analytic.inversion import image_metrics, reconstruct
     from analytic.system import system_matrix
@@ -71,6 +73,9 @@ def command_reconstruct(args) -> int:
     scene = load_scene_argument(args.scene)
     rule, sigma = data_driven_rule(scene, args.rule)
     if args.regularizer == "tv":
+        if rule in ("gcv", "lcurve") and args.rule == "auto":
+            raise UsageError("--regularizer tv: its default rule, discrepancy, needs the scene's Gaussian σ "
+                             "([noise] sigma); give --lambda oracle or a number")
         if rule in ("gcv", "lcurve"):
             raise UsageError(f"--lambda {rule}: not defined for --regularizer tv "
                              f"(use oracle, discrepancy or a number)")
@@ -82,6 +87,9 @@ def command_reconstruct(args) -> int:
         assembly_started = time.perf_counter()
         matrix = system_matrix(scene, progress=show_progress(args))
         assembly = time.perf_counter() - assembly_started
+        if matrix.nnz == 0:
+            raise SceneError("sampling", "the window holds none of the light: no sample sees the plane, "
+                                         "nothing to reconstruct; widen [sampling] start/count")
         truth = np.asarray(scene.reflectance, dtype=np.float64)
         options = {} if args.regularizer == "tv" else {"method": args.method}
         with warnings.catch_warnings(record=True) as caught:
@@ -136,17 +144,11 @@ def command_reconstruct(args) -> int:
 
 
 def _read_data(path: str, scene) -> np.ndarray:
-    from analytic.errors import DataError
-    from analytic.io import read_transient
+    """The transient, read and checked as ``check`` reads it: shape, finite values, and the time axis
+    (and source) that the file states, against the scene's."""
+    from validation.check import read_data
 
-    data = read_transient(path)
-    expected = (scene.sensor_count, scene.sampling.count)
-    if data.shape != expected:
-        raise DataError(f"--data {path}: shape {data.shape} does not match the scene's "
-                        f"{expected[0]} sensors x {expected[1]} bins")
-    if not np.all(np.isfinite(data)):
-        raise DataError(f"--data {path}: contains NaN or infinity")
-    return data
+    return read_data(path, scene)
 
 
 def command_reproduce(args) -> int:

@@ -26,6 +26,9 @@ def command_render(args) -> int:
         result = render(scene, spp=args.spp, seed=args.seed, out_dir=out, variant=args.variant,
                         resume=bool(args.resume), progress=show_progress(args))
     if not args.quiet:
+        if args.spp is not None and result.samples != args.spp:
+            print(f"render: --spp {args.spp:,} rounded up to {result.samples:,} "
+                  f"({result.replicas} replicas of {result.samples // result.replicas:,} samples)")
         print(f"render: {result.samples:,} samples in {result.seconds:.1f} s "
               f"({result.samples / max(result.seconds, 1e-9):,.0f} samples/s, {result.variant}) -> {out}")
     return 0
@@ -36,7 +39,8 @@ def add_commands(subparsers) -> None:
     render = subparsers.add_parser("render", help="Monte Carlo render of the transient")
     render.add_argument("scene", nargs="?", help="scene TOML (default: the built-in scene)")
     render.add_argument("--spp", type=samples_type, required=True,
-                        help="total number of samples (points on the plane; each serves every sensor)")
+                        help="total number of samples (points on the plane; each serves every sensor), "
+                             "rounded up to a whole number per replica (32 replicas)")
     render.add_argument("--seed", type=seed_type, default=0, help="random seed in [0, 2^32) (default 0)")
     group = render.add_mutually_exclusive_group(required=True)
     group.add_argument("--out", help="output folder")

@@ -18,6 +18,7 @@ from typing import Any
 from analytic.errors import SceneError
 from analytic.scene import Scene
 from analytic.scene_file import read_toml, scene_from_dict, scene_to_tables
+from validation.compare import MIN_CHECK_SAMPLES
 
 __all__ = ["Sweep", "SweepItem", "load_sweep", "sweep_from_dict", "default_scene_table",
            "DEFAULT_SWEEP_CHUNK", "MAX_SWEEP_SAMPLES", "MAX_ITEMS"]
@@ -205,6 +206,9 @@ def sweep_from_dict(data: dict, base_dir: str | Path = ".") -> Sweep:
     cross_check = data.get("cross_check", False)
     if not isinstance(cross_check, bool):
         raise SceneError("cross_check", f"expected true or false, got {cross_check!r}")
+    if cross_check and samples < MIN_CHECK_SAMPLES:
+        raise SceneError("samples", f"the cross-check needs at least {MIN_CHECK_SAMPLES} samples per item "
+                                    f"(128 per replica) to judge its bins, got {samples}")
     variant = data.get("variant")
     if variant is not None and not (isinstance(variant, str) and variant.startswith(("llvm_", "cuda_"))
                                     and variant.endswith("_mono")):

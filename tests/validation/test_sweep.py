@@ -182,6 +182,9 @@ def test_reflectance_folder_gives_one_item_per_image(tmp_path, rng):
     ('scene = "base.toml"\nsamples = 100\nchunk = 0\n', "chunk"),
     ('scene = "missing.toml"\nsamples = 100\n', "scene"),
     ('samples = 100\n', "scene"),
+    ('scene = "base.toml"\nsamples = 100\ncross_check = true\n', "samples"),       # too few to judge bins
+    ('scene = "base.toml"\nsamples = 100\n[grid]\n"sampling.count" = [' + ", ".join(map(str, range(1, 401)))
+     + ']\n"sampling.start" = [' + ", ".join(f"{0.001 * i:.3f}" for i in range(300)) + ']\n', "grid"),
 ])
 def test_bad_sweep_files_name_the_key(tmp_path, capsys, text, key):
     path = write_sweep(tmp_path, text=text)

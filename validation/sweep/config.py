@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import hashlib
 import itertools
+import math
 import os
 import re
 from dataclasses import dataclass
@@ -225,6 +226,10 @@ def sweep_from_dict(data: dict, base_dir: str | Path = ".") -> Sweep:
                 raise SceneError(f"grid.{dotted}", "expected a dotted scene key such as \"sampling.period\"")
             grid[dotted] = _grid_values(dotted, value, base_dir)
 
+    count = math.prod(len(values) for values in grid.values())
+    if count > MAX_ITEMS:
+        raise SceneError("grid", f"{count:,} items (the product of the value lists' lengths), more than a sweep "
+                                 f"holds ({MAX_ITEMS:,}); split it into several sweeps")
     items = []
     keys = list(grid)
     for index, combination in enumerate(itertools.product(*(grid[k] for k in keys))):

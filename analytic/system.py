@@ -521,10 +521,11 @@ def system_matrix(scene: Scene, *, tolerance: float | None = None, memory_limit:
     Raises
     ------
     SceneError
-        A tolerance outside the supported range (``model.tolerance``), a
+        A tolerance outside the supported range (``model.tolerance``), or a
         source or sensor too low to resolve (see
-        :func:`analytic.scene.check_heights`), or an A that does not fit
-        in memory.
+        :func:`analytic.scene.check_heights`).
+    ResourceError
+        An A that does not fit in memory (the need and the limit named).
 
     Warns
     -----

@@ -44,6 +44,7 @@ import numpy as np
 import scipy.sparse
 import scipy.sparse.linalg
 
+from ..errors import ResourceError
 from .laplacian import dct2, idct2, laplacian_eigenvalues
 from .result import (Problem, RankDeficiencyWarning, Reconstruction, RegularizationWarning, parse_rule,
                      record_warning)
@@ -308,7 +309,8 @@ def reconstruct(matrix, data, pixels: int, *, rule: str | float = "gcv", truth=N
         Laplacian only. Default ``"auto"``: ``"svd"`` when its dense
         matrices (about 3 m M² doubles) fit ``memory_limit``.
     memory_limit : int, optional
-        Laplacian only: bytes the svd method may use. Default 2 GiB.
+        Laplacian only: bytes the svd method may use (``"svd"`` beyond it
+        is a ResourceError; ``"auto"`` then takes ``"lsqr"``). Default 2 GiB.
     gcv_probes : int, optional
         Laplacian only: Hutchinson probes for GCV's trace with the lsqr
         method. Default 4.
@@ -397,8 +399,12 @@ def reconstruct_rules(matrix, data, pixels: int, *, rules=RULES, truth=None,
         lambdas = lambdas / a**2
     rows = problem.matrix.shape[0]
     unknowns = pixels * pixels
+    svd_bytes = 3 * rows * unknowns * 8
     if method == "auto":
-        method = "svd" if 3 * rows * unknowns * 8 <= memory_limit else "lsqr"
+        method = "svd" if svd_bytes <= memory_limit else "lsqr"
+    elif method == "svd" and svd_bytes > memory_limit:
+        raise ResourceError(f"method svd: its dense matrices need {svd_bytes / 2**30:.2f} GiB, more than "
+                            f"memory_limit ({memory_limit / 2**30:.2f} GiB); use method lsqr or raise the limit")
     solver = SpectralSolver(problem) if method == "svd" else IterativeSolver(problem)
     shared = time.perf_counter() - started
     rank = solver.rank

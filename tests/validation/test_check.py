@@ -72,7 +72,22 @@ def test_known_scale_and_offset_are_recovered(scene, model, rng):
     assert abs(fit.scale - scale) < 3 * fit.scale_stderr
     assert abs(fit.offset_opl - offset) < 3 * fit.offset_stderr
     assert fit.offset_stderr < 0.05 * offset                      # the test has power
+    assert fit.scale_stderr < 0.01 * scale
     assert "path lengths short" in result.diagnosis
+
+
+def test_the_fits_standard_errors_describe_its_spread(scene, model, rng):
+    """The jackknife standard errors that the thresholds above use are neither inflated nor too small:
+    over 100 independent data sets the fitted values scatter by about the stated error (the sample
+    standard deviation of 100 values is itself known to ~7 %; the bounds allow for that many times)."""
+    scales, offsets, scale_errors, offset_errors = [], [], [], []
+    for _ in range(100):
+        fit = check_transient(scene, noisy_replicas(0.3 * shifted(scene, 0.012), rng), model=model).fit
+        scales.append(fit.scale), offsets.append(fit.offset_opl)
+        scale_errors.append(fit.scale_stderr), offset_errors.append(fit.offset_stderr)
+    for values, errors in ((scales, scale_errors), (offsets, offset_errors)):
+        ratio = np.std(values, ddof=1) / np.mean(errors)
+        assert 0.5 < ratio < 1.5, ratio
 
 
 def test_data_without_convention_errors_agree_as_given(scene, model, rng):

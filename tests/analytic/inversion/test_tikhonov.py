@@ -112,7 +112,10 @@ def test_data_of_any_representable_magnitude_scale_the_answer_exactly(small_scen
                          sigma=factor * 1e-3)
     assert np.array_equal(scaled.image, factor * base.image)
     assert scaled.lam == base.lam
-    assert np.all(np.isfinite(scaled.criterion)) or rule == 1e-6     # a given λ has no criterion (NaN)
+    if rule == 1e-6:
+        assert np.all(np.isnan(scaled.criterion))                     # a given λ has no criterion
+    else:
+        assert np.all(np.isfinite(scaled.criterion))
 
 
 @pytest.mark.parametrize("power", [-520, 520])
@@ -141,3 +144,16 @@ def test_data_that_see_only_the_mean_give_the_flat_image(rule, method):
     result = reconstruct(matrix, y, pixels, rule=rule, method=method, truth=np.full((pixels, pixels), 0.2))
     expected = y.mean() / (weight * pixels * pixels)
     assert np.allclose(result.image, expected, rtol=1e-9, atol=0)
+
+
+def test_the_memory_limit_holds_for_an_explicit_svd(small_scene, rng):
+    """memory_limit: "svd" beyond it is refused naming the need; "auto" falls back to lsqr."""
+    from analytic.errors import ResourceError
+
+    scene, matrix = small_scene
+    y = matrix @ scene.reflectance.ravel()
+    need = 3 * matrix.shape[0] * scene.pixels**2 * 8
+    with pytest.raises(ResourceError, match="method svd"):
+        reconstruct(matrix, y, scene.pixels, rule=1e-6, method="svd", memory_limit=need - 1)
+    assert reconstruct(matrix, y, scene.pixels, rule=1e-6, memory_limit=need - 1).method == "lsqr"
+    assert reconstruct(matrix, y, scene.pixels, rule=1e-6, memory_limit=need).method == "svd"

@@ -26,10 +26,11 @@ import drjit as dr
 import mitsuba as mi
 
 from analytic.binning import bin_index
-from analytic.waveforms import EXPONENTIAL_SUM, IMPULSE, SQUARE, WaveformTerms
+from analytic.scene import Illumination
+from analytic.waveforms import EXPONENTIAL_SUM, IMPULSE, SQUARE, WaveformTerms, make_waveform
 
 __all__ = ["cumulative", "attenuation", "height_over_cube", "sample_stream", "jittered_point", "replica_of", "deposit",
-           "reduce_mode", "opaque_u32", "opaque_f64", "is_diffuse"]
+           "reduce_mode", "opaque_u32", "opaque_f64", "is_diffuse", "time_axis_and_waveform"]
 
 
 def opaque_u32(value: int):
@@ -332,3 +333,39 @@ def deposit(histogram, row, weight, length, active, *, bins: int, start_opl: flo
         slot = mi.UInt32(dr.clip(n, 0.0, bins - 1.0)) + row * bins
         dr.scatter_reduce(dr.ReduceOp.Add, histogram, weight * (upper - edge), slot, active=inside, mode=mode)
         edge = upper
+
+
+def time_axis_and_waveform(props, plugin: str):
+    """The bins and the illumination both integrators read from their properties, checked.
+
+    Parameters
+    ----------
+    props : mi.Properties
+        ``bins``, ``bin_width_opl`` (m), ``start_opl`` (m, default 0),
+        ``waveform`` and its options (``pulse_width``, ``cutoff``,
+        ``duration``, ``order``), named as the scene file names them.
+    plugin : str
+        The plugin's name, for messages.
+
+    Returns
+    -------
+    tuple
+        (bins, start_opl, bin_width_opl, waveform).
+    """
+    if "bins" not in props or "bin_width_opl" not in props:
+        raise ValueError(f"{plugin}: 'bins' and 'bin_width_opl' are required")
+    bins = int(props.get("bins"))
+    start_opl = float(props.get("start_opl", 0.0))
+    bin_width_opl = float(props.get("bin_width_opl"))
+    if bins < 1:
+        raise ValueError(f"{plugin}: bins must be >= 1, got {bins}")
+    if not (bin_width_opl > 0.0 and math.isfinite(bin_width_opl)):
+        raise ValueError(f"{plugin}: bin_width_opl must be > 0, got {bin_width_opl}")
+    if not math.isfinite(start_opl):
+        raise ValueError(f"{plugin}: start_opl must be finite, got {start_opl}")
+    options = {name: props.get(key) if key in props else None
+               for name, key in (("width", "pulse_width"), ("cutoff", "cutoff"), ("duration", "duration"),
+                                 ("order", "order"))}
+    # Illumination validates names and values exactly as the scene file does.
+    illumination = Illumination(waveform=props.get("waveform", "impulse"), **options)
+    return bins, start_opl, bin_width_opl, make_waveform(illumination, bin_width_opl)

@@ -34,17 +34,13 @@ Import only after :func:`transient.backend.select_variant`.
 
 from __future__ import annotations
 
-import math
-
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from analytic.scene import Illumination
-from analytic.waveforms import make_waveform
-
 from .chunks import ReplicaLayout
-from .common import deposit, is_diffuse, opaque_f64, opaque_u32, reduce_mode, replica_of, sample_stream
+from .common import (deposit, is_diffuse, opaque_f64, opaque_u32, reduce_mode, replica_of, sample_stream,
+                     time_axis_and_waveform)
 
 __all__ = ["TransientPathIntegrator", "PLUGIN_NAME", "path_length_error"]
 
@@ -107,22 +103,8 @@ class TransientPathIntegrator(mi.SamplingIntegrator):
 
     def __init__(self, props):
         super().__init__(props)
-        if "bins" not in props or "bin_width_opl" not in props:
-            raise ValueError("transient_opl_path: 'bins' and 'bin_width_opl' are required")
-        self.bins = int(props.get("bins"))
-        self.start_opl = float(props.get("start_opl", 0.0))
-        self.bin_width_opl = float(props.get("bin_width_opl"))
-        if self.bins < 1:
-            raise ValueError(f"transient_opl_path: bins must be >= 1, got {self.bins}")
-        if not (self.bin_width_opl > 0.0 and math.isfinite(self.bin_width_opl)):
-            raise ValueError(f"transient_opl_path: bin_width_opl must be > 0, got {self.bin_width_opl}")
-        if not math.isfinite(self.start_opl):
-            raise ValueError(f"transient_opl_path: start_opl must be finite, got {self.start_opl}")
-        options = {name: props.get(key) if key in props else None
-                   for name, key in (("width", "pulse_width"), ("cutoff", "cutoff"), ("duration", "duration"),
-                                     ("order", "order"))}
-        illumination = Illumination(waveform=props.get("waveform", "impulse"), **options)
-        self.waveform = make_waveform(illumination, self.bin_width_opl)
+        self.bins, self.start_opl, self.bin_width_opl, self.waveform = time_axis_and_waveform(
+            props, "transient_opl_path")
         self.max_depth = int(props.get("max_depth", 1))
         if self.max_depth < 1:
             raise ValueError(f"transient_opl_path: max_depth must be >= 1, got {self.max_depth}")

@@ -46,13 +46,10 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from analytic.scene import Illumination
-from analytic.waveforms import make_waveform
-
 from . import spherical_rectangle
 from .chunks import ReplicaLayout
 from .common import attenuation, deposit, height_over_cube, is_diffuse, jittered_point, opaque_f64, \
-    opaque_u32, reduce_mode, replica_of, sample_stream
+    opaque_u32, reduce_mode, replica_of, sample_stream, time_axis_and_waveform
 
 __all__ = ["TransientPlaneIntegrator", "PLUGIN_NAME", "Technique", "techniques", "plane_frame",
            "AREA_SAMPLING_RATIO", "PEAK_RATIO_LIMIT", "STRATEGIES", "SAMPLERS"]
@@ -297,23 +294,8 @@ class TransientPlaneIntegrator(mi.SamplingIntegrator):
 
     def __init__(self, props):
         super().__init__(props)
-        if "bins" not in props or "bin_width_opl" not in props:
-            raise ValueError("transient_opl: 'bins' and 'bin_width_opl' are required")
-        self.bins = int(props.get("bins"))
-        self.start_opl = float(props.get("start_opl", 0.0))
-        self.bin_width_opl = float(props.get("bin_width_opl"))
-        if self.bins < 1:
-            raise ValueError(f"transient_opl: bins must be >= 1, got {self.bins}")
-        if not (self.bin_width_opl > 0.0 and math.isfinite(self.bin_width_opl)):
-            raise ValueError(f"transient_opl: bin_width_opl must be > 0, got {self.bin_width_opl}")
-        if not math.isfinite(self.start_opl):
-            raise ValueError(f"transient_opl: start_opl must be finite, got {self.start_opl}")
-        options = {name: props.get(key) if key in props else None
-                   for name, key in (("width", "pulse_width"), ("cutoff", "cutoff"), ("duration", "duration"),
-                                     ("order", "order"))}
-        # Illumination validates names and values exactly as the scene file does.
-        illumination = Illumination(waveform=props.get("waveform", "impulse"), **options)
-        self.waveform = make_waveform(illumination, self.bin_width_opl)
+        self.bins, self.start_opl, self.bin_width_opl, self.waveform = time_axis_and_waveform(
+            props, "transient_opl")
         if "max_depth" in props:
             raise ValueError("transient_opl: paths on a single plane have exactly one bounce "
                              "(max_depth belongs to transient_opl_path)")

@@ -47,6 +47,7 @@ from analytic.io import save_json  # noqa: E402
 from analytic.scene import default_scene  # noqa: E402
 from analytic.system import MIN_TOLERANCE, QuadratureWarning, system_matrix  # noqa: E402
 from supersampled import supersampled  # noqa: E402
+from validation.bench import cpu_model  # noqa: E402
 
 FORWARD = "{python} -m validation.cli forward {scene} --out {out} --quiet"
 BRUTE = ("{python} " + str(Path(__file__).resolve().parent / "supersampled.py")
@@ -54,16 +55,7 @@ BRUTE = ("{python} " + str(Path(__file__).resolve().parent / "supersampled.py")
 
 
 def machine() -> str:
-    model = "unknown CPU"
-    try:
-        with open("/proc/cpuinfo") as handle:
-            for line in handle:
-                if line.startswith("model name"):
-                    model = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
-    return f"{model}, {os.cpu_count()} cores, Python {platform.python_version()}"
+    return f"{cpu_model()}, {os.cpu_count()} cores, Python {platform.python_version()}"
 
 
 def load() -> str:

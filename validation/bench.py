@@ -46,7 +46,7 @@ from analytic.io import atomic_write, save_json
 from analytic.scene import Sampling, Scene, default_scene, sensor_grid
 from validation.plots import plot_speed_against_error
 
-__all__ = ["plane_scene", "throughput_scene", "MitransientRuns", "run_mitransient", "device_name",
+__all__ = ["plane_scene", "throughput_scene", "MitransientRuns", "run_mitransient", "device_name", "cpu_model",
            "speed_against_error", "TARGETS"]
 
 #: RMS relative errors whose time is reported.
@@ -235,15 +235,18 @@ def device_name(variant: str) -> str:
         except (OSError, subprocess.SubprocessError):
             pass
         return "CUDA GPU (name unavailable)"
-    model = platform.processor() or platform.machine()
+    return f"{cpu_model()}, {dr.thread_count()} threads"
+
+
+def cpu_model() -> str:
+    """The CPU's model name (``/proc/cpuinfo``), or what the platform says."""
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
             if line.startswith("model name"):
-                model = line.split(":", 1)[1].strip()
-                break
+                return line.split(":", 1)[1].strip()
     except OSError:
         pass
-    return f"{model}, {dr.thread_count()} threads"
+    return platform.processor() or platform.machine() or "unknown CPU"
 
 
 def _relative(estimate, reference) -> float:

@@ -86,7 +86,8 @@ def test_a_second_command_on_a_busy_folder_names_the_first(tmp_path, capsys):
     assert main(["forward", str(write_scene(tmp_path)), "--out", str(out), "--quiet"]) == 0
 
 
-def test_a_scheduler_nobody_runs_is_one_line(tmp_path, capsys):
+def test_a_scheduler_nobody_runs_is_one_line(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr("validation.sweep.driver.CONNECT_SECONDS", 1)       # nobody answers: do not wait 10 s
     (tmp_path / "base.toml").write_text(GOOD)
     sweep = tmp_path / "sweep.toml"
     sweep.write_text('scene = "base.toml"\nsamples = 1000\n[grid]\n"sampling.period" = [0.1]\n')

@@ -14,8 +14,7 @@ pixel, one of three routes:
   :data:`FOOT_CLEARANCE`): every entry a_k κ_n(d) is analytic on the pixel,
   integrated by the tensor Gauss ladder
   (:func:`analytic.quadrature.tensor_integrate`) with its error check; most
-  pairs take this route (81 % of them in the default scene, more at
-  larger M).
+  pairs take this route, more of them at larger M.
 - *Cut pixels*: in isochrone coordinates (τ, φ) (see :mod:`analytic.isochrone`)
   the entry is ∫ κ_n(τ) G(τ) dτ with G(τ) = ∫_{isochrone ∩ pixel} a J dφ.
   G is smooth except where an isochrone passes a pixel corner, touches an

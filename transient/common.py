@@ -306,7 +306,8 @@ def deposit(histogram, row, weight, length, active, *, bins: int, start_opl: flo
     terms : WaveformTerms
         The illumination's closed form.
     taps : int
-        Most consecutive bins one path reaches (``Waveform.bins_touched``).
+        Most consecutive bins of the window one path reaches
+        (``Waveform.bins_touched(T, N)``: at most N).
     mode : drjit.ReduceMode
         Scatter strategy (:func:`reduce_mode`).
 
@@ -314,7 +315,8 @@ def deposit(histogram, row, weight, length, active, *, bins: int, start_opl: flo
     -----
     κ_n(τ) = S(t_{n+1} - τ) - S(t_n - τ) with t_n = start_opl + n T. The bin
     of τ comes from :func:`analytic.binning.bin_index`, the model's own
-    binning; the pulse spreads a path into that bin and the next taps - 1.
+    binning; the pulse spreads a path into that bin and the next ones, of
+    which the loop visits the taps from the first inside the window.
     Neighbouring taps share an edge, so S is evaluated taps + 1 times.
     """
     first, _ = bin_index(length, start_opl, bin_width_opl, bins, floor=dr.floor)
@@ -324,12 +326,15 @@ def deposit(histogram, row, weight, length, active, *, bins: int, start_opl: flo
         slot = mi.UInt32(dr.clip(first, 0.0, bins - 1.0)) + row * bins
         dr.scatter_reduce(dr.ReduceOp.Add, histogram, weight, slot, active=inside, mode=mode)
         return
-    lower = start_opl + first * bin_width_opl - length
+    # From the first bin inside the window: a pulse longer than the window (taps capped at N) reaches it
+    # from bins far before it, which no sample ever reads.
+    start = dr.maximum(first, 0.0)
+    lower = start_opl + start * bin_width_opl - length
     edge = cumulative(terms, lower)
     for tap in range(taps):
         upper = cumulative(terms, lower + (tap + 1) * bin_width_opl)
-        n = first + tap
-        inside = active & (n >= 0.0) & (n < bins)
+        n = start + tap
+        inside = active & (n < bins)
         slot = mi.UInt32(dr.clip(n, 0.0, bins - 1.0)) + row * bins
         dr.scatter_reduce(dr.ReduceOp.Add, histogram, weight * (upper - edge), slot, active=inside, mode=mode)
         edge = upper

@@ -185,7 +185,7 @@ class TransientPathIntegrator(mi.SamplingIntegrator):
 
         histogram = dr.zeros(mi.Float64, layout.histogram_rows * K * N)
         settings = dict(bins=N, start_opl=self.start_opl, bin_width_opl=self.bin_width_opl,
-                        terms=self.waveform.terms, taps=self.waveform.bins_touched(self.bin_width_opl),
+                        terms=self.waveform.terms, taps=self.waveform.bins_touched(self.bin_width_opl, self.bins),
                         mode=reduce_mode())
 
         def close(value, length, active):

@@ -439,7 +439,7 @@ class TransientPlaneIntegrator(mi.SamplingIntegrator):
 
         histogram = dr.zeros(mi.Float64, layout.histogram_rows * K * N)
         mode = reduce_mode()
-        taps = self.waveform.bins_touched(self.bin_width_opl)
+        taps = self.waveform.bins_touched(self.bin_width_opl, self.bins)
         terms = self.waveform.terms
         source_distance = _distance(x, y, self.source)
         for k in range(K):

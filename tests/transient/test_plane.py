@@ -144,6 +144,23 @@ def test_a_near_deterministic_render_carries_no_float32_constant():
     assert np.all(result.mean[~lit] == 0)
 
 
+def test_a_pulse_longer_than_the_window_renders_as_fast_and_as_right():
+    """A square of width 1e300 m touches ~1e301 bins but the window's 40: the deposit visits those only
+    (it looped over every bin the pulse touches: a hang), and inside the window the render equals that of
+    a square of width 100 m (the same light there) to rounding."""
+    scene = Scene(size=1.0, pixels=4, reflectance=0.5, source=(0.5, 0.5, 1.0), sensors=[(0.2, 0.7, 1.0)],
+                  sampling=Sampling(bin_width_opl=0.1, start_opl=0.0, count=40))
+    results = {}
+    for width in (100.0, 1e300):
+        wide = scene.replace(illumination=Illumination(waveform="square", width=width))
+        results[width] = render(wide, spp=2**18, seed=5, progress=False)
+    np.testing.assert_allclose(results[1e300].mean, results[100.0].mean, rtol=1e-12, atol=0)
+    chi2_per_dof, largest, dof, passes = agreement(results[1e300].mean, results[1e300].stderr,
+                                                   model(scene.replace(illumination=Illumination(
+                                                       waveform="square", width=1e300))), results[1e300].dof)
+    assert passes, f"chi2/dof {chi2_per_dof:.3f}, max|z| {largest:.2f} over {dof} bins"
+
+
 @pytest.mark.parametrize("name", [scene.name for scene, _ in validation_suite()
                                   if scene.name in hard_cases()])
 def test_hard_cases_agree_at_the_suite_counts(name):

@@ -297,10 +297,11 @@ def read_capture(path: str | Path) -> Capture:
         transient = np.ascontiguousarray(H.reshape(H.shape[0], -1).T)
         start = _value(handle, "t_start")
         width = _value(handle, "delta_t")
-        if _scalar(start) is None or _scalar(width) is None:
+        start, width = _scalar(start), _scalar(width)
+        if start is None or width is None:
             raise CaptureError(f"{name}: no time axis (t_start and delta_t, one number each, are needed)")
-        if not (math.isfinite(_scalar(start)) and math.isfinite(_scalar(width)) and _scalar(width) > 0):
-            raise CaptureError(f"{name}: time axis t_start = {_scalar(start)}, delta_t = {_scalar(width)}: "
+        if not (math.isfinite(start) and math.isfinite(width) and width > 0):
+            raise CaptureError(f"{name}: time axis t_start = {start}, delta_t = {width}: "
                                f"both must be finite and delta_t > 0")
         grid = _value(handle, "sensor_grid_xyz")
         sensors = None
@@ -320,7 +321,7 @@ def read_capture(path: str | Path) -> Capture:
             info = json.loads(info)
         except json.JSONDecodeError:
             pass   # tal's own files hold YAML; kept as text
-    return Capture(transient=transient, start_opl=float(_scalar(start)), bin_width_opl=float(_scalar(width)),
+    return Capture(transient=transient, start_opl=float(start), bin_width_opl=float(width),
                    sensors=sensors, source=source,
                    accounts_first_and_last_bounces=None if accounts is None else bool(accounts),
                    scene_info=info)

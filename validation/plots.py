@@ -61,25 +61,21 @@ def _nanosecond_axis(axis) -> None:
     secondary.set_xlabel("ns", fontsize=6, labelpad=1, loc="right")
 
 
-def _readable_axes(edges: np.ndarray, values: np.ndarray) -> tuple[float, int]:
-    """An origin for the path-length axis and a power of ten for y, so that no tick needs an offset.
+def _round_origin(edges: np.ndarray) -> float:
+    """A round origin for a path-length axis far from 0 (a span under 1 % of its start, such as 1.5 mm
+    at 800 m), else 0: matplotlib's offset text would otherwise collide with the nanosecond axis."""
+    span, start = float(edges[-1] - edges[0]), float(edges[0])
+    if not (span > 0 and abs(start) > 100 * span):
+        return 0.0
+    step = 10.0 ** math.floor(math.log10(span))
+    return math.floor(start / step) * step
 
-    A window far from 0 (a span under 1 % of its start, such as 1.5 mm at
-    800 m) is drawn relative to a round origin, and y values outside
-    [1e-3, 1e4] in a power of ten named in the label: matplotlib's offset
-    and multiplier texts would otherwise collide with the nanosecond axis.
-    """
-    span = float(edges[-1] - edges[0])
-    start = float(edges[0])
-    origin = 0.0
-    if span > 0 and abs(start) > 100 * span:
-        step = 10.0 ** math.floor(math.log10(span))
-        origin = math.floor(start / step) * step
+
+def _power_of_ten(values: np.ndarray) -> int:
+    """The power of ten to name in the y label when values leave [1e-3, 1e4] (else 0), instead of
+    matplotlib's multiplier text."""
     peak = float(np.nanmax(np.abs(values))) if values.size and np.isfinite(values).any() else 0.0
-    power = 0
-    if peak > 0 and not 1e-3 <= peak < 1e4:
-        power = int(math.floor(math.log10(peak)))
-    return origin, power
+    return int(math.floor(math.log10(peak))) if peak > 0 and not 1e-3 <= peak < 1e4 else 0
 
 
 def plot_transients(path: str | Path, sampling, transients: dict[str, np.ndarray], *,
@@ -112,7 +108,7 @@ def plot_transients(path: str | Path, sampling, transients: dict[str, np.ndarray
     sensors = reference.shape[0]
     chosen = np.unique(np.linspace(0, sensors - 1, min(sensors, max_panels)).round().astype(int))
     first, last = _lit_bins(list(transients.values()), sampling)
-    origin, power = _readable_axes(sampling.edges[first:last + 1], reference[:, first:last])
+    origin, power = _round_origin(sampling.edges[first:last + 1]), _power_of_ten(reference[:, first:last])
     scale = 10.0 ** -power
     edges = sampling.edges[first:last + 1] - origin
     centres = 0.5 * (edges[:-1] + edges[1:])
@@ -194,7 +190,7 @@ def plot_z_map(path: str | Path, z: np.ndarray, threshold: float, sampling, titl
     from matplotlib.ticker import MaxNLocator
 
     cmap = colormaps["RdBu_r"].with_extremes(bad="0.85")
-    origin, _ = _readable_axes(sampling.edges[first:last + 1], np.zeros(0))
+    origin = _round_origin(sampling.edges[first:last + 1])
     edges = sampling.edges[first:last + 1] - origin
     image = axis.pcolormesh(edges, np.arange(z.shape[0] + 1) - 0.5, np.ma.masked_invalid(shown),
                             cmap=cmap, vmin=-limit, vmax=limit)

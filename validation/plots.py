@@ -15,7 +15,7 @@ import numpy as np
 
 from analytic.io import atomic_write
 
-__all__ = ["save_figure", "new_figure", "plot_transients", "plot_z_map", "plot_convergence",
+__all__ = ["save_figure", "save_png", "png_bytes", "new_figure", "plot_transients", "model_figure", "plot_z_map", "plot_convergence",
            "plot_reconstructions", "plot_reconstruction", "plot_criterion", "plot_conditioning",
            "plot_panels", "plot_check_transients", "plot_check_z", "plot_speed_against_error",
            "NANOSECONDS_PER_METRE", "Y_LABEL"]
@@ -36,11 +36,23 @@ def new_figure(width: float, height: float, layout: str | None = "constrained"):
     return figure
 
 
+def png_bytes(figure, dpi: int = 110) -> bytes:
+    """A figure as PNG bytes."""
+    import io
+
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png", dpi=dpi)
+    return buffer.getvalue()
+
+
+def save_png(path: str | Path, png: bytes) -> Path:
+    """Write PNG bytes (from :func:`png_bytes`), atomically."""
+    return atomic_write(path, lambda temporary: Path(temporary).write_bytes(png))
+
+
 def save_figure(figure, path: str | Path, dpi: int = 110) -> Path:
     """Write a figure as PNG, atomically."""
-    def write(temporary):
-        figure.savefig(temporary, format="png", dpi=dpi)
-    return atomic_write(path, write)
+    return save_png(path, png_bytes(figure, dpi))
 
 
 def _lit_bins(arrays, sampling, margin: int = 2) -> tuple[int, int]:
@@ -173,6 +185,81 @@ def plot_transients(path: str | Path, sampling, transients: dict[str, np.ndarray
         figure.suptitle(title + ("" if not any(e <= edges[-1] and e >= edges[0] for e in window)
                                  else "  (dotted: the window's edges)"), fontsize=9)
     return save_figure(figure, path)
+
+
+def model_figure(sampling, y: np.ndarray, noisy: np.ndarray | None = None, *, title: str = "",
+                 max_curves: int = 4):
+    """``forward``'s figure: every sensor's transient as an image, and a few of them as curves.
+
+    Two panels whatever K is (16 small ones took ``forward`` longer to draw
+    than to compute A): left, y_k[n] over sensors x path length; right, the
+    step curves of up to ``max_curves`` sensors with distinct transients
+    (evenly chosen; a symmetric array repeats curves), with the noisy
+    samples as points when there are any.
+
+    Parameters
+    ----------
+    sampling : analytic.Sampling
+        The bins (path length in metres).
+    y : ndarray
+        ``(K, N)`` noiseless transient, W m⁻¹ for I in W/sr.
+    noisy : ndarray, optional
+        ``(K, N)`` noisy transient.
+    title : str
+        Figure title.
+    max_curves : int
+        Sensors drawn as curves.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    y = np.atleast_2d(y)
+    sensors = y.shape[0]
+    first, last = _lit_bins([y], sampling)
+    origin, power = _round_origin(sampling.edges[first:last + 1]), _power_of_ten(y[:, first:last])
+    scale = 10.0 ** -power
+    edges = sampling.edges[first:last + 1] - origin
+    centres = 0.5 * (edges[:-1] + edges[1:])
+    x_label = "path length (m)" if origin == 0 else f"path length − {origin:g} m (m)"
+    y_label = Y_LABEL if power == 0 else Y_LABEL.replace("(W", f"(1e{power} W")
+    width, height = 10.0, 3.9
+    # a fixed layout: constrained layout would double the drawing time
+    figure = new_figure(width, height, layout=None)
+    figure.subplots_adjust(left=0.6 / width, right=1 - 0.2 / width, top=1 - 0.85 / height,
+                           bottom=0.55 / height, wspace=0.32)
+    image_axis, curve_axis = figure.subplots(1, 2, gridspec_kw={"width_ratios": [1.0, 1.0]})
+    image = image_axis.imshow(y[:, first:last] * scale, aspect="auto", interpolation="nearest",
+                              extent=(edges[0], edges[-1], sensors - 0.5, -0.5), cmap="viridis")
+    bar = figure.colorbar(image, ax=image_axis, pad=0.02)
+    bar.set_label(y_label, fontsize=7)
+    bar.ax.tick_params(labelsize=6)
+    image_axis.set_ylabel("sensor k", fontsize=7)
+    image_axis.set_title(f"every sensor (K = {sensors})", fontsize=8, loc="left")
+    from matplotlib.ticker import MaxNLocator
+
+    image_axis.yaxis.set_major_locator(MaxNLocator(nbins=6, integer=True))
+    peak = float(np.abs(y).max()) or 1.0
+    distinct = np.unique(np.round(y / (1e-9 * peak)), axis=0, return_index=True)[1]
+    distinct = np.sort(distinct)
+    chosen = distinct[np.unique(np.linspace(0, distinct.size - 1, min(distinct.size, max_curves)).round()
+                                .astype(int))]
+    for i, k in enumerate(chosen):
+        curve_axis.stairs(y[k, first:last] * scale, edges, color=f"C{i}", lw=1.2, label=f"sensor {k}")
+        if noisy is not None:
+            curve_axis.plot(centres, np.atleast_2d(noisy)[k, first:last] * scale, "o", ms=2.5, color=f"C{i}")
+    curve_axis.set_ylabel(y_label, fontsize=7)
+    curve_axis.set_title("model (lines)" + (" and model + noise (points)" if noisy is not None else ""),
+                         fontsize=8, loc="left")
+    curve_axis.legend(fontsize=6, loc="upper right")
+    for axis in (image_axis, curve_axis):
+        axis.set_xlabel(x_label, fontsize=7)
+        axis.tick_params(labelsize=6)
+    if origin == 0:
+        _nanosecond_axis(curve_axis)
+    if title:
+        figure.suptitle(title, fontsize=9)
+    return figure
 
 
 def plot_z_map(path: str | Path, z: np.ndarray, threshold: float, sampling, title: str) -> Path:

@@ -12,6 +12,13 @@ __all__ = ["add_commands", "command_forward"]
 
 def command_forward(args) -> int:
     """Model the noiseless transient (and a noisy one when the scene asks); exit status 0."""
+    from validation import figure_process
+
+    with figure_process.start() as figure:      # first: matplotlib loads there while A is computed here
+        return _forward(args, figure)
+
+
+def _forward(args, figure) -> int:
     from analytic.io import build_meta, output_folder, staged_writes, write_transient
     from analytic.noise import add_noise
     from analytic.system import forward, system_matrix
@@ -31,14 +38,13 @@ def command_forward(args) -> int:
         meta = build_meta(scene, kind="model",
                           seed=scene.noise.seed if scene.noise is not None else None,
                           window_share=share, nonzeros=int(matrix.nnz), assembly_seconds=assembly)
-        from validation.plots import plot_transients
+        from validation.plots import model_figure, save_png
 
+        figure.submit(model_figure, scene.sampling, y, noisy,
+                      title=f"{scene.name}: {meta['illumination']} illumination, {scene.attenuation} attenuation")
         with staged_writes():
             write_transient(out, y, meta, noisy=noisy)
-            curves = {"model": y} if noisy is None else {"model": y, "model + noise": noisy}
-            plot_transients(out / "transient.png", scene.sampling, curves,
-                            title=f"{scene.name}: {meta['illumination']} illumination, "
-                                  f"{scene.attenuation} attenuation")
+            save_png(out / "transient.png", figure.result())
     if not args.quiet:
         print(f"forward: {scene.sensor_count} sensors x {scene.sampling.count} bins, "
               f"A {matrix.shape[0]} x {matrix.shape[1]} with {matrix.nnz:,} non-zeros "

@@ -15,5 +15,8 @@ if ! ldconfig -p 2>/dev/null | grep -Eq 'libLLVM(-(1[6-9]|[2-9][0-9])\.so|\.so\.
     DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq libllvm19 >/dev/null
 fi
 python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ignore -e ".[test]"
+# pip compiles a regular install's modules, not an editable one's: compile them here, so that commands
+# do not recompile them at every start where PYTHONDONTWRITEBYTECODE is set
+python3 -m compileall -q analytic transient validation
 # tal (y-tal) pins numpy < 2: it gets its own environment, used by the tests that read our HDF5 with it
 bash scripts/setup_interop.sh

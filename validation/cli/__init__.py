@@ -14,12 +14,13 @@ each; anything else is a bug and keeps its traceback.
 
 from __future__ import annotations
 
+import gc
 import sys
 import warnings
 
 from .common import OneLineParser, UsageError
 
-__all__ = ["main", "build_parser", "UsageError"]
+__all__ = ["main", "console", "build_parser", "UsageError"]
 
 
 def build_parser() -> OneLineParser:
@@ -57,3 +58,20 @@ def main(argv: list[str] | None = None) -> int:
         text = " ".join(str(error).split())
         print(f"diffuse-imaging: error: {text}", file=sys.stderr)
         return 2
+
+
+def console() -> int:
+    """The console script: :func:`main`, with the cycle collector tuned for a process that ends soon.
+
+    Numba's and matplotlib's imports leave about 10⁶ long-lived objects that
+    every full collection walks again: full collections are made ten times
+    rarer while a command runs (young ones still run, so a long render or
+    sweep frees its cycles), and at the end :func:`gc.freeze` spares the
+    interpreter's exit one last walk. Together 0.3–0.4 s of a 1.7 s
+    ``forward``; the memory goes back to the system with the process.
+    """
+    young, middle, old = gc.get_threshold()
+    gc.set_threshold(young, middle, 10 * old)
+    status = main()
+    gc.freeze()
+    return status

@@ -36,8 +36,9 @@ rungs' trend), and the value estimated is the one kept, relative to
 ∫ |integrand|; the quadrature asks for :data:`SAFETY` x ``tolerance`` and
 the inner integrals for a tenth of that. Every entry, hence every row's
 largest, is accurate to ``tolerance``, and the achieved error follows the
-tolerance (within a factor of 2 to 5 from 1e-3 to 1e-8 on the default
-scene), so that a looser tolerance is faster.
+tolerance (each entry's relative error 2 to 4 times below it from 1e-2 to
+1e-8 on the default scene: benchmarks/bench_model.py), so that a looser
+tolerance is faster.
 
 Assembly (geometry -> entries) runs once, compiled and in parallel over
 pixels (all sensors of a pixel together, pixels dealt out in strides so the

@@ -6,8 +6,9 @@
 Measures, on this machine (named in the output, with its load average):
 
 1. Where ``forward``'s time goes: Python start, imports, Numba's first
-   dispatch (cache load), A, y = A f, and the rest of the command (writing
-   files, the figure), each in a fresh process.
+   dispatch (cache load), A, y = A f, matplotlib's import and the figure
+   (which forward overlaps in a forked process), and the rest of the
+   command (writing files, exit), each in a fresh process.
 2. A's build against NumPy midpoint supersampling (benchmarks/supersampled.py),
    in one process (ratios): 32 x 32 samples per pixel at M = 50 and 8 x 8 at
    M = 256, K = 16, with every entry's error relative to its row's largest
@@ -19,7 +20,8 @@ Measures, on this machine (named in the output, with its load average):
    against M (64 ... 1024, K = 16) and against K (1 ... 64, M = 256), each
    in a fresh process.
 5. The tolerance setting: build time and achieved error (against the tight
-   assembly) from 1e-2 to 1e-8 on the default scene.
+   assembly) from 1e-2 to 1e-8 on the default scene, both as each entry's
+   relative error (what the tolerance bounds) and against its row's largest.
 
 Prints markdown tables and writes ``results.json`` in --out. Timings on a
 shared machine are provisional: compare ratios taken in the same run.
@@ -42,6 +44,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import numpy as np  # noqa: E402
 
 from analytic.io import save_json  # noqa: E402
 from analytic.scene import default_scene  # noqa: E402
@@ -129,9 +133,21 @@ matrix = system_matrix(scene)
 t5 = time.perf_counter()
 y = matrix @ scene.reflectance.ravel()
 t6 = time.perf_counter()
+from matplotlib.backends import backend_agg
+from matplotlib import figure
+t7 = time.perf_counter()
+from validation.plots import model_figure, png_bytes
+png_bytes(model_figure(scene.sampling, y.reshape(scene.sensor_count, -1), title="x"))
+t8 = time.perf_counter()
 print(json.dumps(dict(numpy_scipy=t1 - t0, numba=t2 - t1, analytic=t3 - t2, first_dispatch=t4 - t3,
-                      matrix=t5 - t4, product=t6 - t5)))
+                      matrix=t5 - t4, product=t6 - t5, matplotlib=t7 - t6, figure=t8 - t7)))
 """
+
+#: Runs of each end-to-end command (short, and the most sensitive to a shared machine's load).
+END_TO_END_REPEATS = 5
+
+#: Parts of the breakdown that ``forward`` runs in its forked figure process, beside the others.
+FIGURE_PARTS = ("matplotlib", "figure")
 
 SCALING = """
 import time, json, resource, warnings
@@ -176,6 +192,13 @@ def error_against(matrix, reference) -> float:
     return float((abs(matrix - reference).max(axis=1).toarray().ravel() / row_max).max())
 
 
+def entry_error_against(matrix, reference) -> float:
+    """max over entries of |A - A_ref| / |A_ref| (|A - A_ref| where A_ref is 0), dense: A is small here."""
+    difference = abs(matrix.toarray() - reference.toarray())
+    scale = abs(reference.toarray())
+    return float(np.where(scale > 0, difference / np.where(scale > 0, scale, 1.0), difference).max())
+
+
 def tight(scene):
     with warnings.catch_warnings():     # a few pieces stop at float64's rounding at this tolerance
         warnings.simplefilter("ignore", QuadratureWarning)
@@ -215,9 +238,12 @@ def main():
     total = min(run(args.forward_command.format(python=python, scene=scene50, out=work / "forward"))
                 for _ in range(repeats))
     parts = {"python_start": startup, **parts}
-    parts["rest_of_command"] = total - sum(parts.values())
+    serial = sum(value for key, value in parts.items() if key not in FIGURE_PARTS)
+    parts["rest_of_command"] = total - serial
     results["forward_breakdown"] = {**parts, "total": total}
-    print("Where forward's time goes (M = 50, K = 16; each part best of fresh processes):\n")
+    print("Where forward's time goes (M = 50, K = 16; each part best of fresh processes; matplotlib and "
+          "the figure run in forward's forked figure process, beside the parts above them, so the rest is "
+          "the total less those others: files, exit, and any wait for the figure):\n")
     table(["part", "seconds", "share"], [[key.replace("_", " "), f"{value:.3f}", f"{value / total:.0%}"]
                                          for key, value in parts.items()] + [["total", f"{total:.3f}", ""]])
 
@@ -248,16 +274,18 @@ def main():
     rows, ends = [], []
     for pixels, factor in ((50, 32), (256, 8)):
         path = scene_file(work, pixels, 4)
-        forward_seconds = min(run(args.forward_command.format(python=python, scene=path, out=work / f"f{pixels}"))
-                              for _ in range(repeats))
-        brute_seconds = min(run(BRUTE.format(python=python, scene=path, factor=factor, out=work / f"b{pixels}"))
-                            for _ in range(repeats))
+        forward_times, brute_times = [], []
+        for _ in range(END_TO_END_REPEATS):     # interleaved, so that a busy spell hits both alike
+            forward_times.append(run(args.forward_command.format(python=python, scene=path,
+                                                                 out=work / f"f{pixels}")))
+            brute_times.append(run(BRUTE.format(python=python, scene=path, factor=factor, out=work / f"b{pixels}")))
+        forward_seconds, brute_seconds = min(forward_times), min(brute_times)
         ends.append({"M": pixels, "factor": factor, "forward_seconds": forward_seconds,
                      "brute_seconds": brute_seconds, "ratio": forward_seconds / brute_seconds})
         rows.append([str(pixels), f"{factor}x{factor}", f"{forward_seconds:.2f}", f"{brute_seconds:.2f}",
                      f"{forward_seconds / brute_seconds:.2f}"])
     results["end_to_end"] = ends
-    print(f"End to end, process start to files written (best of {repeats}); forward = "
+    print(f"End to end, process start to files written (best of {END_TO_END_REPEATS}, interleaved); forward = "
           f"`{args.forward_command}`:\n")
     table(["M", "brute force", "forward (s)", "brute script (s)", "forward / brute"], rows)
 
@@ -282,18 +310,22 @@ def main():
     table(["M", "K", "wall (s)", "CPU (s)", "nnz", "µs per nnz (wall)", "memory (MiB)", "bytes per nnz",
            "A (MiB)"], rows)
 
-    # 5. tolerance
+    # 5. tolerance: what it bounds (each entry's relative error) and the error against each row's largest
     scene = default_scene(noise=None)
     reference = tight(scene)
     rows, sweep = [], []
     for tolerance in (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8):
         seconds, matrix = best(lambda tolerance=tolerance: system_matrix(scene, tolerance=tolerance), repeats)
+        entry_error = entry_error_against(matrix, reference)
         error = error_against(matrix, reference)
-        sweep.append({"tolerance": tolerance, "seconds": seconds, "error": error})
-        rows.append([f"{tolerance:g}", f"{seconds:.3f}", f"{error:.1e}", f"{tolerance / error:.1f}"])
+        sweep.append({"tolerance": tolerance, "seconds": seconds, "entry_error": entry_error, "error": error})
+        rows.append([f"{tolerance:g}", f"{seconds:.3f}", f"{entry_error:.1e}", f"{tolerance / entry_error:.1f}",
+                     f"{error:.1e}"])
     results["tolerance"] = sweep
-    print(f"Tolerance (default scene, M = 50, K = 16; reference: tolerance {MIN_TOLERANCE:g}; best of {repeats}):\n")
-    table(["tolerance", "build (s)", "achieved error", "tolerance / error"], rows)
+    print(f"Tolerance (default scene, M = 50, K = 16; reference: tolerance {MIN_TOLERANCE:g}; best of {repeats}; "
+          "entry error = max |A - A_tight| / |A_tight|, what the tolerance bounds; row error = max "
+          "|A - A_tight| / row max):\n")
+    table(["tolerance", "build (s)", "entry error", "tolerance / entry error", "row error"], rows)
 
     results["load_average_end"] = load()
     print(f"load average at end {results['load_average_end']}")

@@ -3,7 +3,8 @@
 Figures are built on :class:`matplotlib.figure.Figure` with the Agg canvas,
 never through pyplot's global state, and written atomically. Time axes are
 cropped to the light (the window's edges drawn when in view) and labelled in
-metres of path length and nanoseconds; every image has a colour bar.
+metres of path length (the transients' also in nanoseconds); every image
+has a colour bar.
 """
 
 from __future__ import annotations
@@ -15,10 +16,10 @@ import numpy as np
 
 from analytic.io import atomic_write
 
-__all__ = ["save_figure", "save_png", "png_bytes", "new_figure", "plot_transients", "model_figure", "plot_z_map", "plot_convergence",
-           "plot_reconstructions", "plot_reconstruction", "plot_criterion", "plot_conditioning",
-           "plot_panels", "plot_check_transients", "plot_check_z", "plot_speed_against_error",
-           "NANOSECONDS_PER_METRE", "Y_LABEL"]
+__all__ = ["save_figure", "save_png_bytes", "png_bytes", "new_figure", "plot_transients", "model_figure",
+           "plot_z_map", "plot_convergence", "plot_reconstructions", "plot_reconstruction", "plot_criterion",
+           "plot_conditioning", "plot_panels", "plot_check_transients", "plot_check_z",
+           "plot_speed_against_error", "NANOSECONDS_PER_METRE", "Y_LABEL"]
 
 #: Light travels 1 m of path in 3.3356 ns.
 NANOSECONDS_PER_METRE = 1e9 / 299_792_458.0
@@ -45,14 +46,14 @@ def png_bytes(figure, dpi: int = 110) -> bytes:
     return buffer.getvalue()
 
 
-def save_png(path: str | Path, png: bytes) -> Path:
+def save_png_bytes(path: str | Path, png: bytes) -> Path:
     """Write PNG bytes (from :func:`png_bytes`), atomically."""
     return atomic_write(path, lambda temporary: Path(temporary).write_bytes(png))
 
 
 def save_figure(figure, path: str | Path, dpi: int = 110) -> Path:
     """Write a figure as PNG, atomically."""
-    return save_png(path, png_bytes(figure, dpi))
+    return save_png_bytes(path, png_bytes(figure, dpi))
 
 
 def _lit_bins(arrays, sampling, margin: int = 2) -> tuple[int, int]:
@@ -130,7 +131,7 @@ def plot_transients(path: str | Path, sampling, transients: dict[str, np.ndarray
     columns = min(len(chosen), 4)
     rows = int(np.ceil(len(chosen) / columns))
     residual = bool(errors)
-    # a fixed layout: constrained layout would double the time `forward` spends on its figure
+    # a fixed layout: constrained layout would double the drawing time
     panel = 3.4 if residual else 2.6
     width, height = max(3.3 * columns, 5.0), panel * rows + 0.9
     figure = new_figure(width, height, layout=None)
@@ -191,11 +192,12 @@ def model_figure(sampling, y: np.ndarray, noisy: np.ndarray | None = None, *, ti
                  max_curves: int = 4):
     """``forward``'s figure: every sensor's transient as an image, and a few of them as curves.
 
-    Two panels whatever K is (16 small ones took ``forward`` longer to draw
-    than to compute A): left, y_k[n] over sensors x path length; right, the
-    step curves of up to ``max_curves`` sensors with distinct transients
-    (evenly chosen; a symmetric array repeats curves), with the noisy
-    samples as points when there are any.
+    Two panels whatever K is (:func:`plot_transients`' eight took ``forward``
+    longer to draw than to compute A): left, y_k[n] over sensors x path
+    length; right, the step curves of up to ``max_curves`` sensors with
+    distinct transients (evenly chosen; a symmetric array repeats curves),
+    with the noisy samples as points when there are any, and the
+    nanosecond axis and the window's edges (dotted, when in view).
 
     Parameters
     ----------
@@ -252,6 +254,9 @@ def model_figure(sampling, y: np.ndarray, noisy: np.ndarray | None = None, *, ti
     curve_axis.set_title("model (lines)" + (" and model + noise (points)" if noisy is not None else ""),
                          fontsize=8, loc="left")
     curve_axis.legend(fontsize=6, loc="upper right")
+    for edge in (sampling.edges[0] - origin, sampling.edges[-1] - origin):
+        if edges[0] <= edge <= edges[-1]:
+            curve_axis.axvline(edge, color="0.4", ls=":", lw=0.8)
     for axis in (image_axis, curve_axis):
         axis.set_xlabel(x_label, fontsize=7)
         axis.tick_params(labelsize=6)

@@ -43,11 +43,23 @@ def _one_line_warning(message, category, filename, lineno, file=None, line=None)
     print(f"diffuse-imaging: warning: {text}", file=sys.stderr if file is None else file)
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Entry point of the console command; returns the exit status."""
+def main(argv: list[str] | None = None, *, standalone: bool = False) -> int:
+    """Run one command; returns its exit status.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        The arguments (default: ``sys.argv[1:]``).
+    standalone : bool
+        The process is this command's alone and ends after it (the console
+        script): commands may then start helper processes (``forward``
+        draws its figure in one, :mod:`validation.figure_process`).
+        False when called from Python, as the tests do.
+    """
     from analytic.errors import UserError
 
     args = build_parser().parse_args(argv)
+    args.standalone = standalone
     warnings.showwarning = _one_line_warning
     try:
         return args.run(args)
@@ -61,17 +73,13 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def console() -> int:
-    """The console script: :func:`main`, with the cycle collector tuned for a process that ends soon.
+    """The console script: :func:`main` in a process of its own, then :func:`gc.freeze`.
 
-    Numba's and matplotlib's imports leave about 10⁶ long-lived objects that
-    every full collection walks again: full collections are made ten times
-    rarer while a command runs (young ones still run, so a long render or
-    sweep frees its cycles), and at the end :func:`gc.freeze` spares the
-    interpreter's exit one last walk. Together 0.3–0.4 s of a 1.7 s
-    ``forward``; the memory goes back to the system with the process.
+    The interpreter's exit would run the cycle collector over every object
+    the command's imports left (Numba's alone are about 10⁵): 0.2–0.3 s of a
+    1 s ``forward``. Frozen objects are skipped; the memory goes back to the
+    system with the process either way.
     """
-    young, middle, old = gc.get_threshold()
-    gc.set_threshold(young, middle, 10 * old)
-    status = main()
+    status = main(standalone=True)
     gc.freeze()
     return status

@@ -5,17 +5,17 @@
 
 Measures, on this machine (named in the output, with its load average):
 
-1. Where ``forward``'s time goes: Python start, imports, Numba's first
+1. ``forward`` end to end, process start to files written (the command
+   is a parameter), against the brute-force script (benchmarks/supersampled.py:
+   32 x 32 samples per pixel at M = 50, 8 x 8 at M = 256, K = 16) on the
+   same scene file, interleaved runs, best and median.
+2. Where ``forward``'s time goes: Python start, imports, Numba's first
    dispatch (cache load), A, y = A f, matplotlib's import and the figure
-   (which forward overlaps in a forked process), and the rest of the
-   command (writing files, exit), each in a fresh process.
-2. A's build against NumPy midpoint supersampling (benchmarks/supersampled.py),
-   in one process (ratios): 32 x 32 samples per pixel at M = 50 and 8 x 8 at
-   M = 256, K = 16, with every entry's error relative to its row's largest
-   against a tight assembly (tolerance MIN_TOLERANCE).
-3. The same end to end, process start to files written: ``forward`` (the
-   command above; the CLI is being restructured, so it is a parameter) and
-   the brute-force script, on the same scene file.
+   (which forward runs in a forked process, beside the rest), each in a
+   fresh process, and the rest of the command (files, exit).
+3. A's build against the same supersampling in one process, with every
+   entry's error relative to its row's largest against a tight assembly
+   (tolerance MIN_TOLERANCE).
 4. Scaling: time, CPU time, non-zeros, time per non-zero and peak memory
    against M (64 ... 1024, K = 16) and against K (1 ... 64, M = 256), each
    in a fresh process.
@@ -23,17 +23,22 @@ Measures, on this machine (named in the output, with its load average):
    assembly) from 1e-2 to 1e-8 on the default scene, both as each entry's
    relative error (what the tolerance bounds) and against its row's largest.
 
-Prints markdown tables and writes ``results.json`` in --out. Timings on a
-shared machine are provisional: compare ratios taken in the same run.
+The project's modules are compiled first, as scripts/setup.sh does (a
+machine with PYTHONDONTWRITEBYTECODE would otherwise recompile them at every
+start of ``forward``). Prints markdown tables and writes ``results.json`` in
+--out. Timings on a shared machine are provisional: compare ratios taken in
+the same run.
 """
 
 from __future__ import annotations
 
 import argparse
+import compileall
 import json
 import os
 import platform
 import shlex
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -144,10 +149,10 @@ print(json.dumps(dict(numpy_scipy=t1 - t0, numba=t2 - t1, analytic=t3 - t2, firs
 """
 
 #: Runs of each end-to-end command (short, and the most sensitive to a shared machine's load).
-END_TO_END_REPEATS = 5
+END_TO_END_REPEATS = 7
 
 #: Parts of the breakdown that ``forward`` runs in its forked figure process, beside the others.
-FIGURE_PARTS = ("matplotlib", "figure")
+HELPER_PARTS = ("matplotlib", "figure")
 
 SCALING = """
 import time, json, resource, warnings
@@ -226,28 +231,53 @@ def main():
     results = {"machine": machine(), "load_average_start": load(), "forward_command": args.forward_command}
     print(f"machine: {results['machine']}; load average at start {results['load_average_start']} "
           f"(shared machine: timings provisional)\n")
+    for package in ("analytic", "transient", "validation"):  # as scripts/setup.sh does
+        compileall.compile_dir(ROOT / package, quiet=1)
     system_matrix(default_scene(pixels=2, noise=None))       # compile or load the cached kernels
     work = Path(tempfile.mkdtemp(prefix="bench_model_"))
     python = shlex.quote(sys.executable)
 
-    # 1. where forward's time goes
+    # 1. end to end
+    rows, ends = [], []
+    for pixels, factor in ((50, 32), (256, 8)):
+        path = scene_file(work, pixels, 4)
+        forward_times, brute_times = [], []
+        for _ in range(END_TO_END_REPEATS):     # interleaved, so that a busy spell hits both alike
+            forward_times.append(run(args.forward_command.format(python=python, scene=path,
+                                                                 out=work / f"f{pixels}")))
+            brute_times.append(run(BRUTE.format(python=python, scene=path, factor=factor, out=work / f"b{pixels}")))
+        entry = {"M": pixels, "factor": factor, "forward_seconds": forward_times, "brute_seconds": brute_times,
+                 "ratio_of_bests": min(forward_times) / min(brute_times),
+                 "ratio_of_medians": statistics.median(forward_times) / statistics.median(brute_times)}
+        ends.append(entry)
+        rows.append([str(pixels), f"{factor}x{factor}",
+                     f"{min(forward_times):.2f} / {statistics.median(forward_times):.2f}",
+                     f"{min(brute_times):.2f} / {statistics.median(brute_times):.2f}",
+                     f"{entry['ratio_of_bests']:.2f} / {entry['ratio_of_medians']:.2f}"])
+    results["end_to_end"] = ends
+    print(f"End to end, process start to files written ({END_TO_END_REPEATS} interleaved runs each; best / "
+          f"median); forward = `{args.forward_command}`:\n")
+    table(["M", "brute force", "forward (s)", "brute script (s)", "forward / brute"], rows)
+
+    # 2. where forward's time goes
     scene50 = scene_file(work, 50, 4)
     startup = min(run(f"{python} -c pass") for _ in range(repeats))
     parts = [child(BREAKDOWN.format(scene=str(scene50))) for _ in range(repeats)]
-    parts = {key: min(p[key] for p in parts) for key in parts[0]}
-    total = min(run(args.forward_command.format(python=python, scene=scene50, out=work / "forward"))
-                for _ in range(repeats))
-    parts = {"python_start": startup, **parts}
-    serial = sum(value for key, value in parts.items() if key not in FIGURE_PARTS)
+    parts = {"python_start": startup, **{key: min(p[key] for p in parts) for key in parts[0]}}
+    total = min(ends[0]["forward_seconds"])
+    serial = sum(value for key, value in parts.items() if key not in HELPER_PARTS)
     parts["rest_of_command"] = total - serial
     results["forward_breakdown"] = {**parts, "total": total}
-    print("Where forward's time goes (M = 50, K = 16; each part best of fresh processes; matplotlib and "
-          "the figure run in forward's forked figure process, beside the parts above them, so the rest is "
-          "the total less those others: files, exit, and any wait for the figure):\n")
-    table(["part", "seconds", "share"], [[key.replace("_", " "), f"{value:.3f}", f"{value / total:.0%}"]
-                                         for key, value in parts.items()] + [["total", f"{total:.3f}", ""]])
+    print("Where forward's time goes (M = 50, K = 16; each part best of fresh processes; the total is the "
+          "best run above; matplotlib and the figure run in forward's forked figure process, beside the command's "
+          "parts; the rest is the total less the command's parts: writing files, exit, waiting for the "
+          "figure):\n")
+    table(["part", "seconds", "share of the total"],
+          [[key.replace("_", " "), f"{value:.3f}",
+            "(forked, beside)" if key in HELPER_PARTS else f"{value / total:.0%}"] for key, value in parts.items()]
+          + [["total", f"{total:.3f}", ""]])
 
-    # 2. A against the brute force, in this process
+    # 3. A against the brute force, in this process
     rows, comparison = [], []
     for pixels, factor in ((50, 32), (256, 8)):
         scene = default_scene(pixels=pixels, noise=None)
@@ -269,25 +299,6 @@ def main():
     print("A's build against midpoint supersampling (K = 16, tolerance 1e-6; same process, best of "
           f"{repeats}; error = max |A - A_tight| / row max):\n")
     table(["M", "brute force", "exact (s)", "exact error", "brute (s)", "brute error", "exact / brute"], rows)
-
-    # 3. end to end
-    rows, ends = [], []
-    for pixels, factor in ((50, 32), (256, 8)):
-        path = scene_file(work, pixels, 4)
-        forward_times, brute_times = [], []
-        for _ in range(END_TO_END_REPEATS):     # interleaved, so that a busy spell hits both alike
-            forward_times.append(run(args.forward_command.format(python=python, scene=path,
-                                                                 out=work / f"f{pixels}")))
-            brute_times.append(run(BRUTE.format(python=python, scene=path, factor=factor, out=work / f"b{pixels}")))
-        forward_seconds, brute_seconds = min(forward_times), min(brute_times)
-        ends.append({"M": pixels, "factor": factor, "forward_seconds": forward_seconds,
-                     "brute_seconds": brute_seconds, "ratio": forward_seconds / brute_seconds})
-        rows.append([str(pixels), f"{factor}x{factor}", f"{forward_seconds:.2f}", f"{brute_seconds:.2f}",
-                     f"{forward_seconds / brute_seconds:.2f}"])
-    results["end_to_end"] = ends
-    print(f"End to end, process start to files written (best of {END_TO_END_REPEATS}, interleaved); forward = "
-          f"`{args.forward_command}`:\n")
-    table(["M", "brute force", "forward (s)", "brute script (s)", "forward / brute"], rows)
 
     # 4. scaling
     sizes = (64, 128, 256) if args.quick else (64, 128, 256, 512, 1024)

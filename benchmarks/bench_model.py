@@ -152,7 +152,7 @@ print(json.dumps(dict(numpy_scipy=t1 - t0, numba=t2 - t1, analytic=t3 - t2, firs
 END_TO_END_REPEATS = 7
 
 #: Parts of the breakdown that ``forward`` runs in its forked figure process, beside the others.
-HELPER_PARTS = ("matplotlib", "figure")
+FORKED_PARTS = ("matplotlib", "figure")
 
 SCALING = """
 import time, json, resource, warnings
@@ -265,7 +265,7 @@ def main():
     parts = [child(BREAKDOWN.format(scene=str(scene50))) for _ in range(repeats)]
     parts = {"python_start": startup, **{key: min(p[key] for p in parts) for key in parts[0]}}
     total = min(ends[0]["forward_seconds"])
-    serial = sum(value for key, value in parts.items() if key not in HELPER_PARTS)
+    serial = sum(value for key, value in parts.items() if key not in FORKED_PARTS)
     parts["rest_of_command"] = total - serial
     results["forward_breakdown"] = {**parts, "total": total}
     print("Where forward's time goes (M = 50, K = 16; each part best of fresh processes; the total is the "
@@ -274,7 +274,7 @@ def main():
           "figure):\n")
     table(["part", "seconds", "share of the total"],
           [[key.replace("_", " "), f"{value:.3f}",
-            "(forked, beside)" if key in HELPER_PARTS else f"{value / total:.0%}"] for key, value in parts.items()]
+            "(forked, beside)" if key in FORKED_PARTS else f"{value / total:.0%}"] for key, value in parts.items()]
           + [["total", f"{total:.3f}", ""]])
 
     # 3. A against the brute force, in this process

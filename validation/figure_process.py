@@ -113,7 +113,7 @@ class FigureProcess:
     def __init__(self, pid: int = -1, requests: int = -1, replies: int = -1):
         self._pid, self._requests, self._replies = pid, requests, replies
         self._job = None
-        self._answered = False
+        self._settled = False     # the exchange is over (answered, or the process killed)
 
     @property
     def forked(self) -> bool:
@@ -159,7 +159,7 @@ class FigureProcess:
                 png = None
             if png is None:
                 self._kill()
-            self._answered = True
+            self._settled = True
         self.close()
         if png is not None:
             return png
@@ -174,7 +174,7 @@ class FigureProcess:
                 os.kill(self._pid, signal.SIGKILL)
             except ProcessLookupError:
                 pass
-        self._answered = True
+        self._settled = True
 
     def close(self) -> None:
         """End the process (idempotent) and reap it.
@@ -184,7 +184,7 @@ class FigureProcess:
         :data:`GRACE_SECONDS`; a process asked for a figure that is no longer
         wanted (the command failed meanwhile) is killed at once.
         """
-        if self._job is not None and not self._answered:
+        if self._job is not None and not self._settled:
             self._kill()
         for name in ("_requests", "_replies"):
             descriptor = getattr(self, name)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -91,6 +92,40 @@ def _power_of_ten(values: np.ndarray) -> int:
     return int(math.floor(math.log10(peak))) if peak > 0 and not 1e-3 <= peak < 1e4 else 0
 
 
+class _TimeAxis(NamedTuple):
+    """The cropped, readable path-length axis of a transient figure (see :func:`_time_axis`)."""
+
+    first: int              # first bin drawn
+    last: int               # one past the last
+    origin: float           # metres subtracted from path lengths (0, or a round number far from 0)
+    scale: float            # y is drawn times this (10^-power)
+    edges: np.ndarray       # drawn bin edges, metres from origin
+    centres: np.ndarray
+    window: tuple           # the window's edges, metres from origin
+    x_label: str
+    y_label: str
+
+
+def _time_axis(sampling, arrays) -> _TimeAxis:
+    """Crop to the light of the first (reference) array, from a round origin, y in a named power of ten."""
+    first, last = _lit_bins(arrays, sampling)
+    reference = np.atleast_2d(arrays[0])
+    origin, power = _round_origin(sampling.edges[first:last + 1]), _power_of_ten(reference[:, first:last])
+    edges = sampling.edges[first:last + 1] - origin
+    return _TimeAxis(first, last, origin, 10.0 ** -power, edges, 0.5 * (edges[:-1] + edges[1:]),
+                     (sampling.edges[0] - origin, sampling.edges[-1] - origin),
+                     "path length (m)" if origin == 0 else f"path length − {origin:g} m (m)",
+                     Y_LABEL if power == 0 else Y_LABEL.replace("(W", f"(1e{power} W"))
+
+
+def _window_edges(axis, time: _TimeAxis) -> bool:
+    """Dotted lines at the window's edges that are in view; whether any was."""
+    shown = [edge for edge in time.window if time.edges[0] <= edge <= time.edges[-1]]
+    for edge in shown:
+        axis.axvline(edge, color="0.4", ls=":", lw=0.8)
+    return bool(shown)
+
+
 def plot_transients(path: str | Path, sampling, transients: dict[str, np.ndarray], *,
                     errors: dict[str, np.ndarray] | None = None, title: str = "",
                     max_panels: int = 8) -> Path:
@@ -120,14 +155,11 @@ def plot_transients(path: str | Path, sampling, transients: dict[str, np.ndarray
     reference = np.atleast_2d(transients[labels[0]])
     sensors = reference.shape[0]
     chosen = np.unique(np.linspace(0, sensors - 1, min(sensors, max_panels)).round().astype(int))
-    first, last = _lit_bins(list(transients.values()), sampling)
-    origin, power = _round_origin(sampling.edges[first:last + 1]), _power_of_ten(reference[:, first:last])
-    scale = 10.0 ** -power
-    edges = sampling.edges[first:last + 1] - origin
-    centres = 0.5 * (edges[:-1] + edges[1:])
-    window = (sampling.edges[0] - origin, sampling.edges[-1] - origin)
-    x_label = "path length (m)" if origin == 0 else f"path length − {origin:g} m (m)"
-    y_label = Y_LABEL if power == 0 else Y_LABEL.replace("(W", f"(1e{power} W")
+    time = _time_axis(sampling, list(transients.values()))
+    first, last, origin, scale, edges, centres = (time.first, time.last, time.origin, time.scale, time.edges,
+                                                   time.centres)
+    x_label, y_label = time.x_label, time.y_label
+    edges_shown = False
     columns = min(len(chosen), 4)
     rows = int(np.ceil(len(chosen) / columns))
     residual = bool(errors)
@@ -151,9 +183,7 @@ def plot_transients(path: str | Path, sampling, transients: dict[str, np.ndarray
                               ms=2.5, color=f"C{i}", label=f"{label} ±1 se", elinewidth=1.0, capsize=1.5)
             else:
                 axis.plot(centres, data, "o", ms=2.5, color=f"C{i}", label=label)
-        for edge in window:
-            if edges[0] <= edge <= edges[-1]:
-                axis.axvline(edge, color="0.4", ls=":", lw=0.8)
+        edges_shown = _window_edges(axis, time)
         axis.set_title(f"sensor {k}", fontsize=8, loc="left")
         axis.tick_params(labelsize=6)
         if column == 0:
@@ -183,8 +213,7 @@ def plot_transients(path: str | Path, sampling, transients: dict[str, np.ndarray
         else:
             axis.set_xlabel(x_label, fontsize=7)
     if title:
-        figure.suptitle(title + ("" if not any(e <= edges[-1] and e >= edges[0] for e in window)
-                                 else "  (dotted: the window's edges)"), fontsize=9)
+        figure.suptitle(title + ("  (dotted: the window's edges)" if edges_shown else ""), fontsize=9)
     return save_figure(figure, path)
 
 
@@ -218,13 +247,8 @@ def model_figure(sampling, y: np.ndarray, noisy: np.ndarray | None = None, *, ti
     """
     y = np.atleast_2d(y)
     sensors = y.shape[0]
-    first, last = _lit_bins([y], sampling)
-    origin, power = _round_origin(sampling.edges[first:last + 1]), _power_of_ten(y[:, first:last])
-    scale = 10.0 ** -power
-    edges = sampling.edges[first:last + 1] - origin
-    centres = 0.5 * (edges[:-1] + edges[1:])
-    x_label = "path length (m)" if origin == 0 else f"path length − {origin:g} m (m)"
-    y_label = Y_LABEL if power == 0 else Y_LABEL.replace("(W", f"(1e{power} W")
+    time = _time_axis(sampling, [y])
+    first, last, scale, edges = time.first, time.last, time.scale, time.edges
     width, height = 10.0, 3.9
     # a fixed layout: constrained layout would double the drawing time
     figure = new_figure(width, height, layout=None)
@@ -234,7 +258,7 @@ def model_figure(sampling, y: np.ndarray, noisy: np.ndarray | None = None, *, ti
     image = image_axis.imshow(y[:, first:last] * scale, aspect="auto", interpolation="nearest",
                               extent=(edges[0], edges[-1], sensors - 0.5, -0.5), cmap="viridis")
     bar = figure.colorbar(image, ax=image_axis, pad=0.02)
-    bar.set_label(y_label, fontsize=7)
+    bar.set_label(time.y_label, fontsize=7)
     bar.ax.tick_params(labelsize=6)
     image_axis.set_ylabel("sensor k", fontsize=7)
     image_axis.set_title(f"every sensor (K = {sensors})", fontsize=8, loc="left")
@@ -242,28 +266,26 @@ def model_figure(sampling, y: np.ndarray, noisy: np.ndarray | None = None, *, ti
 
     image_axis.yaxis.set_major_locator(MaxNLocator(nbins=6, integer=True))
     peak = float(np.abs(y).max()) or 1.0
-    distinct = np.unique(np.round(y / (1e-9 * peak)), axis=0, return_index=True)[1]
-    distinct = np.sort(distinct)
+    distinct = np.sort(np.unique(np.round(y / (1e-9 * peak)), axis=0, return_index=True)[1])
     chosen = distinct[np.unique(np.linspace(0, distinct.size - 1, min(distinct.size, max_curves)).round()
                                 .astype(int))]
     for i, k in enumerate(chosen):
         curve_axis.stairs(y[k, first:last] * scale, edges, color=f"C{i}", lw=1.2, label=f"sensor {k}")
         if noisy is not None:
-            curve_axis.plot(centres, np.atleast_2d(noisy)[k, first:last] * scale, "o", ms=2.5, color=f"C{i}")
-    curve_axis.set_ylabel(y_label, fontsize=7)
+            curve_axis.plot(time.centres, np.atleast_2d(noisy)[k, first:last] * scale, "o", ms=2.5,
+                            color=f"C{i}")
+    curve_axis.set_ylabel(time.y_label, fontsize=7)
     curve_axis.set_title("model (lines)" + (" and model + noise (points)" if noisy is not None else ""),
                          fontsize=8, loc="left")
     curve_axis.legend(fontsize=6, loc="upper right")
-    for edge in (sampling.edges[0] - origin, sampling.edges[-1] - origin):
-        if edges[0] <= edge <= edges[-1]:
-            curve_axis.axvline(edge, color="0.4", ls=":", lw=0.8)
+    edges_shown = _window_edges(curve_axis, time)
     for axis in (image_axis, curve_axis):
-        axis.set_xlabel(x_label, fontsize=7)
+        axis.set_xlabel(time.x_label, fontsize=7)
         axis.tick_params(labelsize=6)
-    if origin == 0:
+    if time.origin == 0:
         _nanosecond_axis(curve_axis)
     if title:
-        figure.suptitle(title, fontsize=9)
+        figure.suptitle(title + ("  (dotted: the window's edges)" if edges_shown else ""), fontsize=9)
     return figure
 
 

@@ -15,30 +15,7 @@ Nothing here imports Mitsuba, matplotlib or Dask.
 
 from __future__ import annotations
 
-import hashlib
 import importlib
-import os
-from pathlib import Path
-
-
-def _numba_cache_folder() -> None:
-    """Compiled kernels cached per version of this package's sources.
-
-    Numba's cache is keyed by the file of each compiled function only, but
-    the kernels inline code from other modules: after an upgrade a stale
-    kernel could run. A folder named by a hash of every source here avoids
-    that (set NUMBA_CACHE_DIR to choose another place).
-    """
-    if "NUMBA_CACHE_DIR" in os.environ:
-        return
-    digest = hashlib.sha256()
-    for source in sorted(Path(__file__).parent.rglob("*.py")):
-        digest.update(source.read_bytes())
-    root = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
-    os.environ["NUMBA_CACHE_DIR"] = str(root / "diffuse-imaging" / "numba" / digest.hexdigest()[:16])
-
-
-_numba_cache_folder()
 
 # public name -> submodule that defines it
 _EXPORTS = {

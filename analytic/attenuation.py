@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from .kernel_cache import njit
 
 __all__ = ["attenuation", "attenuation_at", "attenuation_of_distances", "attenuation_code", "LAMBERTIAN",
            "PAPER"]

@@ -40,7 +40,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-from numba import njit
+from .kernel_cache import njit
 
 from .attenuation import LAMBERTIAN, PAPER, attenuation_at
 

@@ -49,7 +49,7 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+from .kernel_cache import njit
 
 from .attenuation import attenuation_at
 from .isochrone import ellipse, point_on_ellipse, rectangle_crossings

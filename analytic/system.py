@@ -55,9 +55,10 @@ import warnings
 
 import numpy as np
 import scipy.sparse
-from numba import njit, prange
+from numba import prange
 
 from .attenuation import attenuation_code, attenuation_of_distances
+from .kernel_cache import njit
 from .isochrone import (ellipse, first_arrival_point, make_frame, path_length_at,
                         rectangle_range, segment_minimum)
 from .quadrature import (LINEAR, ROOT_BOTH, ROOT_END, ROOT_START, adapt, integrate, isochrone_rule,

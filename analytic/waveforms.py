@@ -27,7 +27,7 @@ from fractions import Fraction
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+from .kernel_cache import njit
 
 from .scene import Illumination, Sampling, SceneError
 

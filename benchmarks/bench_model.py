@@ -141,8 +141,9 @@ t6 = time.perf_counter()
 from matplotlib.backends import backend_agg
 from matplotlib import figure
 t7 = time.perf_counter()
-from validation.plots import model_figure, png_bytes
-png_bytes(model_figure(scene.sampling, y.reshape(scene.sensor_count, -1), title="x"))
+import io
+from validation.plots import model_figure
+model_figure(scene.sampling, y.reshape(scene.sensor_count, -1), title="x").savefig(io.BytesIO(), format="png")
 t8 = time.perf_counter()
 print(json.dumps(dict(numpy_scipy=t1 - t0, numba=t2 - t1, analytic=t3 - t2, first_dispatch=t4 - t3,
                       matrix=t5 - t4, product=t6 - t5, matplotlib=t7 - t6, figure=t8 - t7)))

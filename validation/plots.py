@@ -17,7 +17,7 @@ import numpy as np
 
 from analytic.io import atomic_write
 
-__all__ = ["save_figure", "save_png_bytes", "png_bytes", "new_figure", "plot_transients", "model_figure",
+__all__ = ["save_figure", "new_figure", "plot_transients", "model_figure",
            "plot_z_map", "plot_convergence", "plot_reconstructions", "plot_reconstruction", "plot_criterion",
            "plot_conditioning", "plot_panels", "plot_check_transients", "plot_check_z",
            "plot_speed_against_error", "NANOSECONDS_PER_METRE", "Y_LABEL"]
@@ -38,23 +38,9 @@ def new_figure(width: float, height: float, layout: str | None = "constrained"):
     return figure
 
 
-def png_bytes(figure, dpi: int = 110) -> bytes:
-    """A figure as PNG bytes."""
-    import io
-
-    buffer = io.BytesIO()
-    figure.savefig(buffer, format="png", dpi=dpi)
-    return buffer.getvalue()
-
-
-def save_png_bytes(path: str | Path, png: bytes) -> Path:
-    """Write PNG bytes (from :func:`png_bytes`), atomically."""
-    return atomic_write(path, lambda temporary: Path(temporary).write_bytes(png))
-
-
 def save_figure(figure, path: str | Path, dpi: int = 110) -> Path:
     """Write a figure as PNG, atomically."""
-    return save_png_bytes(path, png_bytes(figure, dpi))
+    return atomic_write(path, lambda temporary: figure.savefig(temporary, format="png", dpi=dpi))
 
 
 def _lit_bins(arrays, sampling, margin: int = 2) -> tuple[int, int]:

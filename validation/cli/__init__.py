@@ -14,7 +14,6 @@ each; anything else is a bug and keeps its traceback.
 
 from __future__ import annotations
 
-import gc
 import sys
 import warnings
 
@@ -43,23 +42,17 @@ def _one_line_warning(message, category, filename, lineno, file=None, line=None)
     print(f"diffuse-imaging: warning: {text}", file=sys.stderr if file is None else file)
 
 
-def main(argv: list[str] | None = None, *, standalone: bool = False) -> int:
+def main(argv: list[str] | None = None) -> int:
     """Run one command; returns its exit status.
 
     Parameters
     ----------
     argv : list of str, optional
         The arguments (default: ``sys.argv[1:]``).
-    standalone : bool
-        The process is this command's alone and ends after it (the console
-        script): commands may then start helper processes (``forward``
-        draws its figure in one, :mod:`validation.figure_process`).
-        False when called from Python, as the tests do.
     """
     from analytic.errors import UserError
 
     args = build_parser().parse_args(argv)
-    args.standalone = standalone
     warnings.showwarning = _one_line_warning
     try:
         return args.run(args)
@@ -73,13 +66,5 @@ def main(argv: list[str] | None = None, *, standalone: bool = False) -> int:
 
 
 def console() -> int:
-    """The console script: :func:`main` in a process of its own, then :func:`gc.freeze`.
-
-    The interpreter's exit would run the cycle collector over every object
-    the command's imports left (1.7·10⁵ after ``forward``): 0.2–0.3 s of a
-    1 s ``forward``. Frozen objects are skipped; the memory goes back to the
-    system with the process either way.
-    """
-    status = main(standalone=True)
-    gc.freeze()
-    return status
+    """The console script ``diffuse-imaging``: :func:`main` on the process's arguments."""
+    return main()

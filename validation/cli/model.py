@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import gc
 import time
 from pathlib import Path
 
@@ -13,26 +12,15 @@ __all__ = ["add_commands", "command_forward"]
 
 def command_forward(args) -> int:
     """Model the noiseless transient (and a noisy one when the scene asks); exit status 0."""
-    from validation import figure_process
-
-    scene = load_scene_argument(args.scene)     # a bad scene is refused before anything is forked
-    if args.tolerance is not None:
-        scene = scene.replace(tolerance=args.tolerance)
-    if args.standalone:
-        # a short process whose few Python objects die with it (A is NumPy arrays): the cycle
-        # collector would only walk the imports' objects again and again
-        gc.disable()
-    # matplotlib loads in the forked process while Numba loads and A is computed here
-    with figure_process.start(enabled=args.standalone) as figure:
-        return _forward(args, scene, figure)
-
-
-def _forward(args, scene, figure) -> int:
     from analytic.io import build_meta, output_folder, staged_writes, write_transient
     from analytic.noise import add_noise
     from analytic.system import forward, system_matrix
     from analytic.window import warn_if_cut, window_share
+    from validation.plots import model_figure, save_figure
 
+    scene = load_scene_argument(args.scene)
+    if args.tolerance is not None:
+        scene = scene.replace(tolerance=args.tolerance)
     share = window_share(scene)
     warn_if_cut(scene, share)
     with output_folder(args.out) as out:
@@ -44,13 +32,11 @@ def _forward(args, scene, figure) -> int:
         meta = build_meta(scene, kind="model",
                           seed=scene.noise.seed if scene.noise is not None else None,
                           window_share=share, nonzeros=int(matrix.nnz), assembly_seconds=assembly)
-        from validation.plots import model_figure, save_png_bytes
-
-        figure.submit(model_figure, scene.sampling, y, noisy,
-                      title=f"{scene.name}: {meta['illumination']} illumination, {scene.attenuation} attenuation")
+        figure = model_figure(scene.sampling, y, noisy, title=f"{scene.name}: {meta['illumination']} "
+                                                              f"illumination, {scene.attenuation} attenuation")
         with staged_writes():
             write_transient(out, y, meta, noisy=noisy)
-            save_png_bytes(out / "transient.png", figure.result())
+            save_figure(figure, out / "transient.png")
     if not args.quiet:
         print(f"forward: {scene.sensor_count} sensors x {scene.sampling.count} bins, "
               f"A {matrix.shape[0]} x {matrix.shape[1]} with {matrix.nnz:,} non-zeros "

@@ -1,0 +1,36 @@
+"""The kernels' cache is keyed by every module they use, not only their own file."""
+
+import os
+from pathlib import Path
+
+from numba.core.caching import CacheImpl
+
+from analytic import kernel_cache, system
+from analytic.kernel_cache import PackageCacheLocator, module_closure
+
+PACKAGE = Path(kernel_cache.__file__).resolve().parent
+
+
+def test_closure_follows_imports_through_other_modules():
+    names = {path.name for path in module_closure(PACKAGE / "system.py")}
+    # system imports quadrature, which imports isochrone, which imports attenuation
+    assert {"system.py", "quadrature.py", "isochrone.py", "attenuation.py", "waveforms.py"} <= names
+    assert "io.py" not in names and "capture.py" not in names
+
+
+def test_stamp_changes_when_an_imported_module_changes():
+    locator = PackageCacheLocator.from_function(system.forward, system.__file__)
+    before = locator.get_source_stamp()
+    dependency = PACKAGE / "waveforms.py"
+    status = dependency.stat()
+    try:
+        os.utime(dependency, ns=(status.st_atime_ns, status.st_mtime_ns + 10**9))
+        assert locator.get_source_stamp() != before
+    finally:
+        os.utime(dependency, ns=(status.st_atime_ns, status.st_mtime_ns))
+    assert locator.get_source_stamp() == before
+
+
+def test_only_this_package_is_served():
+    assert CacheImpl._locator_classes[0] is PackageCacheLocator
+    assert PackageCacheLocator.from_function(os.path.join, os.path.__file__) is None

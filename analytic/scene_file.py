@@ -7,6 +7,9 @@ value is a :class:`~analytic.errors.SceneError` naming its key.
 
 from __future__ import annotations
 
+import datetime
+import json
+import re
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -14,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from .errors import ImageError, SceneError
-from .reflectance import read_reflectance
+from .reflectance import printable, read_reflectance, regular_file_problem
 from .scene import (MAX_SENSORS, Illumination, Noise, Sampling, Scene, _integer, _number, _point,
                     sensor_grid)
 
@@ -23,6 +26,14 @@ __all__ = ["load_scene", "read_toml", "scene_from_dict", "scene_to_tables", "MAX
 #: Largest scene or sweep file read, bytes: a TOML scene is a few hundred bytes,
 #: and a device such as /dev/zero must not be read until memory runs out.
 MAX_FILE_BYTES = 1 << 20
+
+#: The UTF-8 byte-order mark some editors (Windows Notepad) write first: accepted and skipped.
+_UTF8_BOM = b"\xef\xbb\xbf"
+# other byte-order marks: the file is not UTF-8 (UTF-32 first: its little-endian mark starts as UTF-16's)
+_OTHER_BOMS = ((b"\x00\x00\xfe\xff", "UTF-32 (big-endian)"), (b"\xff\xfe\x00\x00", "UTF-32 (little-endian)"),
+               (b"\xfe\xff", "UTF-16 (big-endian)"), (b"\xff\xfe", "UTF-16 (little-endian)"))
+_BARE_KEY = re.compile(r"[A-Za-z0-9_-]+")
+_TOML_PLACE = re.compile(r"^(?P<reason>.*) \(at (?:line (?P<line>\d+), column (?P<column>\d+)|end of document)\)$")
 
 # TOML keys of [sampling] -> Sampling fields
 _SAMPLING_FIELDS = {"period": "bin_width_opl", "start": "start_opl", "count": "count"}
@@ -41,17 +52,41 @@ _SCHEMA = {
 
 def _table(data: dict, name: str) -> dict:
     table = data.get(name, {})
+    if isinstance(table, list):
+        raise SceneError(name, f"expected one table [{name}], got an array of tables [[{name}]]; "
+                               f"write [{name}] once")
     if not isinstance(table, dict):
-        raise SceneError(name, "expected a table")
+        raise SceneError(name, f"expected a table [{name}], got {table!r}")
     for key in table:
         if key not in _SCHEMA[name]:
-            raise SceneError(f"{name}.{key}", f"unknown key (known: {', '.join(sorted(_SCHEMA[name]))})")
+            raise SceneError(f"{name}.{_key_name(key)}", _unknown_key(key, _SCHEMA[name]))
     return table
 
 
-def _label(text: str) -> str:
-    """A printable label: file names that are not UTF-8 keep their readable part."""
-    return text.encode("utf-8", "surrogateescape").decode("utf-8", "replace")
+def _key_name(key: str) -> str:
+    """A key as TOML spells it: bare when it can be, else quoted (an empty key, one with a dot or space)."""
+    return key if _BARE_KEY.fullmatch(key) else printable(json.dumps(key, ensure_ascii=False))
+
+
+def _unknown_key(key: str, known) -> str:
+    problem = f"unknown key (known: {', '.join(sorted(known))})"
+    if "." in key:
+        problem += (f"; the quotes make {_key_name(key)} one key with a dot in its name: "
+                    f"write it without quotes for a dotted key")
+    return problem
+
+
+def _refuse_dates(value: Any, key: str) -> None:
+    """Refuse a TOML date or time anywhere: no scene key takes one, and its repr would be the message."""
+    if isinstance(value, (datetime.date, datetime.time)):      # datetime is a date
+        raise SceneError(key, f"got the TOML date/time {value.isoformat()}; no scene key takes a date "
+                              f"(a number or a string in quotes was meant?)")
+    if isinstance(value, dict):
+        for inner, item in value.items():
+            _refuse_dates(item, f"{key}.{_key_name(inner)}" if key else _key_name(inner))
+    elif isinstance(value, list):
+        for index, item in enumerate(value):
+            _refuse_dates(item, f"{key}[{index}]")
 
 
 def _sensors(table: dict) -> Any:
@@ -97,9 +132,10 @@ def scene_from_dict(data: dict, base_dir: str | Path = ".", *, name: str = "scen
     SceneError
         Naming the key and the problem.
     """
+    _refuse_dates(data, "")
     for key in data:
         if key not in _SCHEMA:
-            raise SceneError(key, f"unknown key (known: {', '.join(sorted(_SCHEMA))})")
+            raise SceneError(_key_name(key), _unknown_key(key, _SCHEMA))
     plane = _table(data, "plane")
     source = _table(data, "source")
     illumination = _table(data, "illumination")
@@ -107,6 +143,9 @@ def scene_from_dict(data: dict, base_dir: str | Path = ".", *, name: str = "scen
     model = _table(data, "model")
     pixels = _integer("plane.pixels", plane.get("pixels", 50))
     reflectance = plane.get("reflectance", 0.5)
+    if isinstance(reflectance, str) and not reflectance:
+        raise SceneError("plane.reflectance", "empty string; give a number in [0, 1] or an image file "
+                                              "(.png or .exr, relative to the scene file)")
     if isinstance(reflectance, str):
         try:
             reflectance = read_reflectance(Path(base_dir) / reflectance, pixels)
@@ -117,7 +156,7 @@ def scene_from_dict(data: dict, base_dir: str | Path = ".", *, name: str = "scen
     if not isinstance(label, str):
         raise SceneError("name", f"expected a string, got {label!r}")
     return Scene(
-        name=_label(label),
+        name=printable(label),
         size=plane.get("size", 1.0),
         pixels=pixels,
         reflectance=reflectance,
@@ -174,25 +213,34 @@ def load_scene(path: str | Path) -> Scene:
     SceneError
         Unreadable file, bad TOML, unknown key or bad value.
     """
+    data = read_toml(path, "scene")
     path = Path(path)
-    return scene_from_dict(read_toml(path, "scene"), path.parent, name=path.stem)
+    return scene_from_dict(data, path.parent, name=path.stem)
 
 
 def read_toml(path: str | Path, what: str = "scene") -> dict:
     """Parse a TOML file of at most :data:`MAX_FILE_BYTES`, UTF-8.
 
+    A UTF-8 byte-order mark at the start is accepted and skipped (editors
+    such as Windows Notepad write one; TOML's own parser would refuse it).
+
     Raises
     ------
     SceneError
-        Naming the file: missing, not a regular file, too large, not UTF-8,
-        or not valid TOML.
+        Naming the file: empty path, missing, not a regular file (a folder, a
+        FIFO, a device, a broken or looping link), too large, not UTF-8
+        (UTF-16 or UTF-32, NUL bytes, Latin-1), not valid TOML (naming the
+        line and, for a key or table given twice, saying so), or without any
+        key.
     """
+    if isinstance(path, str) and not path:
+        raise SceneError(f"{what} file", f"empty path; give a TOML {what} file")
     path = Path(path)
-    shown = _label(str(path))
+    shown = printable(str(path))
+    problem = regular_file_problem(path)
+    if problem is not None:
+        raise SceneError(shown, f"cannot read {what} file: {problem}")
     try:
-        if not path.is_file():
-            problem = "no such file" if not path.exists() else "not a regular file"
-            raise SceneError(shown, f"cannot read {what} file ({problem})")
         with open(path, "rb") as stream:
             raw = stream.read(MAX_FILE_BYTES + 1)
     except OSError as error:
@@ -200,12 +248,60 @@ def read_toml(path: str | Path, what: str = "scene") -> dict:
     if len(raw) > MAX_FILE_BYTES:
         raise SceneError(shown, f"{what} file larger than {MAX_FILE_BYTES // 1024} KiB; "
                                 f"is it really a TOML {what} file?")
+    text = _decode(raw, shown, what)
     try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError as error:
-        raise SceneError(shown, f"{what} file is not UTF-8 text (byte {error.start}); save it as UTF-8") \
-            from None
-    try:
-        return tomllib.loads(text)
+        data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:
-        raise SceneError(shown, f"invalid TOML ({error})") from None
+        raise SceneError(shown, _toml_problem(error, text)) from None
+    if not data:
+        raise SceneError(shown, f"{what} file has no keys (is it empty?); write its tables as in the "
+                                f"README's examples")
+    return data
+
+
+def _decode(raw: bytes, shown: str, what: str) -> str:
+    """UTF-8 text of a TOML file, a leading UTF-8 byte-order mark dropped; other encodings refused by name."""
+    raw = raw.removeprefix(_UTF8_BOM)
+    for mark, encoding in _OTHER_BOMS:
+        if raw.startswith(mark):
+            raise SceneError(shown, f"{what} file is {encoding} text, not UTF-8 (it starts with that "
+                                    f"byte-order mark); save it as UTF-8")
+    if b"\0" in raw:
+        line = raw[:raw.index(b"\0")].count(b"\n") + 1
+        raise SceneError(shown, f"{what} file is not UTF-8 text: NUL byte on line {line} (UTF-16 "
+                                f"without a byte-order mark, or not a text file?); save it as UTF-8")
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as error:
+        line = raw[:error.start].count(b"\n") + 1
+        raise SceneError(shown, f"{what} file is not UTF-8 text: byte 0x{raw[error.start]:02X} on line "
+                                f"{line} (Latin-1 or Windows-1252?); save it as UTF-8") from None
+
+
+def _toml_problem(error: tomllib.TOMLDecodeError, text: str) -> str:
+    """One line from tomllib's error: where, the line's text, what is wrong, how to fix it."""
+    match = _TOML_PLACE.match(" ".join(str(error).split()))
+    if match is None:
+        return f"invalid TOML ({printable(str(error))})"
+    reason = match["reason"]
+    if match["line"] is None:
+        return f"invalid TOML at the end of the file: {reason}; is the last line complete?"
+    line, column = int(match["line"]), int(match["column"])
+    source = text.split("\n")[line - 1].rstrip("\r") if line <= text.count("\n") + 1 else ""
+    quoted = printable(source.strip()[:80])
+    place = f"invalid TOML at line {line}, column {column} ({quoted})"
+    declared = re.fullmatch(r"Cannot declare \((.*)\) twice", reason)
+    if reason == "Cannot overwrite a value":
+        return (f"{place}: sets a value that is already set (a key given twice, or a key set again "
+                f"as a table); give each key once")
+    if declared:
+        table = ".".join(part.strip().strip("'\"") for part in declared[1].split(",") if part.strip())
+        return (f"{place}: table [{printable(table)}] is declared twice (or was already made by a dotted "
+                f"key or an inline table); merge its keys into one [{printable(table)}] table")
+    if reason.startswith("Cannot mutate immutable namespace"):
+        return (f"{place}: adds to a table or array given inline (key = {{...}} or [...]), which "
+                f"cannot be extended; write all its keys in one place")
+    if "\r" in source.rstrip("\r"):
+        return (f"{place}: a carriage return without a line feed (old Mac line endings); save the "
+                f"file with LF or CRLF line endings")
+    return f"{place}: {printable(reason)}; fix the TOML syntax there"

@@ -1,13 +1,18 @@
-"""Attenuation a_k(x) of DESIGN.md section 2, once per execution backend.
+"""Attenuation a_k(x) of DESIGN.md section 2, written once for NumPy, Numba and Dr.Jit.
 
 | name | a_k(x) |
 | lambertian | cos θ_s cos θ_k / (π d_s² d_k²) — physical transport, what Mitsuba renders |
 | paper | cos θ_s / (d_s² d_k²) — the paper's eq. (1), without Lambert's outgoing cos θ_k and the BRDF's 1/π |
 
 The two differ pointwise by exactly π / cos θ_k (DESIGN.md section 3.2).
-:func:`attenuation` is the NumPy form (vectorised over plane points);
-:func:`attenuation_at` the compiled scalar form the quadrature calls. The
-Dr.Jit form lives with the renderer (``transient``).
+With h the heights of the two ends above the rectangle, cos θ = h / d:
+:func:`attenuation_formula` writes a_k from the heights and squared
+distances with the array module's square root as its one argument, so the
+NumPy form (:func:`attenuation`), the compiled scalar form the quadrature
+calls (:func:`attenuation_of_distances`, :func:`attenuation_at`) and the
+renderer's Dr.Jit form (``attenuation_formula(drjit.sqrt)``) are one
+expression. Where an end has a surface of its own (a relay wall's point),
+its cosine n·(x - p) / d multiplies a_k (:func:`attenuation_at`).
 """
 
 from __future__ import annotations
@@ -15,10 +20,14 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
 from .kernel_cache import njit
 
-__all__ = ["attenuation", "attenuation_at", "attenuation_of_distances", "attenuation_code", "LAMBERTIAN",
-           "PAPER"]
+__all__ = ["attenuation", "attenuation_formula", "attenuation_at", "attenuation_of_distances",
+           "attenuation_code", "ATTENUATIONS", "LAMBERTIAN", "PAPER"]
+
+#: The scene's ``[model] attenuation`` values.
+ATTENUATIONS = ("lambertian", "paper")
 
 #: Integer codes of the attenuation kinds for compiled code (``Frame.mode``).
 LAMBERTIAN, PAPER = 0, 1
@@ -40,8 +49,42 @@ def attenuation_code(kind: str) -> int:
         raise ValueError(f"attenuation must be 'lambertian' or 'paper', got {kind!r}") from None
 
 
+def attenuation_formula(sqrt):
+    """a_k from heights and squared distances, for an array module's ``sqrt``.
+
+    Parameters
+    ----------
+    sqrt : callable
+        ``math.sqrt`` (compiled code), ``numpy.sqrt`` or ``drjit.sqrt``.
+
+    Returns
+    -------
+    callable
+        ``a(mode, source_height, source_squared, sensor_height,
+        sensor_squared)``: heights h_s, h_k in metres, squared distances
+        d_s², d_k² in m², ``mode`` :data:`LAMBERTIAN` or :data:`PAPER`
+        (a Python int: a branch at trace time for Dr.Jit); 1/m⁴.
+
+    Notes
+    -----
+    lambertian h_s h_k / (π d_s³ d_k³), paper h_s / (d_s³ d_k²).
+    """
+    def formula(mode, source_height, source_squared, sensor_height, sensor_squared):
+        source_cube = source_squared * sqrt(source_squared)
+        if mode == LAMBERTIAN:
+            return source_height * sensor_height / (math.pi * source_cube * sensor_squared * sqrt(sensor_squared))
+        return source_height / (source_cube * sensor_squared)
+    return formula
+
+
+_numpy_formula = attenuation_formula(np.sqrt)
+
+#: The formula compiled (scalars, ``math.sqrt``).
+_compiled_formula = njit(cache=True, error_model="numpy")(attenuation_formula(math.sqrt))
+
+
 def attenuation(points, source, sensor, kind: str = "lambertian") -> np.ndarray:
-    """a_k(x) at plane points ``(..., 2)``, 1/m⁴ (per unit source intensity).
+    """a_k(x) at plane points ``(..., 2)`` of the z = 0 plane, 1/m⁴ (per unit source intensity).
 
     Parameters
     ----------
@@ -56,60 +99,57 @@ def attenuation(points, source, sensor, kind: str = "lambertian") -> np.ndarray:
     -------
     numpy.ndarray
         ``points.shape[:-1]``, 1/m⁴.
-
-    Notes
-    -----
-    With h_s, h_k the heights, cos θ = h / d, so
-    lambertian = h_s h_k / (π d_s³ d_k³) and paper = h_s / (d_s³ d_k²).
     """
     code = attenuation_code(kind)
     points = np.asarray(points, dtype=np.float64)
     x, y = points[..., 0], points[..., 1]
     source = np.asarray(source, dtype=np.float64)
     sensor = np.asarray(sensor, dtype=np.float64)
-    d_source = np.sqrt((x - source[0]) ** 2 + (y - source[1]) ** 2 + source[2] ** 2)
-    d_sensor = np.sqrt((x - sensor[0]) ** 2 + (y - sensor[1]) ** 2 + sensor[2] ** 2)
-    cos_source = source[2] / d_source
-    cos_sensor = sensor[2] / d_sensor
-    if code == LAMBERTIAN:
-        return cos_source * cos_sensor / (np.pi * d_source**2 * d_sensor**2)
-    return cos_source / (d_source**2 * d_sensor**2)
+    source_squared = (x - source[0]) ** 2 + (y - source[1]) ** 2 + source[2] ** 2
+    sensor_squared = (x - sensor[0]) ** 2 + (y - sensor[1]) ** 2 + sensor[2] ** 2
+    return _numpy_formula(code, source[2], source_squared, sensor[2], sensor_squared)
 
 
 @njit(cache=True, error_model="numpy")
-def attenuation_of_distances(frame, source_squared, sensor_squared):
-    """a_k from the squared distances d_s², d_k² of a plane point, 1/m⁴, compiled.
+def attenuation_of_distances(frame, x, y, source_squared, sensor_squared):
+    """a_k at the rectangle point (x, y) with squared distances d_s², d_k² (m²) to the pair's ends, 1/m⁴.
 
     Parameters
     ----------
     frame : analytic.isochrone.Frame
-        The source-sensor pair (heights and attenuation ``mode``).
+        The pair (heights, attenuation ``mode``, end cosines).
+    x, y : float
+        The point in the rectangle's frame, metres.
     source_squared, sensor_squared : float
         d_s², d_k², m².
 
     Notes
     -----
-    lambertian h_s h_k / (π d_s³ d_k³), paper h_s / (d_s³ d_k²): the same
-    expressions as :func:`attenuation` with cos θ = h / d.
+    :func:`attenuation_formula`, times n·(x - p) / d at each end that has
+    a surface (``frame.source_cosine``, ``frame.sensor_cosine``).
     """
-    ds3 = source_squared * math.sqrt(source_squared)
-    if frame.mode == LAMBERTIAN:
-        return (frame.source_height * frame.sensor_height
-                / (math.pi * ds3 * sensor_squared * math.sqrt(sensor_squared)))
-    return frame.source_height / (ds3 * sensor_squared)
+    value = _compiled_formula(frame.mode, frame.source_height, source_squared, frame.sensor_height,
+                              sensor_squared)
+    if frame.source_cosine:
+        value *= (frame.source_cosine_0 + frame.source_cosine_u * x + frame.source_cosine_v * y) / math.sqrt(
+            source_squared)
+    if frame.sensor_cosine:
+        value *= (frame.sensor_cosine_0 + frame.sensor_cosine_u * x + frame.sensor_cosine_v * y) / math.sqrt(
+            sensor_squared)
+    return value
 
 
 @njit(cache=True, error_model="numpy")
 def attenuation_at(frame, x, y):
-    """a_k(x) at one plane point (x, y), metres, 1/m⁴, compiled.
+    """a_k(x) at one rectangle point (x, y), metres, 1/m⁴, compiled.
 
     Parameters
     ----------
     frame : analytic.isochrone.Frame
-        The source-sensor pair (positions, heights and attenuation ``mode``).
+        The pair (positions, heights, attenuation ``mode``, end cosines).
     x, y : float
-        Plane point, metres.
+        The point in the rectangle's frame, metres.
     """
     ds2 = (x - frame.source_x) ** 2 + (y - frame.source_y) ** 2 + frame.source_height ** 2
     dk2 = (x - frame.sensor_x) ** 2 + (y - frame.sensor_y) ** 2 + frame.sensor_height ** 2
-    return attenuation_of_distances(frame, ds2, dk2)
+    return attenuation_of_distances(frame, x, y, ds2, dk2)

@@ -1,6 +1,9 @@
-"""Isochrones: the ellipses d(x) = τ on the plane, in closed form (compiled).
+"""Isochrones: the ellipses d(x) = τ on a rectangle's plane, in closed form (compiled).
 
-For a source at height h_s and a sensor at height h_k whose feet on the plane
+Everything is in the rectangle's own frame (:mod:`analytic.geometry`):
+x and y along its edges, heights along its normal; for the letter's plane
+that is the world frame. For a source at height h_s and a sensor at height
+h_k whose feet on the plane
 are D apart, the set {x in z = 0 : |x - p_s| + |x - p_k| = τ} is the plane
 section of a prolate spheroid: an ellipse with its major axis along the line
 through the two feet. With e the unit vector from the source's foot to the
@@ -21,7 +24,8 @@ outside x* once; its Jacobian J(τ, φ) = |∂x/∂τ × ∂x/∂φ| equals
 as τ -> t_min. Area integrals become ∫ dτ ∫ dφ (...) J.
 
 Everything here is scalar and compiled with Numba; a source-sensor pair is a
-:class:`Frame` record (see :func:`make_frame`).
+:class:`Frame` record (see :func:`make_frame`), an isochrone an
+:class:`Isochrone`, a pixel a :class:`PixelBox`.
 
 Heights
 -------
@@ -44,12 +48,44 @@ from .kernel_cache import njit
 
 from .attenuation import LAMBERTIAN, PAPER, attenuation_at
 
-__all__ = ["Frame", "make_frame", "ellipse", "point_on_ellipse", "jacobian", "path_length_at",
+__all__ = ["Frame", "Isochrone", "PixelBox", "make_frame", "pair_frame", "ellipse", "point_on_ellipse", "jacobian", "path_length_at",
            "first_arrival_point", "segment_minimum", "rectangle_range", "rectangle_crossings",
            "LAMBERTIAN", "PAPER", "attenuation_at"]
 
+class PixelBox(NamedTuple):
+    """A pixel (or any axis-aligned rectangle) [x0, x1] x [y0, y1] of the rectangle's frame, metres."""
+
+    x0: float
+    x1: float
+    y0: float
+    y1: float
+
+
+class Isochrone(NamedTuple):
+    """The isochrone d = τ of a pair (:func:`ellipse`), metres.
+
+    x(φ) = centre + a cos φ e + b sin φ e⊥, with Jacobian
+    J(τ, φ) = j0 cos φ + j1 cos² φ + j2 sin² φ (m² per m of path per rad).
+    """
+
+    centre_x: float
+    centre_y: float
+    a: float          # semi-axis along e
+    b: float          # semi-axis across
+    j0: float
+    j1: float
+    j2: float
+
+
 class Frame(NamedTuple):
-    """A source-sensor pair as the compiled kernels use it (metres)."""
+    """A source-sensor pair in the rectangle's frame, as the compiled kernels use it (metres).
+
+    The first eleven fields fix the isochrones and the attenuation; the
+    cosine fields are an end's own surface (a relay wall's point): when
+    ``source_cosine``, a_k is multiplied by n·(x - p_s) / d_s with
+    n·(x - p_s) = source_cosine_0 + source_cosine_u x + source_cosine_v y
+    (the same for the sensor).
+    """
 
     source_x: float
     source_y: float
@@ -62,16 +98,39 @@ class Frame(NamedTuple):
     foot_distance: float    # D
     first_arrival: float    # t_min
     mode: int               # attenuation code, analytic.attenuation.LAMBERTIAN or PAPER
+    source_cosine: bool
+    source_cosine_0: float
+    source_cosine_u: float
+    source_cosine_v: float
+    sensor_cosine: bool
+    sensor_cosine_0: float
+    sensor_cosine_u: float
+    sensor_cosine_v: float
+
+
+@njit(cache=True, error_model="numpy")
+def _frame(source_x, source_y, source_height, sensor_x, sensor_y, sensor_height, mode, source_cosine,
+           source_form, sensor_cosine, sensor_form):
+    dx = sensor_x - source_x
+    dy = sensor_y - source_y
+    dist = math.hypot(dx, dy)
+    if dist > 0.0:
+        axis_x, axis_y = dx / dist, dy / dist
+    else:  # feet coincide: the isochrones are circles, any axis will do
+        axis_x, axis_y = 1.0, 0.0
+    return Frame(source_x, source_y, source_height, sensor_x, sensor_y, sensor_height, axis_x, axis_y,
+                 dist, math.hypot(dist, source_height + sensor_height), mode, source_cosine, source_form[0],
+                 source_form[1], source_form[2], sensor_cosine, sensor_form[0], sensor_form[1], sensor_form[2])
 
 
 @njit(cache=True, error_model="numpy")
 def make_frame(source, sensor, mode):
-    """A source-sensor pair as a :class:`Frame`.
+    """A pair of omnidirectional points as a :class:`Frame`.
 
     Parameters
     ----------
     source, sensor : float64[3]
-        Positions, metres (z > 0).
+        Positions in the rectangle's frame (x, y, height), metres, height > 0.
     mode : int
         Attenuation code, :data:`analytic.attenuation.LAMBERTIAN` or ``PAPER``.
 
@@ -79,15 +138,18 @@ def make_frame(source, sensor, mode):
     -------
     Frame
     """
-    dx = sensor[0] - source[0]
-    dy = sensor[1] - source[1]
-    dist = math.hypot(dx, dy)
-    if dist > 0.0:
-        axis_x, axis_y = dx / dist, dy / dist
-    else:  # feet coincide: the isochrones are circles, any axis will do
-        axis_x, axis_y = 1.0, 0.0
-    return Frame(source[0], source[1], source[2], sensor[0], sensor[1], sensor[2], axis_x, axis_y,
-                 dist, math.hypot(dist, source[2] + sensor[2]), mode)
+    none = (1.0, 0.0, 0.0)
+    return _frame(source[0], source[1], source[2], sensor[0], sensor[1], sensor[2], mode, False, none, False,
+                  none)
+
+
+@njit(cache=True, error_model="numpy")
+def pair_frame(pair, mode):
+    """The :class:`Frame` of one record of :data:`analytic.geometry.PAIR_DTYPE`."""
+    return _frame(pair.source_x, pair.source_y, pair.source_height, pair.sensor_x, pair.sensor_y,
+                  pair.sensor_height, mode, pair.source_cosine,
+                  (pair.source_cosine_0, pair.source_cosine_u, pair.source_cosine_v), pair.sensor_cosine,
+                  (pair.sensor_cosine_0, pair.sensor_cosine_u, pair.sensor_cosine_v))
 
 
 @njit(cache=True, error_model="numpy")
@@ -103,12 +165,9 @@ def ellipse(frame, tau):
 
     Returns
     -------
-    cx, cy : float
-        Centre, metres.
-    a, b : float
-        Semi-axes along e and across, metres.
-    j0, j1, j2 : float
-        J(τ, φ) = j0 cos φ + j1 cos² φ + j2 sin² φ, metres (m² per m per rad).
+    Isochrone
+        Centre, semi-axes along e and across, and the Jacobian's
+        coefficients.
     """
     dist = frame.foot_distance
     hs2 = frame.source_height * frame.source_height
@@ -136,16 +195,16 @@ def ellipse(frame, tau):
     j0 = b * dshift
     j1 = 0.5 * da2 * root_den / tau        # a' b, written without dividing by a
     j2 = 0.5 * db2 * tau / root_den        # a b', written without dividing by b
-    return cx, cy, a, b, j0, j1, j2
+    return Isochrone(cx, cy, a, b, j0, j1, j2)
 
 
 @njit(cache=True, error_model="numpy")
-def point_on_ellipse(frame, cx, cy, a, b, phi):
-    """The point x(τ, φ) on an isochrone, metres."""
+def point_on_ellipse(frame, curve, phi):
+    """The point x(τ, φ) on the isochrone ``curve``, metres."""
     c = math.cos(phi)
     s = math.sin(phi)
-    return (cx + a * c * frame.axis_x - b * s * frame.axis_y,
-            cy + a * c * frame.axis_y + b * s * frame.axis_x)
+    return (curve.centre_x + curve.a * c * frame.axis_x - curve.b * s * frame.axis_y,
+            curve.centre_y + curve.a * c * frame.axis_y + curve.b * s * frame.axis_x)
 
 
 @njit(cache=True, error_model="numpy")
@@ -200,12 +259,13 @@ def segment_minimum(frame, x0, y0, x1, y1):
 
 
 @njit(cache=True, error_model="numpy")
-def rectangle_range(frame, x0, x1, y0, y1):
-    """[min, max] of d over the rectangle [x0, x1] x [y0, y1], metres.
+def rectangle_range(frame, box):
+    """[min, max] of d over the :class:`PixelBox` ``box``, metres.
 
     d is convex, so its maximum is at a corner and its minimum at x* when x*
     is inside, else on an edge.
     """
+    x0, x1, y0, y1 = box
     xs, ys = first_arrival_point(frame)
     top = max(max(path_length_at(frame, x0, y0), path_length_at(frame, x1, y0)),
               max(path_length_at(frame, x0, y1), path_length_at(frame, x1, y1)))
@@ -219,13 +279,15 @@ def rectangle_range(frame, x0, x1, y0, y1):
 
 
 @njit(cache=True, error_model="numpy")
-def rectangle_crossings(frame, cx, cy, a, b, x0, x1, y0, y1, out):
-    """Angles φ where the isochrone crosses the rectangle's four edge lines.
+def rectangle_crossings(frame, curve, box, out):
+    """Angles φ where the isochrone ``curve`` crosses the four edge lines of the :class:`PixelBox` ``box``.
 
     x1(φ) = cx + R1 cos(φ + ψ1) and x2(φ) = cy + R2 cos(φ - ψ2), so each
     line gives at most two angles. Writes sorted angles in [0, 2π) into
     ``out`` and returns how many.
     """
+    cx, cy, a, b = curve.centre_x, curve.centre_y, curve.a, curve.b
+    x0, x1, y0, y1 = box
     e1 = frame.axis_x
     e2 = frame.axis_y
     r1 = math.hypot(a * e1, b * e2)

@@ -52,9 +52,10 @@ import numpy as np
 from .kernel_cache import njit
 
 from .attenuation import attenuation_at
-from .isochrone import ellipse, point_on_ellipse, rectangle_crossings
+from .isochrone import Frame, Isochrone, PixelBox, ellipse, point_on_ellipse, rectangle_crossings
 
-__all__ = ["Workspace", "make_workspace", "adapt", "ladder_rule", "integrate", "isochrone_rule",
+__all__ = ["Workspace", "ArcProblem", "IsochronePiece", "make_workspace", "adapt", "ladder_rule", "integrate",
+           "isochrone_rule",
            "tensor_integrate", "arc_value", "arc_integrand", "pixel_arcs", "pixel_isochrone_integral",
            "piece_map", "LINEAR", "ROOT_START", "ROOT_END", "ROOT_BOTH", "GAUSS_NODES", "GAUSS_WEIGHTS",
            "LADDER_LEVELS", "TENSOR_LEVELS", "MAX_PIECES"]
@@ -277,7 +278,7 @@ def integrate(integrand, problem, lo, hi, rtol, size, total, work, resolution):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def tensor_integrate(integrand, problem, x0, x1, y0, y1, rtol, size, total, work):
+def tensor_integrate(integrand, problem, box, rtol, size, total, work):
     """Add ∫∫ f(x, y) over [x0, x1] x [y0, y1] to total[:size] by the tensor Gauss ladder.
 
     Rungs G_n x G_n, n = 1 ... :data:`TENSOR_LEVELS`, each checked against the
@@ -289,8 +290,8 @@ def tensor_integrate(integrand, problem, x0, x1, y0, y1, rtol, size, total, work
         ``integrand(problem, x, y, values, noise)`` writes f(x, y) into
         ``values[:size]`` and its rounding into ``noise[:size]``.
     problem : tuple
-    x0, x1, y0, y1 : float
-        Rectangle, metres.
+    box : analytic.isochrone.PixelBox
+        The rectangle, metres.
     rtol : float
         Relative accuracy of each component (relative to ∫∫ |f|).
     size : int
@@ -303,10 +304,10 @@ def tensor_integrate(integrand, problem, x0, x1, y0, y1, rtol, size, total, work
     bool
         Whether a rung met the tolerance (then total holds the result).
     """
-    cx = 0.5 * (x0 + x1)
-    hx = 0.5 * (x1 - x0)
-    cy = 0.5 * (y0 + y1)
-    hy = 0.5 * (y1 - y0)
+    cx = 0.5 * (box.x0 + box.x1)
+    hx = 0.5 * (box.x1 - box.x0)
+    cy = 0.5 * (box.y0 + box.y1)
+    hy = 0.5 * (box.y1 - box.y0)
     for i in range(size):
         work.floor[i] = 0.0
     for order in range(1, TENSOR_LEVELS + 1):
@@ -332,29 +333,35 @@ def tensor_integrate(integrand, problem, x0, x1, y0, y1, rtol, size, total, work
     return False
 
 
+class ArcProblem(NamedTuple):
+    """What :func:`arc_integrand` needs: the pair and one of its isochrones."""
+
+    frame: Frame
+    curve: Isochrone
+
+
 @njit(cache=True, error_model="numpy")
-def arc_value(frame, cx, cy, a, b, j0, j1, j2, phi):
+def arc_value(frame, curve, phi):
     """a(x(τ, φ)) J(τ, φ) on one isochrone, m⁻³ per rad (one cosine and sine for both factors)."""
     c = math.cos(phi)
     s = math.sin(phi)
-    x = cx + a * c * frame.axis_x - b * s * frame.axis_y
-    y = cy + a * c * frame.axis_y + b * s * frame.axis_x
-    return attenuation_at(frame, x, y) * abs(j0 * c + j1 * c * c + j2 * s * s)
+    x = curve.centre_x + curve.a * c * frame.axis_x - curve.b * s * frame.axis_y
+    y = curve.centre_y + curve.a * c * frame.axis_y + curve.b * s * frame.axis_x
+    return attenuation_at(frame, x, y) * abs(curve.j0 * c + curve.j1 * c * c + curve.j2 * s * s)
 
 
 @njit(cache=True, error_model="numpy")
 def arc_integrand(problem, phi, values, noise):
-    """:func:`arc_value` as an integrand of :func:`integrate` (``problem`` = frame and its ellipse).
+    """:func:`arc_value` as an integrand of :func:`integrate` (``problem``: an :class:`ArcProblem`).
 
     A product of well-conditioned factors: its rounding is negligible (0).
     """
-    frame, cx, cy, a, b, j0, j1, j2 = problem
-    values[0] = arc_value(frame, cx, cy, a, b, j0, j1, j2, phi)
+    values[0] = arc_value(problem.frame, problem.curve, phi)
     noise[0] = 0.0
 
 
 @njit(cache=True, error_model="numpy")
-def pixel_arcs(frame, cx, cy, a, b, x0, x1, y0, y1, angles, arcs):
+def pixel_arcs(frame, curve, box, angles, arcs):
     """The arcs [φ_lo, φ_hi] of an isochrone inside a pixel; returns how many (at most 4).
 
     The isochrone is cut at its crossings with the pixel's edge lines; each
@@ -364,20 +371,20 @@ def pixel_arcs(frame, cx, cy, a, b, x0, x1, y0, y1, angles, arcs):
     Parameters
     ----------
     frame : Frame
-    cx, cy, a, b : float
-        The isochrone, from :func:`analytic.isochrone.ellipse`, metres.
-    x0, x1, y0, y1 : float
-        Pixel, metres.
+    curve : Isochrone
+        From :func:`analytic.isochrone.ellipse`, metres.
+    box : PixelBox
+        The pixel, metres.
     angles : float64[8]
         Scratch for the crossings.
     arcs : float64[4, 2]
         Output, radians.
     """
-    count = rectangle_crossings(frame, cx, cy, a, b, x0, x1, y0, y1, angles)
+    count = rectangle_crossings(frame, curve, box, angles)
     two_pi = 2.0 * math.pi
     if count == 0:
-        x, y = point_on_ellipse(frame, cx, cy, a, b, 0.0)
-        if x0 <= x <= x1 and y0 <= y <= y1:
+        x, y = point_on_ellipse(frame, curve, 0.0)
+        if box.x0 <= x <= box.x1 and box.y0 <= y <= box.y1:
             arcs[0, 0] = 0.0
             arcs[0, 1] = two_pi
             return 1
@@ -388,8 +395,8 @@ def pixel_arcs(frame, cx, cy, a, b, x0, x1, y0, y1, angles, arcs):
         hi = angles[i + 1] if i + 1 < count else angles[0] + two_pi
         if not hi - lo > 0.0:
             continue
-        x, y = point_on_ellipse(frame, cx, cy, a, b, 0.5 * (lo + hi))
-        if x0 <= x <= x1 and y0 <= y <= y1 and inside < arcs.shape[0]:
+        x, y = point_on_ellipse(frame, curve, 0.5 * (lo + hi))
+        if box.x0 <= x <= box.x1 and box.y0 <= y <= box.y1 and inside < arcs.shape[0]:
             arcs[inside, 0] = lo
             arcs[inside, 1] = hi
             inside += 1
@@ -397,7 +404,7 @@ def pixel_arcs(frame, cx, cy, a, b, x0, x1, y0, y1, angles, arcs):
 
 
 @njit(cache=True, error_model="numpy")
-def pixel_isochrone_integral(frame, cx, cy, a, b, j0, j1, j2, x0, x1, y0, y1, rtol, angles, arcs, work):
+def pixel_isochrone_integral(frame, curve, box, rtol, angles, arcs, work):
     """G(τ) = ∫_{isochrone ∩ pixel} a J dφ: the pixel's impulse response at τ, m⁻³.
 
     Each arc of :func:`pixel_arcs` is smooth, so the adaptive ladder
@@ -406,10 +413,10 @@ def pixel_isochrone_integral(frame, cx, cy, a, b, j0, j1, j2, x0, x1, y0, y1, rt
     Parameters
     ----------
     frame : Frame
-    cx, cy, a, b, j0, j1, j2 : float
-        The isochrone, from :func:`analytic.isochrone.ellipse`.
-    x0, x1, y0, y1 : float
-        Pixel, metres.
+    curve : Isochrone
+        From :func:`analytic.isochrone.ellipse`.
+    box : PixelBox
+        The pixel, metres.
     rtol : float
         Relative accuracy.
     angles, arcs : float64[8], float64[4, 2]
@@ -423,8 +430,8 @@ def pixel_isochrone_integral(frame, cx, cy, a, b, j0, j1, j2, x0, x1, y0, y1, rt
     float
         Per metre of path length, m⁻³ (any positive attenuation works).
     """
-    count = pixel_arcs(frame, cx, cy, a, b, x0, x1, y0, y1, angles, arcs)
-    problem = (frame, cx, cy, a, b, j0, j1, j2)
+    count = pixel_arcs(frame, curve, box, angles, arcs)
+    problem = ArcProblem(frame, curve)
     total = work.result
     total[0] = 0.0
     for i in range(count):
@@ -460,6 +467,23 @@ def piece_map(kind, tau_a, span, v):
     return tau_a + span * s * s, 0.5 * math.pi * span * math.sin(math.pi * v)
 
 
+class IsochronePiece(NamedTuple):
+    """What :func:`isochrone_rule` needs: the time weight's own problem, the pair, the pixel, the τ-piece.
+
+    ``kind``, ``tau_a`` and ``span`` define τ(v) (:func:`piece_map`);
+    ``angles`` and ``arcs`` are scratch (float64[8], float64[4, 2]).
+    """
+
+    weight_problem: tuple
+    frame: Frame
+    box: PixelBox
+    kind: int
+    tau_a: float
+    span: float
+    angles: np.ndarray
+    arcs: np.ndarray
+
+
 @njit(cache=True, error_model="numpy", inline="always")
 def isochrone_rule(weight, problem, lo, hi, rtol, size, work):
     """Tensor ladder in (v, φ) of w(τ) G(τ) dτ/dv over [lo, hi] ⊂ [0, 1] (a rule for :func:`adapt`).
@@ -476,14 +500,13 @@ def isochrone_rule(weight, problem, lo, hi, rtol, size, work):
         ``weight(weight_problem, tau, scale, values, noise)`` writes
         scale w(τ) into ``values[:size]`` (the time kernels) and its
         rounding into ``noise[:size]``.
-    problem : tuple
-        ``(weight_problem, frame, x0, x1, y0, y1, kind, tau_a, span, angles,
-        arcs)``: the pixel (metres), the τ-piece (metres) and its
-        :func:`piece_map` kind, and scratch (float64[8], float64[4, 2]).
+    problem : IsochronePiece
     lo, hi, rtol, size, work
         As for any rule of :func:`adapt`.
     """
-    weight_problem, frame, x0, x1, y0, y1, kind, tau_a, span, angles, arcs = problem
+    frame = problem.frame
+    angles = problem.angles
+    arcs = problem.arcs
     centre_v = 0.5 * (lo + hi)
     half_v = 0.5 * (hi - lo)
     for order in range(1, LADDER_LEVELS + 1):
@@ -493,21 +516,21 @@ def isochrone_rule(weight, problem, lo, hi, rtol, size, work):
             work.magnitude[i] = 0.0
             work.rounding[i] = 0.0
         for jv in range(order):
-            tau, slope = piece_map(kind, tau_a, span, centre_v + half_v * GAUSS_NODES[order, jv])
-            cx, cy, a, b, j0, j1, j2 = ellipse(frame, tau)
-            count = pixel_arcs(frame, cx, cy, a, b, x0, x1, y0, y1, angles, arcs)
+            tau, slope = piece_map(problem.kind, problem.tau_a, problem.span,
+                                   centre_v + half_v * GAUSS_NODES[order, jv])
+            curve = ellipse(frame, tau)
+            count = pixel_arcs(frame, curve, problem.box, angles, arcs)
             response = 0.0
             for arc in range(count):
                 centre = 0.5 * (arcs[arc, 0] + arcs[arc, 1])
                 half = 0.5 * (arcs[arc, 1] - arcs[arc, 0])
                 for jphi in range(order):
                     phi = centre + half * GAUSS_NODES[order, jphi]
-                    response += half * GAUSS_WEIGHTS[order, jphi] * arc_value(frame, cx, cy, a, b, j0, j1, j2,
-                                                                               phi)
+                    response += half * GAUSS_WEIGHTS[order, jphi] * arc_value(frame, curve, phi)
             scale = half_v * GAUSS_WEIGHTS[order, jv] * slope * response
             if scale == 0.0:
                 continue
-            weight(weight_problem, tau, scale, work.values, work.noise)
+            weight(problem.weight_problem, tau, scale, work.values, work.noise)
             for i in range(size):
                 target[i] += work.values[i]
                 work.magnitude[i] += abs(work.values[i])

@@ -16,10 +16,11 @@ import warnings
 
 import numpy as np
 
-from .isochrone import LAMBERTIAN, make_frame, rectangle_range
+from .geometry import PointPairs, Rectangle, pair_table, plane_geometry
+from .isochrone import LAMBERTIAN, PixelBox, pair_frame, rectangle_range
 from .scene import Sampling, Scene
 
-__all__ = ["response_range", "covering_sampling", "window_share", "warn_if_cut", "WindowWarning", "FULL_SHARE"]
+__all__ = ["response_range", "pairs_range", "covering_sampling", "window_share", "warn_if_cut", "WindowWarning", "FULL_SHARE"]
 
 #: The share of the light a window must hold not to be warned about.
 FULL_SHARE = 0.999
@@ -31,12 +32,17 @@ class WindowWarning(UserWarning):
 
 def response_range(scene: Scene) -> tuple[float, float]:
     """(first, last) path length from the source over the plane to any sensor, metres (exact)."""
-    source = np.asarray(scene.source, dtype=np.float64)
+    rectangle, pairs = plane_geometry(scene)
+    return pairs_range(rectangle, pairs)
+
+
+def pairs_range(rectangle: Rectangle, pairs: PointPairs) -> tuple[float, float]:
+    """(first, last) path length over the rectangle of any pair, its added length included, metres (exact)."""
+    whole = PixelBox(0.0, rectangle.width, 0.0, rectangle.height)
     low, high = math.inf, -math.inf
-    for sensor in np.asarray(scene.sensors, dtype=np.float64):
-        first, last = rectangle_range(make_frame(source, sensor, LAMBERTIAN), 0.0, scene.size,
-                                      0.0, scene.size)
-        low, high = min(low, float(first)), max(high, float(last))
+    for pair in pair_table(rectangle, pairs):
+        first, last = rectangle_range(pair_frame(pair, LAMBERTIAN), whole)
+        low, high = min(low, float(first) + pair["offset"]), max(high, float(last) + pair["offset"])
     return low, high
 
 

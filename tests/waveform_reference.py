@@ -111,6 +111,18 @@ class ButterworthReference:
             integral = self.c * mpmath.lu_solve(self.a, (mpmath.expm(self.a * v) - identity) * self.b)
             return float(mpmath.re(integral[0]) / self.peak)
 
+    def kernel(self, lower: float, upper: float) -> float:
+        """∫_lower^upper s(t) dt in mpmath (no difference of two rounded S), metres."""
+        with mpmath.workdps(_DIGITS):
+            end = min(self.duration, self.settled)
+            a = min(max(mpmath.mpf(lower), 0), end)
+            b = min(max(mpmath.mpf(upper), 0), end)
+            if not b > a:
+                return 0.0
+            change = mpmath.expm(self.a * b) - mpmath.expm(self.a * a)
+            integral = self.c * mpmath.lu_solve(self.a, change * self.b)
+            return float(mpmath.re(integral[0]) / self.peak)
+
     def intensity(self, t: float) -> float:
         """s(t) = h(t) / peak on [0, duration], 0 elsewhere."""
         with mpmath.workdps(_DIGITS):

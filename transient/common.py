@@ -3,7 +3,8 @@
 Everything here is Dr.Jit code in float64 (``mi.Float64``, ``mi.UInt32``)
 traced into the plugins' kernels:
 
-- :func:`cumulative`: the illumination's cumulative S(u), the closed form of
+- :func:`cumulative`, :func:`kernel_between`: the illumination's cumulative
+  S(u) and its differences, from the pieces of
   :class:`analytic.waveforms.WaveformTerms` that NumPy
   (``Waveform.cumulative``) and Numba (``cumulative_scalar``) evaluate too;
 - :func:`attenuation`: a_k(x) of DESIGN.md section 2 (``lambertian``) at plane
@@ -25,12 +26,17 @@ import math
 import drjit as dr
 import mitsuba as mi
 
+from analytic.attenuation import LAMBERTIAN, attenuation_formula
 from analytic.binning import bin_index
 from analytic.scene import Illumination
-from analytic.waveforms import EXPONENTIAL_SUM, IMPULSE, SQUARE, WaveformTerms, make_waveform
+from analytic.waveforms import POLYNOMIAL, WaveformTerms, make_waveform
 
-__all__ = ["cumulative", "attenuation", "height_over_cube", "sample_stream", "jittered_point", "replica_of", "deposit",
+__all__ = ["cumulative", "kernel_between", "attenuation", "height_over_cube", "sample_stream", "jittered_point", "replica_of", "deposit",
            "reduce_mode", "opaque_u32", "opaque_f64", "is_diffuse", "time_axis_and_waveform"]
+
+
+#: The attenuation of analytic.attenuation, with Dr.Jit's square root: one expression for every backend.
+_formula = attenuation_formula(dr.sqrt)
 
 
 def opaque_u32(value: int):
@@ -46,13 +52,53 @@ def opaque_f64(value: float):
 # -- the waveform's cumulative --------------------------------------------------
 
 
+def _piece_index(terms: WaveformTerms, u):
+    """Index of the piece holding u (-1 where S = 0), as analytic.waveforms.piece_of: the count of starts below u."""
+    index = mi.Int32(-1)
+    for start in terms.starts:
+        index += dr.select(u > float(start), mi.Int32(1), mi.Int32(0))
+    return index
+
+
+def _piece_form(terms: WaveformTerms, piece: int, u):
+    """F_i(u) of one piece on every lane (u clipped to the piece, so lanes outside it stay finite)."""
+    first, last = int(terms.offsets[piece]), int(terms.offsets[piece + 1])
+    coefficients = [float(c) for c in terms.coefficients[first:last]]
+    low = float(terms.starts[piece])
+    high = float(terms.starts[piece + 1]) if piece + 1 < len(terms.starts) else float(terms.duration)
+    x = dr.clip(u, low, max(high, low)) - float(terms.origins[piece])
+    if terms.families[piece] == POLYNOMIAL:
+        value = mi.Float64(0.0)
+        for coefficient in coefficients[::-1]:
+            value = value * x + coefficient
+        return value
+    value = mi.Float64(0.0)
+    for a, w, b, c in zip(*[iter(coefficients)] * 4):
+        term = b * dr.cos(w * x) + c * dr.sin(w * x) if w else mi.Float64(b)
+        value += dr.exp(a * x) * term
+    return value
+
+
+def _constant_and_form(terms: WaveformTerms, u):
+    """(K_i, F_i(u)) of each lane's piece (0, 0 where S = 0): S(u) = K_i + F_i(u)."""
+    index = _piece_index(terms, u)
+    constant, form = mi.Float64(0.0), mi.Float64(0.0)
+    for piece in range(len(terms.starts)):
+        inside = index == piece
+        constant = dr.select(inside, float(terms.constants[piece]), constant)
+        if terms.offsets[piece + 1] > terms.offsets[piece]:
+            form = dr.select(inside, _piece_form(terms, piece, u), form)
+    return constant, form
+
+
 def cumulative(terms: WaveformTerms, u):
-    """S(u) = ∫_{-∞}^u s(t) dt in Dr.Jit Float64, the closed form of ``terms``.
+    """S(u) = ∫_{-∞}^u s(t) dt in Dr.Jit Float64, from the waveform's pieces.
 
     Parameters
     ----------
     terms : WaveformTerms
-        The waveform's closed form (``Waveform.terms``).
+        The waveform's pieces (``Waveform.terms``, :mod:`analytic.waveforms.pieces`),
+        the same record NumPy and Numba evaluate.
     u : mi.Float64
         Time after the pulse's start, metres of path length (c = 1).
 
@@ -60,56 +106,16 @@ def cumulative(terms: WaveformTerms, u):
     -------
     mi.Float64
         S(u): dimensionless for the impulse (a step), metres for the others.
-
-    Notes
-    -----
-    S(u) = 0 for u <= 0. For u > 0: IMPULSE 1; SQUARE min(u, duration);
-    EXPONENTIAL_SUM, with v = min(u, duration),
-
-        S = Σ_m series_m v^m                       (v < series_limit),
-        S = constant + Σ_i e^{a_i v} (b_i cos ω_i v + c_i sin ω_i v)   (else),
-
-    exactly as ``analytic.waveforms.cumulative_scalar``. The two terms of a
-    complex-conjugate pole pair (ω and -ω) are evaluated as one (cos is even
-    and sin odd): the same sum with half the transcendentals, which dominate
-    the cost of a Butterworth render.
     """
-    zero = mi.Float64(0.0)
-    if terms.kind == IMPULSE:
-        return dr.select(u > 0.0, mi.Float64(1.0), zero)
-    if terms.kind == SQUARE:
-        return dr.clip(u, 0.0, terms.duration)
-    if terms.kind != EXPONENTIAL_SUM:
-        raise ValueError(f"waveform kind {terms.kind}: no closed form for it")
-    clipped = dr.clip(u, 0.0, terms.duration)
-    value = mi.Float64(float(terms.constant))
-    for decay, frequency, cos_coefficient, sin_coefficient in _conjugates_merged(terms):
-        if frequency:
-            term = cos_coefficient * dr.cos(frequency * clipped) + sin_coefficient * dr.sin(frequency * clipped)
-        else:
-            term = mi.Float64(cos_coefficient)
-        value += dr.exp(decay * clipped) * term
-    # Near u = 0 the exponentials cancel to S ~ u^order: the Taylor series there.
-    series = mi.Float64(0.0)
-    for coefficient in terms.series[::-1]:
-        series = series * clipped + float(coefficient)
-    value = dr.select(clipped < terms.series_limit, series, value)
-    return dr.select(u <= 0.0, zero, value)
+    constant, form = _constant_and_form(terms, u)
+    return constant + form
 
 
-def _conjugates_merged(terms: WaveformTerms) -> list[tuple[float, float, float, float]]:
-    """The terms (a, ω >= 0, b, c) of ``terms`` with each complex-conjugate pair added into one."""
-    merged: dict[tuple[float, float], list[float]] = {}
-    for a, w, b, c in zip(terms.decay, terms.frequency, terms.cos_coefficient, terms.sin_coefficient):
-        a, w, b, c = float(a), float(w), float(b), float(c)
-        if w < 0.0:
-            w, c = -w, -c
-        key = next((k for k in merged if math.isclose(k[0], a, rel_tol=1e-12)
-                    and math.isclose(k[1], w, rel_tol=1e-12, abs_tol=1e-300)), (a, w))
-        entry = merged.setdefault(key, [0.0, 0.0])
-        entry[0] += b
-        entry[1] += c
-    return [(a, w, b, c) for (a, w), (b, c) in merged.items()]
+def kernel_between(terms: WaveformTerms, lower, upper):
+    """S(upper) - S(lower) as (K_j - K_i) + (F_j(upper) - F_i(lower)): exact cancellation within a piece."""
+    constant_low, form_low = _constant_and_form(terms, lower)
+    constant_high, form_high = _constant_and_form(terms, upper)
+    return (constant_high - constant_low) + (form_high - form_low)
 
 
 # -- geometry --------------------------------------------------------------------
@@ -131,8 +137,8 @@ def height_over_cube(x, y, point):
     return height / (squared * dr.sqrt(squared))
 
 
-def attenuation(x, y, source, sensor):
-    """a_k(x) = cos θ_s cos θ_k / (π d_s² d_k²) at plane points, 1/m⁴ (``lambertian``).
+def attenuation(x, y, source, sensor, mode: int = LAMBERTIAN):
+    """a_k(x) at plane points, 1/m⁴: :func:`analytic.attenuation.attenuation_formula` in Dr.Jit.
 
     Parameters
     ----------
@@ -140,19 +146,18 @@ def attenuation(x, y, source, sensor):
         Plane points in the plane's frame (z = 0), metres.
     source, sensor : sequence of float
         Positions (x, y, h) in the plane's frame, metres, h > 0 above it.
+    mode : int
+        :data:`analytic.attenuation.LAMBERTIAN` (physical, the default) or ``PAPER``.
 
     Returns
     -------
     mi.Float64
-
-    Notes
-    -----
-    With h the heights above the plane, cos θ = h / d, so
-    a_k = h_s h_k / (π d_s³ d_k³): the expression of
-    :func:`analytic.isochrone.attenuation_at` (Numba) and
-    :func:`analytic.attenuation.attenuation` (NumPy).
     """
-    return height_over_cube(x, y, source) * height_over_cube(x, y, sensor) / math.pi
+    sx, sy, source_height = (float(v) for v in source)
+    kx, ky, sensor_height = (float(v) for v in sensor)
+    source_squared = dr.square(x - sx) + dr.square(y - sy) + source_height * source_height
+    sensor_squared = dr.square(x - kx) + dr.square(y - ky) + sensor_height * sensor_height
+    return _formula(mode, source_height, source_squared, sensor_height, sensor_squared)
 
 
 # -- random numbers and sample points --------------------------------------------
@@ -330,14 +335,16 @@ def deposit(histogram, row, weight, length, active, *, bins: int, start_opl: flo
     # from bins far before it, which no sample ever reads.
     start = dr.maximum(first, 0.0)
     lower = start_opl + start * bin_width_opl - length
-    edge = cumulative(terms, lower)
+    edge_constant, edge_form = _constant_and_form(terms, lower)
     for tap in range(taps):
-        upper = cumulative(terms, lower + (tap + 1) * bin_width_opl)
+        upper_constant, upper_form = _constant_and_form(terms, lower + (tap + 1) * bin_width_opl)
         n = start + tap
         inside = active & (n < bins)
         slot = mi.UInt32(dr.clip(n, 0.0, bins - 1.0)) + row * bins
-        dr.scatter_reduce(dr.ReduceOp.Add, histogram, weight * (upper - edge), slot, active=inside, mode=mode)
-        edge = upper
+        # κ_n = (K_j - K_i) + (F_j - F_i): within one piece the constants cancel exactly (a tail keeps its digits)
+        kernel = (upper_constant - edge_constant) + (upper_form - edge_form)
+        dr.scatter_reduce(dr.ReduceOp.Add, histogram, weight * kernel, slot, active=inside, mode=mode)
+        edge_constant, edge_form = upper_constant, upper_form
 
 
 def time_axis_and_waveform(props, plugin: str):

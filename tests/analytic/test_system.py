@@ -6,6 +6,7 @@ nested integrals, pixel boxes from DESIGN.md, κ_n from the mpmath
 state-space pulse of tests/waveform_reference.py.
 """
 
+import math
 import warnings
 
 import numpy as np
@@ -113,3 +114,50 @@ def test_achieved_error_follows_the_tolerance(name, waveform):
         assert error <= tolerance, (tolerance, error)
         assert error >= tolerance / 100, (tolerance, error)
     assert errors == sorted(errors, reverse=True)
+
+
+def _exponential_tail_kernel(omega, duration, lower, upper):
+    """κ(τ) of the order-1 Butterworth pulse s(t) = e^{-ωt} on [0, duration], written without cancellation.
+
+    ∫_a^b e^{-ωt} dt = e^{-ωa} (1 - e^{-ω(b-a)}) / ω with expm1: its own relative accuracy however far
+    into the tail (an independent closed form, not the model's pieces).
+    """
+    def kernel(tau):
+        a = min(max(lower - tau, 0.0), duration)
+        b = min(max(upper - tau, 0.0), duration)
+        if not b > a:
+            return 0.0
+        return math.exp(-omega * a) * -math.expm1(-omega * (b - a)) / omega
+    return kernel
+
+
+def test_butterworth_tail_entries_keep_the_per_entry_tolerance(rng):
+    """A long first-order pulse over 160 bins: entries 1e-6 to 1e-15 of their row's largest stay within the
+    tolerance of their own value (the difference of two values of S near the pulse's area did not)."""
+    from analytic.scene import Illumination, Sampling
+
+    cutoff, duration = 0.5, 12.0
+    scene = default_scene(pixels=4, sensors=[[0.2, 0.7, 1.0]],
+                          illumination=Illumination(waveform="butterworth", order=1, cutoff=cutoff,
+                                                    duration=duration),
+                          sampling=Sampling(bin_width_opl=duration / 160, start_opl=1.9, count=170))
+    matrix = system_matrix(scene).tocsr()
+    row_max = abs(matrix).max(axis=1).toarray().ravel()
+    coo = matrix.tocoo()
+    ratio = np.abs(coo.data) / row_max.max()
+    omega = 2 * math.pi * cutoff
+    tested = 0
+    for low, high in [(1e-9, 1e-6), (1e-12, 1e-9), (1e-15, 1e-12)]:
+        band = np.flatnonzero((ratio >= low) & (ratio < high))
+        assert band.size, (low, high)
+        for i in rng.choice(band, size=min(2, band.size), replace=False):
+            row, pixel = int(coo.row[i]), int(coo.col[i])
+            n = row % scene.sampling.count
+            lower, upper = scene.sampling.edges[n], scene.sampling.edges[n + 1]
+            kernel = _exponential_tail_kernel(omega, duration, lower, upper)
+            reference = scene.intensity * pixel_entry(pixel_box(scene.size, scene.pixels, pixel), scene.source,
+                                                      scene.sensors[0], kernel,
+                                                      [lower, upper, lower - duration, upper - duration])
+            assert abs(coo.data[i] - reference) <= TOLERANCE * abs(reference), (row, pixel, coo.data[i], reference)
+            tested += 1
+    assert tested == 6

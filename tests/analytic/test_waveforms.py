@@ -167,11 +167,18 @@ def _butterworth(order, cutoff, duration, period=None):
                                       duration=duration), period)
 
 
+def _switch(waveform):
+    """Where the Butterworth pulse's Taylor series hands over to its exponential sum (a piece that is no kink)."""
+    terms = waveform.terms
+    switches = [float(b) for b, kink in zip(terms.starts, terms.kinks) if not kink]
+    return switches[0] if switches else float(np.nextafter(waveform.duration, np.inf))
+
+
 def _probe_times(waveform, reference):
     """u (metres) over the pulse: geometric from 1e-3/ω_c, linear, and at its landmarks."""
     end = min(reference.duration, float(reference.model.settled))
     probes = [np.geomspace(1e-3 / reference.omega, end, 6), np.linspace(0.0, end, 6)[1:],
-              [waveform.series_limit * (1 - 1e-9), waveform.series_limit * (1 + 1e-9),
+              [_switch(waveform) * (1 - 1e-9), _switch(waveform) * (1 + 1e-9),
                waveform.peak_time, end, 2 * end]]
     u = np.unique(np.concatenate(probes))
     return u[u > 0]
@@ -231,10 +238,10 @@ def test_butterworth_series_keeps_relative_accuracy_near_zero(order):
     reference = _reference(order, DEFAULT_CUTOFF, 1e300)
     # the smallest x = ω u whose S (~x^n / n!) is still a normal float64
     smallest = (1e-290 * math.factorial(order)) ** (1 / order) / reference.omega
-    u = np.geomspace(smallest, waveform.series_limit / 2, 8)
+    u = np.geomspace(smallest, _switch(waveform) / 2, 8)
     # where the series meets the exponential sum both cancel to ~ε Σ|ρ_k| e^{Re q_k x₀} / S:
     # measured up to 2.5e-12 at orders 19 and 20
-    switch = waveform.series_limit * np.array([0.9, 1 - 1e-9, 1 + 1e-9, 1.5])
+    switch = _switch(waveform) * np.array([0.9, 1 - 1e-9, 1 + 1e-9, 1.5])
     with mpmath.workdps(80):
         expected = np.array([float(reference.taylor(x, 1) / reference.peak) for x in u])
         expected_switch = np.array([float(reference.taylor(x, 1) / reference.peak) for x in switch])
@@ -295,13 +302,13 @@ def test_numpy_and_numba_evaluate_the_same_closed_form(name, options, rng):
 
     span = max(waveform.duration, PERIOD)
     u = np.concatenate([rng.uniform(-0.2 * span, 1.2 * span, 4000),
-                        rng.uniform(0.0, waveform.series_limit, 1000),
+                        rng.uniform(0.0, _switch(waveform), 1000),
                         np.geomspace(1e-300, 1e300, 121), [-1e308, 0.0, 1e308]])
     numpy_values = waveform.cumulative(u)
     numba_values = compiled(waveform.terms, u)
     assert np.all(np.isfinite(numpy_values))
     np.testing.assert_allclose(numba_values, numpy_values, rtol=0, atol=1e-12 * waveform.energy)
-    series = (u > 0) & (u < waveform.series_limit)
+    series = (u > 0) & (u < _switch(waveform))
     np.testing.assert_allclose(numba_values[series], numpy_values[series], rtol=1e-12)
 
 
@@ -388,8 +395,36 @@ def test_every_stored_coefficient_is_a_normal_float(options):
     """At the corners of the accepted ranges nothing over- or underflows."""
     cutoff = options.get("cutoff", DEFAULT_CUTOFF)
     waveform = make_waveform(Illumination(waveform="butterworth", **options), 0.5 / cutoff)
-    stored = np.concatenate([waveform.series, waveform.decay, waveform.frequency, waveform.cos_coefficient,
-                             waveform.sin_coefficient, [waveform.constant, waveform.series_limit,
-                                                        waveform.duration, waveform.peak_time]])
+    terms = waveform.terms
+    stored = np.concatenate([terms.coefficients, terms.constants, terms.starts,
+                             [waveform.duration, waveform.peak_time]])
     nonzero = np.abs(stored[stored != 0.0])
     assert np.all(np.isfinite(stored)) and np.all(nonzero >= np.finfo(float).tiny)
+
+
+# ---------------------------------------------------------------------------
+# Kernels far in the pulse's tail keep their own relative accuracy
+
+
+TAIL_CASES = [(1, 0.5, 12.0, 12.0 / 160), (2, 0.5, 12.0, 12.0 / 160), (3, DEFAULT_CUTOFF, 500.0, PERIOD),
+              (8, DEFAULT_CUTOFF, 500.0, PERIOD)]
+
+
+@pytest.mark.parametrize("order, cutoff, duration, period", TAIL_CASES)
+def test_butterworth_kernels_are_accurate_far_in_the_tail(order, cutoff, duration, period):
+    """κ_n 1e-11 (and less) below the peak bin is within 1e-12 of itself, against the mpmath reference.
+
+    A kernel taken as the difference of two values of S near the pulse's area
+    keeps only their rounding there (1e-16 of the area: 100 % of a 1e-16 kernel);
+    the pieces keep the remainder instead.
+    """
+    waveform = _butterworth(order, cutoff, duration, period)
+    reference = _reference(order, cutoff, duration)
+    sampling = Sampling(bin_width_opl=period, start_opl=0.0, count=int(waveform.duration / period))
+    tau = 0.37 * period
+    kernel = waveform.kernel(np.array([tau]), sampling)[:, 0]
+    edges = sampling.edges - tau
+    expected = np.array([reference.model.kernel(a, b) for a, b in zip(edges[:-1], edges[1:])])
+    live = np.abs(expected) > 1e-300
+    assert np.max(np.abs(expected)) / np.min(np.abs(expected[live])) > 1e11     # the tail is reached
+    np.testing.assert_allclose(kernel[live], expected[live], rtol=1e-12, atol=0)

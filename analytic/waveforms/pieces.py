@@ -1,0 +1,271 @@
+"""A waveform's cumulative S(u) as pieces, each a closed form that NumPy, Numba and Dr.Jit evaluate alike.
+
+Every waveform s(t) (unit peak, or unit area for the impulse) enters the
+model only through its cumulative S(u) = ∫_{-∞}^u s(t) dt and the sampling
+kernels it induces,
+
+    κ_n(τ) = S(t_{n+1} - τ) - S(t_n - τ).
+
+S is stored as pieces: piece i covers (b_i, b_{i+1}] (the last one up to
++∞; S = 0 for u <= b_0) and there
+
+    S(u) = K_i + F_i(u),
+
+with K_i a constant and F_i a closed form of one *family*:
+
+============== ===============================================================
+``POLYNOMIAL`` F(u) = Σ_m c_m (u - o)^m (Horner; no coefficient: F = 0)
+``EXPONENTIALS`` F(u) = Σ_j e^{a_j (u - o)} (b_j cos ω_j (u - o) + c_j sin ω_j (u - o))
+============== ===============================================================
+
+(o is the piece's origin; coefficients are stored flat, four per term for
+``EXPONENTIALS``: a_j, ω_j, b_j, c_j). Why a constant and a form, not S
+itself: far in a pulse's tail S is its area less a remainder 1e-13 of it,
+and a kernel computed as the difference of two such S keeps only their
+rounding. Each kernel is computed as
+
+    S(b) - S(a) = (K_j - K_i) + (F_j(b) - F_i(a)),
+
+so that within one piece (K_j = K_i) the constant cancels exactly and the
+difference keeps the relative accuracy of the forms themselves: a
+Butterworth tail keeps its remainder as F.
+
+``kinks[i]`` says whether s or one of its derivatives jumps at b_i: those
+are the waveform's breakpoints, where the model's quadrature cuts its
+integrals (a piece boundary that only switches between two closed forms of
+one analytic function, as the Butterworth pulse's Taylor series and its
+exponential sum, is not a kink). Adding a waveform means building its
+pieces (see :mod:`analytic.waveforms.square`); the quadrature, the NumPy
+and Numba evaluators here and the renderer's Dr.Jit one read nothing else.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from ..kernel_cache import njit
+
+__all__ = ["WaveformTerms", "make_terms", "POLYNOMIAL", "EXPONENTIALS", "piece_of", "piece_value",
+           "cumulative_scalar", "kernel_scalar", "cumulative_array", "derivative_array", "kernel_array",
+           "ROUNDING"]
+
+#: Families of the pieces' closed forms.
+POLYNOMIAL, EXPONENTIALS = 0, 1
+
+#: Relative rounding allowed per term of a closed form when bounding a kernel's rounding error
+#: (a few roundings of each term and of the sums).
+ROUNDING = 8.0 * 2.0**-52
+
+
+class WaveformTerms(NamedTuple):
+    """A waveform's pieces as a record that compiled (Numba) code accepts; see the module docstring.
+
+    Attributes
+    ----------
+    starts : float64[P]
+        b_i, increasing, metres of path length; piece i covers (b_i, b_{i+1}].
+    kinks : bool[P]
+        Whether s or a derivative jumps at b_i (a breakpoint of the quadrature).
+    constants : float64[P]
+        K_i, metres (dimensionless for the impulse).
+    families : int64[P]
+        ``POLYNOMIAL`` or ``EXPONENTIALS``.
+    origins : float64[P]
+        o_i, metres.
+    offsets : int64[P + 1]
+        Piece i's coefficients are ``coefficients[offsets[i]:offsets[i + 1]]``.
+    coefficients : float64[C]
+        See the module docstring.
+    duration : float
+        Support [0, duration] of s, metres: S is constant beyond it.
+    """
+
+    starts: np.ndarray
+    kinks: np.ndarray
+    constants: np.ndarray
+    families: np.ndarray
+    origins: np.ndarray
+    offsets: np.ndarray
+    coefficients: np.ndarray
+    duration: float
+
+
+def _frozen(values, dtype=np.float64) -> np.ndarray:
+    array = np.array(values, dtype=dtype)
+    array.setflags(write=False)
+    return array
+
+
+def make_terms(pieces, duration: float) -> WaveformTerms:
+    """The record of a list of pieces.
+
+    Parameters
+    ----------
+    pieces : sequence of (start, kink, constant, family, origin, coefficients)
+        In increasing order of start (metres); see :class:`WaveformTerms`.
+    duration : float
+        Where s ends, metres.
+
+    Returns
+    -------
+    WaveformTerms
+    """
+    starts = [float(p[0]) for p in pieces]
+    if any(not b > a for a, b in zip(starts, starts[1:])):
+        raise ValueError(f"piece starts must increase, got {starts}")
+    for piece in pieces:
+        if piece[3] == EXPONENTIALS and len(piece[5]) % 4:
+            raise ValueError("EXPONENTIALS pieces take four coefficients per term")
+    sizes = [len(p[5]) for p in pieces]
+    return WaveformTerms(_frozen(starts), _frozen([bool(p[1]) for p in pieces], np.bool_),
+                         _frozen([p[2] for p in pieces]), _frozen([p[3] for p in pieces], np.int64),
+                         _frozen([p[4] for p in pieces]), _frozen(np.concatenate([[0], np.cumsum(sizes)]), np.int64),
+                         _frozen(np.concatenate([np.asarray(p[5], dtype=np.float64) for p in pieces])
+                                 if pieces else []),
+                         float(duration))
+
+
+# -- compiled evaluators -------------------------------------------------------------
+
+
+@njit(cache=True, error_model="numpy")
+def piece_of(terms, u):
+    """Index of the piece holding u, or -1 where S = 0 (u <= b_0, or u NaN)."""
+    starts = terms.starts
+    if not u > starts[0]:
+        return -1
+    low, high = 0, starts.size - 1          # starts[low] < u; the answer is in [low, high]
+    while low < high:
+        middle = (low + high + 1) // 2
+        if starts[middle] < u:
+            low = middle
+        else:
+            high = middle - 1
+    return low
+
+
+@njit(cache=True, error_model="numpy")
+def piece_value(terms, piece, u):
+    """(F_i(u), a bound on the size of its terms) for piece i, metres."""
+    first = terms.offsets[piece]
+    last = terms.offsets[piece + 1]
+    x = u - terms.origins[piece]
+    coefficients = terms.coefficients
+    value = 0.0
+    size = 0.0
+    if terms.families[piece] == 0:          # POLYNOMIAL, by Horner's rule (as NumPy's polyval)
+        magnitude = abs(x)
+        for m in range(last - 1, first - 1, -1):
+            value = value * x + coefficients[m]
+            size = size * magnitude + abs(coefficients[m])
+        return value, size
+    for j in range(first, last, 4):         # EXPONENTIALS
+        envelope = math.exp(coefficients[j] * x)
+        frequency = coefficients[j + 1]
+        if frequency == 0.0:
+            term = envelope * coefficients[j + 2]
+            size += abs(term)
+        else:
+            angle = frequency * x
+            term = envelope * (coefficients[j + 2] * math.cos(angle) + coefficients[j + 3] * math.sin(angle))
+            size += envelope * (abs(coefficients[j + 2]) + abs(coefficients[j + 3]))
+        value += term
+    return value, size
+
+
+@njit(cache=True, error_model="numpy")
+def cumulative_scalar(terms, u):
+    """S(u) at one path length u (metres), compiled."""
+    piece = piece_of(terms, u)
+    if piece < 0:
+        return 0.0
+    return terms.constants[piece] + piece_value(terms, piece, u)[0]
+
+
+@njit(cache=True, error_model="numpy")
+def kernel_scalar(terms, a, b):
+    """(S(b) - S(a), a bound on its rounding error) for a <= b, metres, compiled.
+
+    (K_j - K_i) + (F_j(b) - F_i(a)): within one piece the constants cancel
+    exactly (see the module docstring).
+    """
+    i = piece_of(terms, a)
+    j = piece_of(terms, b)
+    constant = 0.0
+    value_a = 0.0
+    size_a = 0.0
+    value_b = 0.0
+    size_b = 0.0
+    if i >= 0:
+        value_a, size_a = piece_value(terms, i, a)
+        constant -= terms.constants[i]
+    if j >= 0:
+        value_b, size_b = piece_value(terms, j, b)
+        constant += terms.constants[j]
+    return constant + (value_b - value_a), ROUNDING * (abs(constant) + size_a + size_b)
+
+
+# -- NumPy evaluators ----------------------------------------------------------------
+
+
+def _piece_indices(terms: WaveformTerms, u: np.ndarray) -> np.ndarray:
+    """Piece of each u (-1 where S = 0): the largest i with b_i < u."""
+    index = np.searchsorted(terms.starts, u, side="left") - 1
+    return np.where(np.isnan(u), -1, index)
+
+
+def _forms(terms: WaveformTerms, piece: int, x: np.ndarray, derivative: bool) -> np.ndarray:
+    """F_i (or dF_i/du) at x = u - o_i."""
+    coefficients = terms.coefficients[terms.offsets[piece]:terms.offsets[piece + 1]]
+    if terms.families[piece] == POLYNOMIAL:
+        if coefficients.size == 0:
+            return np.zeros_like(x)
+        if derivative:
+            coefficients = np.polynomial.polynomial.polyder(coefficients) if coefficients.size > 1 else [0.0]
+        return np.polynomial.polynomial.polyval(x, coefficients)
+    value = np.zeros_like(x)
+    for a, w, b, c in coefficients.reshape(-1, 4):
+        if derivative:      # d/dx of e^{ax}(b cos wx + c sin wx)
+            b, c = a * b + w * c, a * c - w * b
+        value += np.exp(a * x) * (b * np.cos(w * x) + c * np.sin(w * x))
+    return value
+
+
+def _evaluate(terms: WaveformTerms, u, derivative: bool) -> np.ndarray:
+    u = np.asarray(u, dtype=np.float64)
+    flat = u.ravel()
+    index = _piece_indices(terms, flat)
+    out = np.zeros(flat.shape)
+    for piece in np.unique(index[index >= 0]):
+        chosen = index == piece
+        forms = _forms(terms, int(piece), flat[chosen] - terms.origins[piece], derivative)
+        out[chosen] = forms if derivative else terms.constants[piece] + forms
+    return out.reshape(u.shape)
+
+
+def cumulative_array(terms: WaveformTerms, u) -> np.ndarray:
+    """S(u) at path lengths u (metres), NumPy."""
+    return _evaluate(terms, u, derivative=False)
+
+
+def derivative_array(terms: WaveformTerms, u) -> np.ndarray:
+    """dS/du = s(u) inside the pieces (metres of path length in, dimensionless out), NumPy."""
+    return _evaluate(terms, u, derivative=True)
+
+
+def kernel_array(terms: WaveformTerms, a, b) -> np.ndarray:
+    """S(b) - S(a), elementwise, with the constants of one piece cancelled exactly (NumPy)."""
+    a, b = np.broadcast_arrays(np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64))
+    flat_a, flat_b = a.ravel(), b.ravel()
+    i, j = _piece_indices(terms, flat_a), _piece_indices(terms, flat_b)
+    constants = np.concatenate([terms.constants, [0.0]])     # index -1: S = 0
+    constant = constants[j] - constants[i]
+    forms = np.zeros(flat_a.shape)
+    for index, points, sign in ((j, flat_b, 1.0), (i, flat_a, -1.0)):
+        for piece in np.unique(index[index >= 0]):
+            chosen = index == piece
+            forms[chosen] += sign * _forms(terms, int(piece), points[chosen] - terms.origins[piece], False)
+    return (constant + forms).reshape(a.shape)

@@ -46,7 +46,6 @@ with it True (tests/test_capture.py).
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -207,27 +206,143 @@ def write_capture(path: str | Path, transient, *, start_opl: float, bin_width_op
     return atomic_write(path, write, verify)
 
 
-def _value(handle, key: str):
-    """A dataset's value, None when absent or empty (tal's None)."""
+# What each dataset read_capture uses must hold, for its messages.
+_EXPECTED = {
+    "H": "a real-valued array, time first, in the layout H_format names",
+    "H_format": f"one of tal's HFormat values ({', '.join(f'{v} {k}' for k, v in H_FORMATS.items())})",
+    "sensor_grid_format": f"one of tal's GridFormat values "
+                          f"({', '.join(f'{v} {k}' for k, v in GRID_FORMATS.items())})",
+    "sensor_grid_xyz": "the sensor points in metres, (sensors, 3) in N_3 or (Sx, Sy, 3) in X_Y_3",
+    "laser_xyz": "3 numbers, the laser's (the source's) position in metres",
+    "t_start": "one finite number, the lower edge of bin 0 in metres of path length",
+    "delta_t": "one finite number > 0, the bin width in metres of path length",
+    "t_accounts_first_and_last_bounces": "true or false",
+}
+
+# H's rank in each layout tal names; UNKNOWN is read from the rank.
+_H_RANK = {"T_Si": 2, "T_Sx_Sy": 3, "T_Lx_Ly_Sx_Sy": 5, "T_Li_Si": 3}
+
+
+def _refuse(name: str, key: str, problem: str) -> CaptureError:
+    return CaptureError(f"{name}: {key} {problem}; expected {_EXPECTED[key]}")
+
+
+def _read(handle, name: str, key: str):
+    """A dataset's value as a NumPy array, or None when absent or empty (tal's None)."""
     import h5py
 
     if key not in handle:
         return None
-    value = handle[key][()]
+    item = handle[key]
+    if not isinstance(item, h5py.Dataset):
+        raise _refuse(name, key, f"is a {type(item).__name__.lower()}, not a dataset")
+    try:
+        value = item[()]
+    except Exception as error:   # h5py raises several types for data it cannot convert
+        raise _refuse(name, key, f"cannot be read ({type(error).__name__}: {error})") from None
     if isinstance(value, h5py.Empty):
         return None
+    return np.asarray(value)
+
+
+def _kind(dtype: np.dtype) -> str:
+    """What a dtype that is no real number holds, in words."""
+    return {"S": "text", "U": "text", "O": "text or objects", "b": "true/false values",
+            "c": "complex numbers", "V": "compound records"}.get(dtype.kind, f"{dtype} values")
+
+
+def _real(value: np.ndarray, name: str, key: str) -> np.ndarray:
+    """``value`` as finite float64 numbers, refusing text, booleans, complex numbers, NaN and infinity."""
+    if value.dtype == bool or not (np.issubdtype(value.dtype, np.floating)
+                                   or np.issubdtype(value.dtype, np.integer)):
+        raise _refuse(name, key, f"holds {_kind(value.dtype)}, not real numbers")
+    if value.size == 0:
+        raise _refuse(name, key, f"is empty (shape {value.shape})")
+    value = value.astype(np.float64)
+    bad = int(np.count_nonzero(~np.isfinite(value)))
+    if bad:
+        raise _refuse(name, key, f"holds {bad} NaN or infinite value(s)")
     return value
 
 
-def _scalar(value):
-    """A real number stored as a scalar or a one-element array; None when absent or anything else."""
+def _number(value: np.ndarray, name: str, key: str) -> float:
+    if value.size != 1:
+        raise _refuse(name, key, f"holds {value.size} values (shape {value.shape})")
+    return float(_real(value, name, key).reshape(-1)[0])
+
+
+def _enum_name(value: np.ndarray | None, name: str, key: str, names: dict[str, int]) -> str:
+    """The name of an enum stored as tal stores it (or as a plain integer); UNKNOWN when absent."""
+    if value is None:
+        return "UNKNOWN"
+    code = _number(value, name, key)
+    by_value = {number: label for label, number in names.items()}
+    if code != int(code) or int(code) not in by_value:
+        raise _refuse(name, key, f"is {code:g}, not one of its values")
+    return by_value[int(code)]
+
+
+def _flag(value: np.ndarray | None, name: str, key: str) -> bool | None:
     if value is None:
         return None
-    array = np.asarray(value)
-    if array.size != 1 or not (np.issubdtype(array.dtype, np.number) or array.dtype == bool) \
-            or np.iscomplexobj(array):
+    number = _number(value.astype(np.int8) if value.dtype == bool else value, name, key)
+    if number not in (0.0, 1.0):
+        raise _refuse(name, key, f"is {number:g}")
+    return bool(number)
+
+
+def _transient(H: np.ndarray | None, layout: str, name: str) -> tuple[np.ndarray, str]:
+    """H as ``(K, N)`` and its layout (UNKNOWN resolved from H's rank)."""
+    if H is None:
+        raise CaptureError(f"{name}: no H dataset (not a tal capture)")
+    if H.dtype == bool or not (np.issubdtype(H.dtype, np.floating) or np.issubdtype(H.dtype, np.integer)):
+        raise CaptureError(f"{name}: H holds {_kind(H.dtype)}, not real numbers; expected {_EXPECTED['H']}")
+    if layout == "UNKNOWN":
+        layout = {2: "T_Si", 3: "T_Sx_Sy"}.get(H.ndim, "UNKNOWN")
+    if layout not in _H_RANK or H.ndim != _H_RANK[layout]:
+        raise CaptureError(f"{name}: H of shape {H.shape} with H_format {layout} is not a time x sensors "
+                           f"capture; expected rank {_H_RANK.get(layout, '2 (T_Si) or 3 (T_Sx_Sy)')}")
+    if H.size == 0:
+        raise CaptureError(f"{name}: H is empty (shape {H.shape}); expected at least one bin and one sensor")
+    H = _real(H, name, "H")
+    if layout == "T_Lx_Ly_Sx_Sy":
+        if H.shape[1] * H.shape[2] != 1:
+            raise CaptureError(f"{name}: H holds {H.shape[1]} x {H.shape[2]} laser points; "
+                               f"one source is needed")
+        H = H[:, 0, 0]
+    elif layout == "T_Li_Si":
+        if H.shape[1] != 1:
+            raise CaptureError(f"{name}: H holds {H.shape[1]} laser points; one source is needed")
+        H = H[:, 0]
+    return np.ascontiguousarray(H.reshape(H.shape[0], -1).T), layout
+
+
+def _sensor_axes(H_shape: tuple[int, ...], layout: str) -> tuple[int, ...]:
+    """H's sensor axes: (K,) for T_Si and T_Li_Si, (Sx, Sy) for the grid layouts."""
+    return tuple(H_shape[3:]) if layout == "T_Lx_Ly_Sx_Sy" else tuple(H_shape[-2:]) if layout == "T_Sx_Sy" \
+        else tuple(H_shape[-1:])
+
+
+def _sensors(grid: np.ndarray | None, grid_format: str, axes: tuple[int, ...],
+             name: str) -> np.ndarray | None:
+    """The ``(K, 3)`` sensor points in H's order, checked against H's sensor axes."""
+    if grid is None:
         return None
-    return array.reshape(-1)[0].item()
+    key = "sensor_grid_xyz"
+    grid = _real(grid, name, key)
+    if grid_format == "UNKNOWN":
+        grid_format = {2: "N_3", 3: "X_Y_3"}.get(grid.ndim, "UNKNOWN")
+    rank = {"N_3": 2, "X_Y_3": 3}.get(grid_format)
+    if rank is None or grid.ndim != rank or grid.shape[-1] != 3:
+        raise _refuse(name, key, f"has shape {grid.shape} (sensor_grid_format {grid_format})")
+    count = int(np.prod(axes))
+    if grid_format == "X_Y_3" and len(axes) == 2 and grid.shape[:2] != axes:
+        raise _refuse(name, key, f"is a {grid.shape[0]} x {grid.shape[1]} grid for H's {axes[0]} x {axes[1]} "
+                                 f"sensors")
+    points = grid.reshape(-1, 3)
+    if len(points) != count:
+        raise _refuse(name, key, f"holds {len(points)} points for {count} sensors in H")
+    return points
 
 
 def read_capture(path: str | Path) -> Capture:
@@ -248,15 +363,23 @@ def read_capture(path: str | Path) -> Capture:
     FileNotFoundError
         No such file.
     CaptureError
-        Not HDF5, no H, an H layout with several laser points, or a missing
-        time axis; the message names the file and the problem.
+        One line naming the file, the dataset and what it must hold: not
+        HDF5; no H, or H not finite real numbers, empty, of the wrong rank
+        for its H_format, or with several laser points; an H_format or
+        sensor_grid_format that is not one of tal's values; a missing or
+        non-finite time axis; a sensor_grid_xyz that does not match H's
+        sensor axes; a laser_xyz that is not 3 finite numbers; a
+        t_accounts_first_and_last_bounces that is not true or false.
 
     Notes
     -----
     Accepted ``H_format``: T_Si ``(N, K)``; T_Sx_Sy ``(N, Sx, Sy)``,
     flattened to K = Sx Sy sensors in row-major order; T_Lx_Ly_Sx_Sy and
     T_Li_Si when the laser dimensions hold one point. A missing or UNKNOWN
-    format is taken from H's rank (2: T_Si, 3: T_Sx_Sy).
+    format is taken from H's rank (2: T_Si, 3: T_Sx_Sy), and a missing
+    sensor_grid_format from the grid's (2: N_3, 3: X_Y_3). Datasets that
+    the transient does not need (normals, laser grid, volume format) are
+    not read.
     """
     import h5py
 
@@ -269,59 +392,45 @@ def read_capture(path: str | Path) -> Capture:
     except OSError as error:
         raise CaptureError(f"{name}: not a readable HDF5 file ({error})") from None
     with handle:
-        H = _value(handle, "H")
-        if H is None:
-            raise CaptureError(f"{name}: no H dataset (not a tal capture)")
-        H = np.asarray(H)
-        if not (np.issubdtype(H.dtype, np.floating) or np.issubdtype(H.dtype, np.integer)):
-            raise CaptureError(f"{name}: H holds {H.dtype} values, not real numbers")
-        H = H.astype(np.float64)
-        code = _scalar(_value(handle, "H_format"))
-        names = {value: key for key, value in H_FORMATS.items()}
-        layout = names.get(int(code), "UNKNOWN") if code is not None else "UNKNOWN"
-        if layout == "UNKNOWN":
-            layout = {2: "T_Si", 3: "T_Sx_Sy"}.get(H.ndim, "UNKNOWN")
-        expected_rank = {"T_Si": 2, "T_Sx_Sy": 3, "T_Lx_Ly_Sx_Sy": 5, "T_Li_Si": 3}
-        if layout not in expected_rank or H.ndim != expected_rank[layout]:
-            raise CaptureError(f"{name}: H of shape {H.shape} with H_format {layout} is not a "
-                               f"time x sensors capture")
-        if layout == "T_Lx_Ly_Sx_Sy":
-            if H.shape[1] * H.shape[2] != 1:
-                raise CaptureError(f"{name}: H holds {H.shape[1]} x {H.shape[2]} laser points; "
-                                   f"one source is needed")
-            H = H[:, 0, 0]
-        elif layout == "T_Li_Si":
-            if H.shape[1] != 1:
-                raise CaptureError(f"{name}: H holds {H.shape[1]} laser points; one source is needed")
-            H = H[:, 0]
-        transient = np.ascontiguousarray(H.reshape(H.shape[0], -1).T)
-        start = _value(handle, "t_start")
-        width = _value(handle, "delta_t")
-        start, width = _scalar(start), _scalar(width)
-        if start is None or width is None:
-            raise CaptureError(f"{name}: no time axis (t_start and delta_t, one number each, are needed)")
-        if not (math.isfinite(start) and math.isfinite(width) and width > 0):
-            raise CaptureError(f"{name}: time axis t_start = {start}, delta_t = {width}: "
-                               f"both must be finite and delta_t > 0")
-        grid = _value(handle, "sensor_grid_xyz")
-        sensors = None
-        if grid is not None:
-            sensors = np.asarray(grid, dtype=np.float64).reshape(-1, 3)
-            if len(sensors) != transient.shape[0]:
-                raise CaptureError(f"{name}: sensor_grid_xyz holds {len(sensors)} points for "
-                                   f"{transient.shape[0]} sensors in H")
-        laser = _value(handle, "laser_xyz")
-        source = None if laser is None else np.asarray(laser, dtype=np.float64).reshape(3)
-        accounts = _scalar(_value(handle, "t_accounts_first_and_last_bounces"))
-        info = _value(handle, "scene_info")
+        values = {key: _read(handle, name, key) for key in _EXPECTED}
+        info = _read(handle, name, "scene_info") if "scene_info" in handle else None
+    H = values["H"]
+    transient, layout = _transient(H, _enum_name(values["H_format"], name, "H_format", H_FORMATS), name)
+    start, width = values["t_start"], values["delta_t"]
+    if start is None or width is None:
+        raise CaptureError(f"{name}: no time axis (t_start and delta_t, one number each, are needed)")
+    start, width = _number(start, name, "t_start"), _number(width, name, "delta_t")
+    if not width > 0:
+        raise _refuse(name, "delta_t", f"is {width:g}")
+    grid_format = _enum_name(values["sensor_grid_format"], name, "sensor_grid_format", GRID_FORMATS)
+    sensors = _sensors(values["sensor_grid_xyz"], grid_format, _sensor_axes(H.shape, layout), name)
+    laser = values["laser_xyz"]
+    source = None
+    if laser is not None:
+        source = _real(laser, name, "laser_xyz")
+        if source.size != 3:
+            raise _refuse(name, "laser_xyz", f"holds {source.size} number(s)")
+        source = source.reshape(3)
+    accounts = _flag(values["t_accounts_first_and_last_bounces"], name, "t_accounts_first_and_last_bounces")
+    return Capture(transient=transient, start_opl=start, bin_width_opl=width, sensors=sensors, source=source,
+                   accounts_first_and_last_bounces=accounts, scene_info=_scene_info(info))
+
+
+def _scene_info(info):
+    """tal's ``scene_info``: JSON (ours) as a dict, other text (tal's YAML) as text, anything else as is."""
+    if info is None:
+        return None
+    if info.shape == () and info.dtype == object:
+        info = info.item()
+    elif info.shape == () and info.dtype.kind in "SU":
+        info = info.item()
+    else:
+        return info.tolist()
     if isinstance(info, bytes):
         info = info.decode("utf-8", errors="replace")
     if isinstance(info, str):
         try:
-            info = json.loads(info)
+            return json.loads(info)
         except json.JSONDecodeError:
-            pass   # tal's own files hold YAML; kept as text
-    return Capture(transient=transient, start_opl=float(start), bin_width_opl=float(width),
-                   sensors=sensors, source=source,
-                   accounts_first_and_last_bounces=None if accounts is None else bool(accounts),
-                   scene_info=info)
+            return info   # tal's own files hold YAML; kept as text
+    return info

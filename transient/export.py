@@ -38,12 +38,13 @@ No Mitsuba import is needed to write the files.
 
 from __future__ import annotations
 
+import re
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
 
-from analytic.io import save_exr, save_text, staged_writes
+from analytic.io import float32_problem, save_exr, save_text, staged_writes
 from analytic.scene import Scene, SceneError
 
 __all__ = ["export_scene", "FORMATS", "RADIUS", "SPP", "plane_to_world_matrix"]
@@ -178,6 +179,49 @@ def _mitransient(root, scene: Scene, radius: float) -> None:
         _add(film, "rfilter", type="box")
 
 
+# Characters XML 1.0 cannot hold at all (C0 controls but tab, newline and carriage return; surrogates,
+# which file names that are not UTF-8 decode to; U+FFFE and U+FFFF), and "-" where a comment forbids it:
+# in "--" and before the closing "-->".
+_NOT_XML = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ud800-\udfff\ufffe\uffff]")
+
+
+def _comment_text(text: str) -> str:
+    """``text`` made safe inside an XML comment: what XML cannot hold as ``\\uXXXX``, "--" as "- -".
+
+    Parameters
+    ----------
+    text : str
+        Any text (a scene's name: a file name may hold anything but "/").
+
+    Returns
+    -------
+    str
+        Text a conforming parser reads inside ``<!-- ... -->``, readable as
+        the original: every character XML allows is kept, non-ASCII included.
+    """
+    text = _NOT_XML.sub(lambda match: f"\\u{ord(match.group()):04x}", text)
+    while "--" in text:
+        text = text.replace("--", "- -")
+    return text + " " if text.endswith("-") else text
+
+
+def _verify_xml(temporary: str) -> None:
+    """The written scene parses as XML (a torn or malformed file is not renamed into place)."""
+    ET.parse(temporary)
+
+
+def _check_float32(scene: Scene) -> None:
+    """Mitsuba's float variants read the texture and the intensity as float32: refuse what it cannot hold."""
+    problem = float32_problem(scene.reflectance)
+    if problem is not None:
+        raise SceneError("plane.reflectance", f"the exported texture is float32, as Mitsuba reads it, and "
+                                              f"{problem}; scale the reflectance up (and the intensity down)")
+    problem = float32_problem([scene.intensity])
+    if problem is not None:
+        raise SceneError("source.intensity", f"Mitsuba's float variants read it as float32, and {problem}; "
+                                             f"scale the intensity into float32's range")
+
+
 _README = {
     "mitsuba": """# {name}: Mitsuba 3 scene for diffuse-imaging's plugins
 
@@ -255,12 +299,18 @@ def export_scene(scene: Scene, out_dir: str | Path, format: str, *, radius: floa
         Unknown format, a bad radius or spp, or either given for ``mitsuba``.
     SceneError
         ``mitransient`` with a waveform other than the impulse
-        (``illumination.waveform``): its point emitter emits a Dirac pulse.
+        (``illumination.waveform``): its point emitter emits a Dirac pulse;
+        a reflectance or an intensity that float32 (the texture's EXR,
+        Mitsuba's float variants) cannot hold
+        (:func:`analytic.io.float32_problem`).
 
     Notes
     -----
     A sample of bin n holds the light whose path length
     |p_s - x| + |x - p_k| lies in [start_opl + n T, start_opl + (n + 1) T).
+    The scene's name goes into an XML comment, made safe there (any
+    character XML cannot hold as ``\\uXXXX``, "--" split), and
+    ``scene.xml`` is parsed back before it is renamed into place.
     """
     if format not in FORMATS:
         raise ValueError(f"format: must be one of {', '.join(FORMATS)}, got {format!r}")
@@ -279,6 +329,7 @@ def export_scene(scene: Scene, out_dir: str | Path, format: str, *, radius: floa
                              f"got {radius:g}")
         if spp < 1:
             raise ValueError(f"spp: must be >= 1, got {spp}")
+    _check_float32(scene)
     out_dir = Path(out_dir)
     root = ET.Element("scene", version="3.0.0")
     if format == "mitransient":
@@ -292,14 +343,15 @@ def export_scene(scene: Scene, out_dir: str | Path, format: str, *, radius: floa
         _our_sensors(root, scene)
     ET.indent(root)
     text = ('<?xml version="1.0" encoding="utf-8"?>\n'
-            f"<!-- {scene.name}: exported by diffuse-imaging for {format}; lengths in metres, "
-            f"time as optical path length (c = 1) -->\n" + ET.tostring(root, encoding="unicode") + "\n")
+            f"<!-- {_comment_text(scene.name)}: exported by diffuse-imaging for {format}; lengths in "
+            f"metres, time as optical path length (c = 1) -->\n"
+            + ET.tostring(root, encoding="unicode") + "\n")
     written = {}
     # Image row 0 is the top (y = L); a bitmap's row 0 is v = 0 (y = 0).
     texture = np.ascontiguousarray(np.flipud(scene.reflectance), dtype=np.float32)
     with staged_writes():
         written["reflectance.exr"] = save_exr(out_dir / "reflectance.exr", texture)
-        written["scene.xml"] = save_text(out_dir / "scene.xml", text)
+        written["scene.xml"] = save_text(out_dir / "scene.xml", text, verify=_verify_xml)
         sampling = scene.sampling
         readme = _README[format].format(name=scene.name, sensors=scene.sensor_count, bins=sampling.count,
                                         width=sampling.bin_width_opl, start=sampling.start_opl, radius=radius,

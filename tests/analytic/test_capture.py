@@ -114,9 +114,10 @@ def test_files_that_are_not_captures_are_refused(tmp_path):
     ({"H": np.ones((40, 1))}, "no time axis"),                                    # no t_start, delta_t
     ({"H": np.ones((40, 1)), "t_start": 0.0, "delta_t": np.nan}, "finite"),
     ({"H": np.ones((40, 1)), "t_start": np.inf, "delta_t": 0.1}, "finite"),
-    ({"H": np.ones((40, 1)), "t_start": 0.0, "delta_t": -0.1}, "delta_t > 0"),
-    ({"H": np.ones((40, 1)), "t_start": 0.0, "delta_t": np.array([0.1, 0.2])}, "one number each"),
-    ({"H": np.ones((40, 1)), "t_start": "zero", "delta_t": 0.1}, "one number each"),
+    ({"H": np.ones((40, 1)), "t_start": 0.0, "delta_t": -0.1},
+     "delta_t is -0.1; expected one finite number > 0"),
+    ({"H": np.ones((40, 1)), "t_start": 0.0, "delta_t": np.array([0.1, 0.2])}, "delta_t holds 2 values"),
+    ({"H": np.ones((40, 1)), "t_start": "zero", "delta_t": 0.1}, "t_start holds text, not real numbers"),
     ({"H": np.array([b"hello"] * 40).reshape(40, 1), "t_start": 0.0, "delta_t": 0.1}, "not real numbers"),
     ({"H": np.ones((40, 1)) * (1 + 1j), "t_start": 0.0, "delta_t": 0.1}, "not real numbers"),
 ])
@@ -126,6 +127,89 @@ def test_captures_with_a_bad_time_axis_or_h_are_refused(tmp_path, datasets, word
             handle[key] = value
     with pytest.raises(CaptureError, match=words):
         read_capture(tmp_path / "bad.h5")
+
+
+
+def _enum_dataset(handle, key, names, code):
+    dataset = handle.create_dataset(key, (1,), dtype=h5py.enum_dtype(dict(names), basetype="i"))
+    dataset[0] = code
+
+
+def _grid_capture(handle):
+    """A valid T_Sx_Sy capture of 2 x 3 sensors with its X_Y_3 grid."""
+    handle["H"] = np.ones((7, 2, 3))
+    _enum_dataset(handle, "H_format", capture_module.H_FORMATS, capture_module.H_FORMATS["T_Sx_Sy"])
+    handle["sensor_grid_xyz"] = np.ones((2, 3, 3))
+    _enum_dataset(handle, "sensor_grid_format", capture_module.GRID_FORMATS,
+                  capture_module.GRID_FORMATS["X_Y_3"])
+
+
+# (dataset, what to store there: a value, None to delete it, or a function of the open file), words
+_MALFORMED = [
+    ("laser_xyz", np.array([0.5, 0.5]), "laser_xyz holds 2 number"),
+    ("laser_xyz", np.array([np.nan, 0.5, 1.0]), "laser_xyz holds 1 NaN or infinite"),
+    ("laser_xyz", "over there", "laser_xyz holds text, not real numbers"),
+    ("laser_xyz", np.array([True, False, True]), "laser_xyz holds true/false values"),
+    ("sensor_grid_xyz", np.arange(19.0), r"sensor_grid_xyz has shape \(19,\)"),
+    ("sensor_grid_xyz", np.ones((3, 2)), r"sensor_grid_xyz has shape \(3, 2\)"),
+    ("sensor_grid_xyz", np.ones((4, 3)), "sensor_grid_xyz holds 4 points for 3 sensors in H"),
+    ("sensor_grid_xyz", np.full((3, 3), np.inf), "sensor_grid_xyz holds 9 NaN or infinite"),
+    ("sensor_grid_xyz", np.zeros((0, 3)), "sensor_grid_xyz is empty"),
+    ("sensor_grid_xyz", np.ones((3, 3), dtype=complex), "sensor_grid_xyz holds complex numbers"),
+    ("sensor_grid_format", 5, "sensor_grid_format is 5, not one of its values"),
+    ("sensor_grid_format", 2, r"sensor_grid_xyz has shape \(3, 3\) \(sensor_grid_format X_Y_3\)"),
+    ("H_format", np.nan, "H_format holds 1 NaN or infinite"),
+    ("H_format", 7, "H_format is 7, not one of its values"),
+    ("H_format", 2.5, "H_format is 2.5, not one of its values"),
+    ("H_format", "T_Si", "H_format holds text"),
+    ("H_format", np.array([3, 3]), "H_format holds 2 values"),
+    ("H_format", lambda h: _enum_dataset(h, "H_format", capture_module.H_FORMATS, 9), "H_format is 9"),
+    ("H_format", lambda h: _enum_dataset(h, "H_format", capture_module.H_FORMATS, 1),
+     r"H of shape \(7, 3\) with H_format T_Sx_Sy is not a time x sensors capture"),
+    ("H", np.ones(7), r"H of shape \(7,\) with H_format T_Si"),
+    ("H", np.ones((0, 3)), r"H is empty \(shape \(0, 3\)\)"),
+    ("H", np.where(np.eye(7, 3) > 0, np.nan, 1.0), "H holds 3 NaN or infinite"),
+    ("H", np.ones((7, 3), dtype=bool), "H holds true/false values, not real numbers"),
+    ("H", np.ones((7, 3), dtype=complex), "H holds complex numbers"),
+    ("H", None, "no H dataset"),
+    ("H", lambda h: h.create_group("H"), "H is a group, not a dataset"),
+    ("H", h5py.Empty("f8"), "no H dataset"),
+    ("t_start", None, "no time axis"),
+    ("t_start", np.array([0.0, 1.0]), "t_start holds 2 values"),
+    ("delta_t", 0.0, "delta_t is 0; expected one finite number > 0"),
+    ("delta_t", np.nan, "delta_t holds 1 NaN or infinite"),
+    ("delta_t", np.array([]), "delta_t holds 0 values"),
+    ("t_accounts_first_and_last_bounces", 2,
+     "t_accounts_first_and_last_bounces is 2; expected true or false"),
+    ("t_accounts_first_and_last_bounces", "yes", "t_accounts_first_and_last_bounces holds text"),
+    ("grid", _grid_capture, None),                                         # valid: the reference
+    ("grid", lambda h: (_grid_capture(h), h.__delitem__("sensor_grid_xyz"),
+                        h.__setitem__("sensor_grid_xyz", np.ones((3, 2, 3)))),
+     "sensor_grid_xyz is a 3 x 2 grid for H's 2 x 3 sensors"),
+]
+
+
+@pytest.mark.parametrize("key, stored, words", _MALFORMED, ids=[f"{case[0]}-{i}" for i, case in
+                                                                enumerate(_MALFORMED)])
+def test_every_malformed_dataset_is_one_line_naming_it(tmp_path, rng, key, stored, words):
+    path, _, _ = small_capture(tmp_path, rng)
+    with h5py.File(path, "a") as handle:
+        if key in handle:
+            del handle[key]
+        if callable(stored):
+            if key == "grid":
+                for name in ("H", "H_format", "sensor_grid_xyz", "sensor_grid_format"):
+                    del handle[name]
+            stored(handle)
+        elif stored is not None:
+            handle[key] = stored
+    if words is None:
+        assert read_capture(path).transient.shape == (6, 7)
+        return
+    with pytest.raises(CaptureError, match=words) as refused:
+        read_capture(path)
+    message = str(refused.value)
+    assert "\n" not in message and message.startswith(str(path))
 
 
 _TAL_READ = r"""

@@ -3,14 +3,18 @@
 import errno
 import json
 import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from analytic import io as io_module
 from analytic.errors import DataError, ResourceError
-from analytic.io import (LOCK_FILE, atomic_write, build_meta, output_folder, read_transient, save_exr,
-                         save_json, save_npy, staged_writes, write_transient)
+from analytic.io import (LOCK_FILE, TEMPORARY_PREFIX, PrecisionWarning, atomic_write, build_meta,
+                         float32_problem, output_folder, read_exr, read_transient, save_exr, save_json,
+                         save_npy, staged_writes, write_transient)
 from analytic.scene import Illumination, default_scene
 
 SCHEMA = {"kind", "samples", "seed", "scene", "plane_size", "pixels", "source", "intensity",
@@ -66,7 +70,10 @@ def test_output_folder_is_locked_cleaned_and_undone_on_failure(tmp_path):
             with output_folder(folder):
                 pass
     assert not (folder / LOCK_FILE).exists()
-    (folder / ".transient.npy.tmp-abc123.npy").write_bytes(b"left by a killed run")
+    killed = subprocess.Popen([sys.executable, "-c", "pass"])
+    killed.wait()
+    (folder / f"{TEMPORARY_PREFIX}{io_module._host_tag()}-{killed.pid}-abc123-transient.npy").write_bytes(
+        b"left by a killed run")
     with output_folder(folder):
         pass
     assert list(folder.iterdir()) == []                   # the killed run's temporary is gone
@@ -141,3 +148,48 @@ def test_read_transient_refuses_what_it_cannot_use(tmp_path):
     np.save(tmp_path / "words.npy", np.array(["a", "b"]))
     with pytest.raises(DataError, match="not numbers"):
         read_transient(tmp_path / "words.npy")
+
+
+def _model_meta():
+    scene = default_scene(pixels=8)
+    return scene, build_meta(scene, kind="model")
+
+
+@pytest.mark.parametrize("peak", [3.3e40, 1e-300])
+def test_values_float32_cannot_hold_leave_the_exr_unwritten_and_say_so(tmp_path, peak):
+    """y = 3.3e40 is legal (lengths x 1e-6, I = 1e30) and overflows float32; y = 1e-300 underflows it."""
+    scene, meta = _model_meta()
+    shape = (scene.sensor_count, scene.sampling.count)
+    write_transient(tmp_path, np.ones(shape), meta)               # an earlier command's files
+    transient = peak * np.linspace(0.5, 1.0, shape[0] * shape[1]).reshape(shape)
+    with pytest.warns(PrecisionWarning, match="transient.exr: not written.*float32.*exact record"):
+        write_transient(tmp_path, transient, meta)
+    assert not (tmp_path / "transient.exr").exists()              # neither inf, nor zeros, nor the old one
+    assert np.array_equal(np.load(tmp_path / "transient.npy"), transient)
+    record = json.loads((tmp_path / "meta.json").read_text())["exr"]
+    assert record.startswith("not written") and "float32" in record
+    assert read_transient(tmp_path).max() == transient.max()      # the folder reads as its exact record
+
+
+def test_the_exr_holds_every_value_float32_can(tmp_path):
+    scene, meta = _model_meta()
+    shape = (scene.sensor_count, scene.sampling.count)
+    # normal values, and subnormal ones beside a normal peak (their error is below 2^-24 of it)
+    transient = np.geomspace(1e-44, 3e38, shape[0] * shape[1]).reshape(shape)
+    write_transient(tmp_path, transient, meta)
+    back, _ = read_exr(tmp_path / "transient.exr")
+    assert np.array_equal(back, transient.astype(np.float32).astype(np.float64))
+    assert np.max(np.abs(back - transient)) <= 2.0**-24 * transient.max()
+    assert json.loads((tmp_path / "meta.json").read_text())["exr"].startswith("written")
+
+
+def test_float32_problem_measures_the_rounding(tmp_path):
+    assert float32_problem(np.array([1.0, 1e-45, 0.0])) is None           # 1e-45 errs by < 2^-24 of 1
+    assert float32_problem(np.array([np.finfo(np.float32).max])) is None
+    assert "exceeds" in float32_problem(np.array([1.0, 3.5e38]))
+    assert "below float32's smallest normal" in float32_problem(np.array([1e-300, 0.0]))
+    assert "below float32's smallest normal" in float32_problem(np.array([1e-39]))
+    assert "NaN" in float32_problem(np.array([np.nan]))
+    with pytest.raises(ValueError, match="float32"):                   # save_exr never writes inf
+        save_exr(tmp_path / "never.exr", np.array([[1e40]]))
+    assert not (tmp_path / "never.exr").exists()

@@ -1,6 +1,12 @@
-"""The reconstruct command: its files, metrics and figures, and its one-line refusals."""
+"""The reconstruct command: its files, metrics and figures, and its one-line refusals; it reads its
+data while no command writes them, and keeps what float32 cannot hold in its float64 file."""
 
 import json
+import subprocess
+import sys
+import textwrap
+import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -101,6 +107,52 @@ def test_bad_data_and_a_missing_noise_level_end_in_one_line(tmp_path, noisy_data
     assert len(errors) == 3 and "missing.npy" in errors[0] and "NaN" in errors[1]
     assert "noise.sigma" in errors[2]
     assert not (tmp_path / "s").exists()
+
+
+def test_data_another_command_is_writing_are_not_read(tmp_path, noisy_data, capsys, monkeypatch):
+    """`reconstruct --data p/model/transient.npy` while `run --out p` writes p: one line naming run."""
+    scene_path, data = noisy_data
+    inside = tmp_path / "p" / "model" / "transient.npy"
+    inside.parent.mkdir(parents=True)
+    save_npy(inside, np.load(data))
+    monkeypatch.setattr("analytic.io.LOCK_WAIT_SECONDS", 0.2)
+    writer = subprocess.Popen([sys.executable, "-c", textwrap.dedent("""
+        import sys
+        from analytic.io import output_folder
+        with output_folder(sys.argv[1]):
+            print("ready", flush=True)
+            sys.stdin.readline()
+        """), str(tmp_path / "p")], cwd=Path(__file__).resolve().parents[2], text=True,
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+    command = ["reconstruct", str(scene_path), "--data", str(inside), "--out", str(tmp_path / "r"), "--quiet"]
+    try:
+        assert writer.stdout.readline().strip() == "ready"
+        assert main(command) == 2
+    finally:
+        writer.communicate("done\n", timeout=60)
+    error = capsys.readouterr().err.strip().splitlines()
+    assert len(error) == 1 and f"process {writer.pid}" in error[0] and "--data" in error[0], error
+    assert not (tmp_path / "r").exists()
+    assert main(command) == 0                                   # once it is done
+
+
+def test_a_reconstruction_float32_cannot_hold_stays_exact_in_its_npy(tmp_path, capsys):
+    """A legal plane of reflectance 1e-39: float32 would write it as subnormal noise."""
+    scene_path = tmp_path / "faint.toml"
+    scene_path.write_text(SCENE.replace("pixels = 8", "pixels = 8\nreflectance = 1e-39").split("[noise]")[0])
+    save_npy(tmp_path / "y.npy", forward(load_scene(scene_path)))
+    (tmp_path / "r").mkdir()
+    (tmp_path / "r" / "reconstruction.exr").write_bytes(b"an earlier run's")
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")                # as a user sees them: the CLI prints one line each
+        assert main(["reconstruct", str(scene_path), "--data", str(tmp_path / "y.npy"), "--out",
+                     str(tmp_path / "r"), "--quiet"]) == 0
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "reconstruction.exr: not written" in lines[0] and "float32" in lines[0], lines
+    assert not (tmp_path / "r" / "reconstruction.exr").exists()
+    image = np.load(tmp_path / "r" / "reconstruction.npy")
+    assert np.allclose(image, 1e-39, rtol=1e-3, atol=0)          # noiseless data give the plane back
+    assert json.loads((tmp_path / "r" / "metrics.json").read_text())["exr"].startswith("not written")
 
 
 class _returns:

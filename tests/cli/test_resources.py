@@ -1,15 +1,21 @@
 """Resource problems end in one line and exit 2, leaving the folder as it was:
-a full disk, a read-only file system, --out naming a file, a folder another command holds,
-a scheduler nobody runs."""
+a full disk (whichever writer meets it), a read-only file system, --out naming a file, a FIFO, a
+device, a dangling link, a name too long, a loop of links or a NUL byte, a folder another command
+holds, a scheduler nobody runs; and a command removes none of the user's files."""
 
 from __future__ import annotations
 
+import errno
 import os
 import subprocess
 import sys
 import textwrap
 
+import numpy as np
 import pytest
+
+from analytic.errors import ResourceError
+from analytic.io import save_exr, save_npy
 
 from scene_files import GOOD, write_scene
 from validation.cli import main
@@ -95,3 +101,68 @@ def test_a_scheduler_nobody_runs_is_one_line(tmp_path, capsys, monkeypatch):
                  str(tmp_path / "out"), "--quiet"]) == 2
     assert "--scheduler" in _one_error(capsys)
     assert not (tmp_path / "out").exists()
+
+
+def _fill(disk, leave: int):
+    """Fill a small disk, then free ``leave`` bytes: a file larger than that fails half-way."""
+    with open(disk / "filler", "wb", buffering=0) as stream:
+        try:
+            while True:
+                stream.write(b"\0" * 512)
+        except OSError as error:
+            assert error.errno == errno.ENOSPC
+    os.truncate(disk / "filler", os.path.getsize(disk / "filler") - leave)
+
+
+_NOISE = np.random.default_rng(0).random((64, 64))     # 16 kB as float32, and it does not compress
+
+
+@pytest.mark.parametrize("save", [
+    lambda path: save_exr(path.with_suffix(".exr"), _NOISE),   # OpenEXR: RuntimeError quoting the C library
+    lambda path: save_npy(path.with_suffix(".npy"), _NOISE),   # NumPy: a short write, OSError without errno
+], ids=["exr", "npy"])
+def test_every_writer_meeting_a_full_disk_is_one_resource_line(small_disk, save):
+    (small_disk / "out").mkdir()
+    _fill(small_disk, leave=4096)
+    with pytest.raises(ResourceError, match="free some space"):
+        save(small_disk / "out" / "transient")
+    assert os.listdir(small_disk / "out") == []                 # and no temporary left
+
+
+def test_out_paths_that_are_no_folder_are_one_line(tmp_path, capsys):
+    scene = str(write_scene(tmp_path))
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)
+    (tmp_path / "loop_a").symlink_to(tmp_path / "loop_b")
+    (tmp_path / "loop_b").symlink_to(tmp_path / "loop_a")
+    (tmp_path / "dangling").symlink_to(tmp_path / "nowhere")
+    cases = {str(tmp_path / ("x" * 256) / "out"): "longer than the file system allows",
+             str(tmp_path / "loop_a" / "out"): "symbolic links loop",
+             str(tmp_path / "dangling"): "symbolic link to .*nowhere, which does not exist",
+             str(fifo): "is a named pipe",
+             "/dev/null": "is a device",
+             str(tmp_path / "nul\0byte"): "NUL byte"}
+    for out, words in cases.items():
+        assert main(["forward", scene, "--out", out, "--quiet"]) == 2, out
+        line = _one_error(capsys)
+        assert __import__("re").search(words, line), line
+    assert not (tmp_path / "nowhere").exists() and fifo.exists()
+
+
+def test_out_as_a_link_to_a_folder_is_that_folder(tmp_path, capsys):
+    (tmp_path / "real").mkdir()
+    (tmp_path / "link").symlink_to(tmp_path / "real")
+    assert main(["forward", str(write_scene(tmp_path)), "--out", str(tmp_path / "link"), "--quiet"]) == 0
+    assert (tmp_path / "real" / "transient.npy").is_file() and (tmp_path / "link").is_symlink()
+
+
+def test_a_command_removes_none_of_the_users_files(tmp_path):
+    userdir = tmp_path / "userdir"
+    deep = userdir / "notes" / "deep"
+    deep.mkdir(parents=True)
+    drafts = [userdir / ".thesis.tmp-draft.tex", deep / ".thesis.tmp-draft.tex"]
+    for draft in drafts:
+        draft.write_text("chapter 1")
+    assert main(["forward", str(write_scene(tmp_path)), "--out", str(userdir), "--quiet"]) == 0
+    assert all(draft.read_text() == "chapter 1" for draft in drafts)
+    assert not (userdir / ".diffuse-imaging.lock").exists()

@@ -220,3 +220,50 @@ def test_mitransient_save_frames_folders_are_replicas(tmp_path):
     metrics = json.loads((tmp_path / "check" / "metrics.json").read_text())
     assert status == 1 and metrics["agrees_after_fit"] is True
     assert abs(metrics["fit"]["scale"] / 0.25 - 1) < 0.02
+
+
+_NAMES = ["a--b", "end-", "x-->y", "<scene>", "R&D", "quote\"d 'name'", "ünïcødé ∂ 光",
+          "tab\tand\nnewline", "bell\x07null\x00", "not utf-8 \udcff", "---"]
+
+
+@pytest.mark.parametrize("name", _NAMES)
+def test_any_scene_name_gives_well_formed_xml(tmp_path, name):
+    scene = small_scene()
+    object.__setattr__(scene, "name", name)        # whatever the scene's own checks let through
+    export_scene(scene, tmp_path, "mitsuba")
+    root = ET.parse(tmp_path / "scene.xml").getroot()         # expat: strict XML 1.0
+    assert root.tag == "scene" and root.find("integrator").get("type") == "transient_opl"
+    text = (tmp_path / "scene.xml").read_text(encoding="utf-8")
+    comment = text.split("<!-- ", 1)[1].split(": exported by", 1)[0]
+    readable = [c for c in name if c.isprintable() and not 0xD800 <= ord(c) < 0xE000]
+    assert all(c in comment for c in readable)                 # the name stays readable there
+
+
+def test_a_scene_file_named_with_dashes_exports_well_formed_xml(tmp_path):
+    scene_file = tmp_path / "my--scene-.toml"
+    scene_file.write_text("[plane]\nsize = 1\npixels = 4\nreflectance = 0.5\n"
+                          "[source]\nposition = [0.5, 0.5, 1]\n[sensors]\npositions = [[0.2, 0.7, 1]]\n"
+                          "[sampling]\nperiod = 0.1\nstart = 1.9\ncount = 12\n")
+    assert main(["export", str(scene_file), "--format", "mitsuba", "--out", str(tmp_path / "out"),
+                 "--quiet"]) == 0
+    ET.parse(tmp_path / "out" / "scene.xml")
+
+
+def test_xml_that_does_not_parse_is_never_renamed_into_place(tmp_path, monkeypatch):
+    import transient.export as export_module
+    from analytic.errors import ResourceError
+
+    monkeypatch.setattr(export_module, "_comment_text", lambda text: text)   # the old, unescaped comment
+    with pytest.raises(ResourceError, match="scene.xml: the written file does not read back"):
+        export_scene(small_scene(name="a--b"), tmp_path, "mitsuba")
+    assert list(tmp_path.iterdir()) == []                      # nor the texture: the writes are staged
+
+
+@pytest.mark.parametrize("changes, key", [
+    (dict(reflectance=np.full((4, 4), 1e-39)), "plane.reflectance"),   # the texture would read zeros
+    (dict(intensity=1e-300), "source.intensity"),                    # Mitsuba's float32 would read 0
+])
+def test_values_mitsuba_reads_as_float32_must_fit_it(tmp_path, changes, key):
+    with pytest.raises(SceneError, match=f"{key}.*float32"):
+        export_scene(small_scene(**changes), tmp_path, "mitsuba")
+    assert list(tmp_path.iterdir()) == []

@@ -63,7 +63,8 @@ def add_lambda_options(parser, *, default: str) -> None:
 def command_reconstruct(args) -> int:
     """Reconstruct the scene's image from a transient; write images, metrics, figures, report."""
     from analytic.errors import SceneError
-    from analytic.io import output_folder, save_exr, save_json, save_npy, save_png_image, staged_writes
+    from analytic.io import (PrecisionWarning, discard, float32_problem, output_folder, reading_folder,
+                             save_exr, save_json, save_npy, save_png_image, staged_writes)
     from analytic.inversion import image_metrics, reconstruct
     from analytic.system import system_matrix
     from validation.harness import data_driven_rule
@@ -82,7 +83,8 @@ def command_reconstruct(args) -> int:
         if args.method is not None:
             raise UsageError("--method: applies to --regularizer laplacian only")
     grid = lambda_grid_of(args)
-    data = _read_data(args.data, scene)
+    with reading_folder(args.data, option="--data"):    # no command writes the data while they are read
+        data = _read_data(args.data, scene)
     with output_folder(args.out) as out:
         assembly_started = time.perf_counter()
         matrix = system_matrix(scene, progress=show_progress(args))
@@ -113,13 +115,20 @@ def command_reconstruct(args) -> int:
                             "isotropic total variation (½||Af − y||² + λ TV), Neumann edges, PDHG"),
             "warnings": notes, "lambdas": result.lambdas, "criterion": result.criterion,
         }
+        exr_problem = float32_problem(result.image)
+        report["exr"] = ("written: float32, every value within float32's rounding of reconstruction.npy"
+                         if exr_problem is None else
+                         f"not written: {exr_problem}; reconstruction.npy is the exact record")
         how = (f"λ = {result.lam:.3g} by the {result.rule} rule" if result.rule != "value"
                else f"λ = {result.lam:.3g} as given")
         with staged_writes():
             save_npy(out / "reconstruction.npy", result.image)
-            save_exr(out / "reconstruction.exr", result.image,
-                     {"lambda": result.lam, "rule": result.rule, "method": result.method,
-                      "units": "reflectance (unclipped)"})
+            if exr_problem is None:
+                save_exr(out / "reconstruction.exr", result.image,
+                         {"lambda": result.lam, "rule": result.rule, "method": result.method,
+                          "units": "reflectance (unclipped)"})
+            else:
+                discard(out / "reconstruction.exr")      # an earlier run's: not this image
             save_png_image(out / "reconstruction.png", result.image)
             save_json(out / "metrics.json", report)
             plot_criterion(out / "criterion.png", result, title=f"{scene.name}: {how}")
@@ -136,6 +145,9 @@ def command_reconstruct(args) -> int:
                 "![truth, reconstruction and error](comparison.png)", "",
                 "![the λ rule's criterion and the L-curve](criterion.png)", ""]
                 + ([""] + [f"- warning: {note}" for note in notes] if notes else []))
+    if exr_problem is not None:
+        warnings.warn(f"{out / 'reconstruction.exr'}: not written, {exr_problem}; reconstruction.npy "
+                      f"(float64) is the exact record", PrecisionWarning, stacklevel=1)
     if not args.quiet:
         print(f"reconstruct: M = {scene.pixels}, {how} ({result.method}) in {result.seconds:.2f} s "
               f"(A assembled in {assembly:.2f} s); PSNR {metrics['psnr']:.2f} dB, SSIM "

@@ -20,8 +20,9 @@ import importlib
 # importing one module of this package does not import the others)
 _EXPORTS = {"BackendError": "backend", "select_variant": "backend", "ReplicaLayout": "chunks",
             "ChunkPlan": "chunks", "ReplicaAccumulator": "chunks", "RenderResult": "render",
-            "RenderStateError": "render", "render": "render", "render_loaded": "render",
-            "export_scene": "export"}
+            "RenderStateError": "render", "render": "render", "render_loaded": "render", "resume": "render",
+            "read_saved_render": "render", "SavedRender": "render", "RenderInterrupted": "render",
+            "export_scene": "export", "emitter_intensity": "intensity"}
 
 __all__ = sorted(_EXPORTS)
 

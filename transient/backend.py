@@ -11,22 +11,35 @@ installed the glob may pick either, so :func:`select_variant` decides before
 Dr.Jit is imported: it points ``DRJIT_LIBLLVM_PATH`` at the newest
 libLLVM >= 16 and refuses, with a one-line fix, when only older ones exist.
 
+Dr.Jit also reads its kernel cache's folder when it is imported, from
+``DRJIT_CACHE_DIR`` or else ``$HOME/.drjit``; with HOME unset it warns on
+stderr and compiles every kernel afresh. :func:`select_variant` then names
+the folder HOME would have given (the user's home from the password
+database, else a private folder in the temporary directory) in
+``DRJIT_CACHE_DIR`` for the import only, and removes the variable again:
+Dr.Jit offers no other way to be told, and nothing else in the process
+(or its children) sees it.
+
 Nothing in this project imports ``mitsuba`` or ``drjit`` before
 :func:`select_variant` has run.
 """
 
 from __future__ import annotations
 
+import contextlib
 import glob
 import os
+import pwd
 import re
+import stat
 import sys
+import tempfile
 from pathlib import Path
 
 from analytic.errors import ResourceError
 
 __all__ = ["BackendError", "MIN_LLVM", "llvm_version_of", "find_llvm_libraries", "choose_libllvm",
-           "select_variant", "SEARCH_PATTERNS"]
+           "select_variant", "usable_variants", "kernel_cache_folder", "SEARCH_PATTERNS"]
 
 #: Oldest LLVM major version whose code generation Dr.Jit 1.5 survives.
 MIN_LLVM = 16
@@ -178,6 +191,58 @@ def _check_loaded_llvm() -> None:
                            f"crashes its LLVM backend; {_FIX}")
 
 
+def kernel_cache_folder() -> str | None:
+    """The folder Dr.Jit's kernel cache should use when Dr.Jit cannot find one itself, or None.
+
+    Returns
+    -------
+    str or None
+        None when ``HOME`` or ``DRJIT_CACHE_DIR`` is set (Dr.Jit finds its
+        folder). Else ``<home>/.drjit`` for the user's home in the password
+        database (what HOME would hold), or, without a writable one, a
+        folder ``drjit-<uid>`` of the temporary directory that this user
+        owns and no one else may write (created so); None if neither exists.
+    """
+    if os.environ.get("HOME") or os.environ.get("DRJIT_CACHE_DIR"):
+        return None
+    try:
+        home = pwd.getpwuid(os.getuid()).pw_dir
+    except KeyError:
+        home = ""
+    if home and os.path.isdir(home) and os.access(home, os.W_OK | os.X_OK):
+        return os.path.join(home, ".drjit")
+    private = os.path.join(tempfile.gettempdir(), f"drjit-{os.getuid()}")
+    with contextlib.suppress(FileExistsError, OSError):
+        os.mkdir(private, 0o700)
+    try:
+        status = os.lstat(private)
+    except OSError:
+        return None
+    # Compiled kernels are run from this folder: it must be ours alone.
+    if not stat.S_ISDIR(status.st_mode) or status.st_uid != os.getuid() or status.st_mode & 0o022:
+        return None
+    return private
+
+
+@contextlib.contextmanager
+def _kernel_cache_while_importing():
+    """Give Dr.Jit its cache folder (:func:`kernel_cache_folder`) for the import that initialises it only."""
+    folder = None if "drjit" in sys.modules else kernel_cache_folder()
+    if folder is None:
+        yield
+        return
+    os.environ["DRJIT_CACHE_DIR"] = folder
+    try:
+        yield
+    finally:
+        os.environ.pop("DRJIT_CACHE_DIR", None)
+
+
+def usable_variants(available: list[str]) -> list[str]:
+    """The variants of ``available`` (``mitsuba.variants()``) the renderer runs on: mono llvm_* and cuda_*."""
+    return [name for name in available if name.startswith(("llvm_", "cuda_")) and name.endswith("_mono")]
+
+
 def default_variant(available: list[str]) -> str:
     """The CPU variant to use when none is asked for.
 
@@ -263,14 +328,15 @@ def select_variant(variant: str | None = None) -> str:
         raise BackendError(f"variant {variant!r}: the renderer needs a mono llvm_* or cuda_* variant")
     if variant is None or variant.startswith("llvm_"):
         _configure_llvm()
-    import mitsuba as mi
+    with _kernel_cache_while_importing():
+        import mitsuba as mi
 
     available = list(mi.variants())
     if variant is None:
         variant = default_variant(available)
     elif variant not in available:
-        raise BackendError(f"variant {variant!r} is not in this Mitsuba build "
-                           f"(available: {', '.join(available)})")
+        raise BackendError(f"variant {variant!r} is not in this Mitsuba build; use one of "
+                           f"{', '.join(usable_variants(available))}")
     if variant.startswith("cuda_"):
         _check_cuda(variant)
     if mi.variant() != variant:

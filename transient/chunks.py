@@ -23,9 +23,11 @@ The chunk-level API, for a renderer loop or a distributed sweep::
                                        first=chunk.first, count=chunk.count)
         accumulator.add(chunk, sums)
     mean, stderr, dof = accumulator.mean(), accumulator.stderr(), accumulator.dof
+    replicas = accumulator.replica_means()              # (R, K, N): their mean is `mean`
 
-Memory: the accumulator holds four ``(K, N)`` float64 arrays plus the
-chunks that arrived ahead of their turn; a chunk's sums are
+Memory: the accumulator holds the ``(R, K, N)`` float64 replica means and
+a ``(K, N)`` partial sum, plus the chunks that arrived ahead of their
+turn (:func:`render_memory_bytes`); a chunk's sums are
 ``(replicas it touches, K, N)``, and the kernel's histogram
 ``(ReplicaLayout.histogram_rows, K, N)`` (at most R rows; on the LLVM
 backend one private copy per thread when it has at most 2^20 entries).
@@ -39,7 +41,7 @@ from typing import NamedTuple
 import numpy as np
 
 __all__ = ["DEFAULT_REPLICAS", "MAX_REPLICA_SIZE", "MAX_SAMPLES", "ReplicaLayout", "Chunk", "ChunkPlan",
-           "ReplicaAccumulator"]
+           "ReplicaAccumulator", "render_memory_bytes"]
 
 #: Replicas of a render unless asked otherwise. More replicas give a steadier
 #: standard error (Student t with R - 1 degrees of freedom) but smaller point
@@ -177,26 +179,47 @@ class ChunkPlan:
         return (self[i] for i in range(len(self)))
 
 
+def render_memory_bytes(layout: ReplicaLayout, shape: tuple[int, int]) -> int:
+    """Bytes a render of this layout holds at once: replica means, partial sums, one chunk's histogram.
+
+    Parameters
+    ----------
+    layout : ReplicaLayout
+    shape : (int, int)
+        (K sensors, N bins).
+
+    Returns
+    -------
+    int
+        8 K N (R + 1 + 2 h) bytes, h = :attr:`ReplicaLayout.histogram_rows`
+        (the kernel's histogram and its NumPy copy).
+    """
+    cells = int(shape[0]) * int(shape[1])
+    return 8 * cells * (layout.replicas + 1 + 2 * layout.histogram_rows)
+
+
 class _Folded(NamedTuple):
-    """The accumulator's folded totals (replaced whole, never mutated)."""
+    """The accumulator's folded totals (replaced whole, never mutated, except rows past ``completed``)."""
 
     done: int                  # samples folded: a prefix of the render
-    completed: int             # replicas complete
+    completed: int             # replicas complete: rows [0, completed) of the replica means hold them
     partial: np.ndarray        # Σc of the replica in progress
-    replica_mean: np.ndarray   # Welford: mean of the completed replicas' means
-    deviations: np.ndarray     # Welford: Σ (m_r - mean)² over the completed replicas
 
 
 class ReplicaAccumulator:
-    """Folds chunk sums into replica means and their mean, spread and degrees of freedom.
+    """Folds chunk sums into replica means, and those into an estimate, its standard error and dof.
 
     Chunks are folded in global sample order whatever order they arrive
     in (early ones wait), so the float64 result does not depend on the
-    order of arrival. Completed replicas enter Welford's running mean and
-    sum of squared deviations of the replica means (stable however small
-    the spread is against the mean). Each fold replaces the totals in one
-    assignment, so an interrupt (Ctrl-C, SIGTERM) between two Python
-    bytecodes leaves either the old totals or the new ones, never a mix.
+    order of arrival. Each completed replica's mean is kept (``(R, K, N)``
+    float64, :meth:`replica_means`): the estimate is their mean and the
+    standard error their spread, computed in two passes with the
+    deviations scaled by their largest magnitude, so that neither the
+    squares of y ~ 1e-300 underflow nor those of large values overflow.
+    A fold writes the new replica's row (unused until counted) and then
+    replaces the totals in one assignment, so an interrupt (Ctrl-C,
+    SIGTERM) between two Python bytecodes leaves either the old totals or
+    the new ones, never a mix.
 
     Parameters
     ----------
@@ -207,8 +230,8 @@ class ReplicaAccumulator:
 
     def __init__(self, layout: ReplicaLayout, shape: tuple[int, int]):
         self.layout, self.shape = layout, tuple(shape)
-        zeros = np.zeros(self.shape)
-        self._folded = _Folded(0, 0, zeros, zeros, zeros)
+        self._replica_means = np.zeros((layout.replicas,) + self.shape)
+        self._folded = _Folded(0, 0, np.zeros(self.shape))
         self._waiting: dict[int, tuple[Chunk, np.ndarray]] = {}
 
     @property
@@ -245,17 +268,14 @@ class ReplicaAccumulator:
     def _fold(self, folded: _Folded, chunk: Chunk, sums: np.ndarray) -> _Folded:
         size = self.layout.size
         completed, partial = folded.completed, folded.partial
-        mean, deviations = folded.replica_mean, folded.deviations
         for row, replica in enumerate(chunk.replicas(self.layout)):
             partial = partial + sums[row]
             if chunk.first + chunk.count >= (replica + 1) * size:
+                # Row `completed` is past the folded count until the new totals are assigned.
+                self._replica_means[completed] = partial / size
                 completed += 1
-                replica_mean = partial / size
-                delta = replica_mean - mean
-                mean = mean + delta / completed
-                deviations = deviations + delta * (replica_mean - mean)
                 partial = np.zeros(self.shape)
-        return _Folded(chunk.first + chunk.count, completed, partial, mean, deviations)
+        return _Folded(chunk.first + chunk.count, completed, partial)
 
     @property
     def finished(self) -> bool:
@@ -272,11 +292,15 @@ class ReplicaAccumulator:
         """Degrees of freedom of the standard error: completed replicas - 1."""
         return self.completed - 1
 
+    def replica_means(self) -> np.ndarray:
+        """``(completed, K, N)``: each completed replica's own estimate of y, in replica order."""
+        return self._replica_means[:self.completed].copy()
+
     def mean(self) -> np.ndarray:
         """``(K, N)`` estimate of y: the mean of the completed replicas' means."""
         if self.completed == 0:
             raise ValueError("no replica is complete yet")
-        return self._folded.replica_mean.copy()
+        return np.mean(self._replica_means[:self.completed], axis=0)
 
     def stderr(self) -> np.ndarray:
         """``(K, N)`` standard error of :meth:`mean`: sqrt(Σ (m_r - m)² / ((R - 1) R)).
@@ -288,15 +312,24 @@ class ReplicaAccumulator:
         """
         if self.completed < 2:
             raise ValueError("a standard error needs 2 complete replicas")
-        return np.sqrt(self._folded.deviations / ((self.completed - 1) * self.completed))
+        means = self._replica_means[:self.completed]
+        deviations = means - np.mean(means, axis=0)
+        # Scaled by the largest deviation of each bin: its squares neither underflow nor overflow.
+        scale = np.max(np.abs(deviations), axis=0)
+        scaled = np.divide(deviations, scale, out=np.zeros_like(deviations), where=scale > 0.0)
+        return scale * np.sqrt(np.sum(scaled * scaled, axis=0) / ((self.completed - 1) * self.completed))
 
     # -- checkpoints -------------------------------------------------------------
 
     def state(self) -> dict:
-        """The folded totals as plain arrays and integers (chunks still waiting are not included)."""
+        """The folded totals as plain arrays and integers (chunks still waiting are not included).
+
+        ``done``, ``completed``, ``partial`` (``(K, N)``: Σc of the replica
+        in progress) and ``replica_means`` (``(completed, K, N)``).
+        """
         folded = self._folded
         return {"done": int(folded.done), "completed": int(folded.completed), "partial": folded.partial.copy(),
-                "replica_mean": folded.replica_mean.copy(), "deviations": folded.deviations.copy()}
+                "replica_means": self._replica_means[:folded.completed].copy()}
 
     @classmethod
     def from_state(cls, layout: ReplicaLayout, shape, state: dict) -> "ReplicaAccumulator":
@@ -305,8 +338,7 @@ class ReplicaAccumulator:
         Raises
         ------
         ValueError
-            Wrong shapes, non-finite sums, negative squared deviations, or
-            counts that do not fit the layout.
+            Wrong shapes, non-finite sums, or counts that do not fit the layout.
         """
         accumulator = cls(layout, shape)
         done, completed = int(state["done"]), int(state["completed"])
@@ -316,18 +348,17 @@ class ReplicaAccumulator:
         if completed != done // layout.size:
             raise ValueError(f"{done} samples done but {completed} replicas complete "
                              f"(replicas of {layout.size})")
+        expected = {"partial": accumulator.shape, "replica_means": (completed,) + accumulator.shape}
         arrays = {}
-        for name in ("partial", "replica_mean", "deviations"):
+        for name, shape_expected in expected.items():
             array = np.asarray(state[name], dtype=np.float64)
-            if array.shape != accumulator.shape:
-                raise ValueError(f"{name} has shape {array.shape}, expected {accumulator.shape}")
+            if array.shape != shape_expected:
+                raise ValueError(f"{name} has shape {array.shape}, expected {shape_expected}")
             if not np.all(np.isfinite(array)):
                 raise ValueError(f"{name} holds NaN or infinite values")
             arrays[name] = array
-        if np.any(arrays["deviations"] < 0.0):
-            raise ValueError("negative squared deviations")
         if done % layout.size == 0 and np.any(arrays["partial"] != 0.0):
             raise ValueError("sums of a replica in progress although none is")
-        accumulator._folded = _Folded(done, completed, arrays["partial"], arrays["replica_mean"],
-                                      arrays["deviations"])
+        accumulator._replica_means[:completed] = arrays["replica_means"]
+        accumulator._folded = _Folded(done, completed, arrays["partial"])
         return accumulator

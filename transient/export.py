@@ -47,6 +47,8 @@ import numpy as np
 from analytic.io import float32_problem, save_exr, save_text, staged_writes
 from analytic.scene import Scene, SceneError
 
+from .intensity import emitter_intensity
+
 __all__ = ["export_scene", "FORMATS", "RADIUS", "SPP", "plane_to_world_matrix"]
 
 FORMATS = ("mitsuba", "mitransient")
@@ -113,11 +115,13 @@ def _plane(root, scene: Scene) -> None:
     _add(texture, "string", "wrap_mode", value="clamp")
 
 
-def _source(root, scene: Scene) -> None:
+def _source(root, scene: Scene, format: str) -> None:
     emitter = _add(root, "emitter", type="point", id="source")
     _point(emitter, "position", scene.source)
-    # The source's peak radiant intensity, W/sr: y scales with it exactly.
-    _add(emitter, "float", "intensity", value=repr(float(scene.intensity)))
+    # The source's peak radiant intensity, W/sr: y scales with it exactly. Our integrator reads it in
+    # float64 (source_intensity) and checks the emitter's float32 stand-in against it.
+    intensity = emitter_intensity(scene.intensity) if format == "mitsuba" else float(scene.intensity)
+    _add(emitter, "float", "intensity", value=repr(intensity))
 
 
 def _our_integrator(root, scene: Scene) -> None:
@@ -143,6 +147,8 @@ def _our_integrator(root, scene: Scene) -> None:
             _add(integrator, "integer", "order", value=int(illumination.order))
     _transform(integrator, "plane_to_world", plane_to_world_matrix(scene.size))
     _point(integrator, "source_position", scene.source)
+    _add(integrator, "float", "source_intensity", value=repr(float(scene.intensity)))
+    _add(integrator, "string", "attenuation", value=scene.attenuation)
 
 
 def _our_sensors(root, scene: Scene) -> None:
@@ -210,13 +216,16 @@ def _verify_xml(temporary: str) -> None:
     ET.parse(temporary)
 
 
-def _check_float32(scene: Scene) -> None:
-    """Mitsuba's float variants read the texture and the intensity as float32: refuse what it cannot hold."""
+def _check_float32(scene: Scene, format: str) -> None:
+    """Mitsuba reads the texture as float32, and mitransient the intensity too: refuse what it cannot hold.
+
+    Our integrator takes the intensity in float64 (``source_intensity``).
+    """
     problem = float32_problem(scene.reflectance)
     if problem is not None:
         raise SceneError("plane.reflectance", f"the exported texture is float32, as Mitsuba reads it, and "
                                               f"{problem}; scale the reflectance up (and the intensity down)")
-    problem = float32_problem([scene.intensity])
+    problem = float32_problem([scene.intensity]) if format == "mitransient" else None
     if problem is not None:
         raise SceneError("source.intensity", f"Mitsuba's float variants read it as float32, and {problem}; "
                                              f"scale the intensity into float32's range")
@@ -273,8 +282,9 @@ def export_scene(scene: Scene, out_dir: str | Path, format: str, *, radius: floa
     Parameters
     ----------
     scene : Scene
-        The scene. Its attenuation is not written: a Mitsuba scene renders
-        physical (``lambertian``) transport.
+        The scene. Our integrator renders either attenuation (written as its
+        ``attenuation``); mitransient renders physical (``lambertian``)
+        transport only, so ``paper`` is refused for it.
     out_dir : str or Path
         Output folder (created).
     format : {"mitsuba", "mitransient"}
@@ -329,7 +339,11 @@ def export_scene(scene: Scene, out_dir: str | Path, format: str, *, radius: floa
                              f"got {radius:g}")
         if spp < 1:
             raise ValueError(f"spp: must be >= 1, got {spp}")
-    _check_float32(scene)
+    if format == "mitransient" and scene.attenuation != "lambertian":
+        raise SceneError("model.attenuation", f"mitransient renders physical transport only, not the paper's "
+                                              f"eq. (1) ({scene.attenuation!r}); export with format 'mitsuba' "
+                                              f"(our plugins render both)")
+    _check_float32(scene, format)
     out_dir = Path(out_dir)
     root = ET.Element("scene", version="3.0.0")
     if format == "mitransient":
@@ -338,7 +352,7 @@ def export_scene(scene: Scene, out_dir: str | Path, format: str, *, radius: floa
     else:
         _our_integrator(root, scene)
     _plane(root, scene)
-    _source(root, scene)
+    _source(root, scene, format)
     if format == "mitsuba":
         _our_sensors(root, scene)
     ET.indent(root)

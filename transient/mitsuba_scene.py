@@ -26,6 +26,8 @@ import numpy as np
 from analytic.scene import Sampling, Scene
 from analytic.waveforms import make_waveform
 
+from .intensity import emitter_intensity
+
 __all__ = ["plane_to_world", "scene_dict", "load_scene", "corner_scene_dict", "wall_to_world",
            "mitransient_scene_dict", "mitransient_planes", "irradiancemeter_correction", "METER_RADIUS",
            "RAY_EPSILON"]
@@ -117,19 +119,28 @@ def scene_dict(scene: Scene, **estimator) -> dict:
     Returns
     -------
     dict
-        For ``mitsuba.load_dict``: integrator ``transient_opl``, shape
-        ``plane``, emitter ``source`` (point, the scene's intensity in W/sr) and sensors
-        ``sensor_000000`` ..., in sensor order.
+        For ``mitsuba.load_dict``: integrator ``transient_opl`` (with the
+        scene's attenuation, and its source position and intensity in
+        float64), shape ``plane``, emitter ``source`` (point; its float32
+        intensity is :func:`transient.intensity.emitter_intensity` of the
+        scene's) and sensors ``sensor_000000`` ..., in sensor order.
+
+    Notes
+    -----
+    Every scene field is rendered except ``tolerance`` (the model's
+    quadrature accuracy) and ``noise`` (added to the model's y; a render
+    is noiseless but for its own Monte Carlo error).
     """
     from .plane import PLUGIN_NAME as INTEGRATOR
 
+    source = [float(v) for v in scene.source]
     integrator = {"type": INTEGRATOR, **_sampling_entries(scene.sampling), **_illumination_entries(scene),
-                  "plane_to_world": plane_to_world(scene.size),
-                  "source_position": [float(v) for v in scene.source], **estimator}
+                  "plane_to_world": plane_to_world(scene.size), "source_position": source,
+                  "source_intensity": float(scene.intensity), "attenuation": scene.attenuation, **estimator}
     return {"type": "scene", "integrator": integrator,
             "plane": {"type": "rectangle", "to_world": plane_to_world(scene.size),
                       "bsdf": _bitmap_bsdf(scene.reflectance)},
-            "source": {"type": "point", "position": [float(v) for v in scene.source], "intensity": float(scene.intensity)},
+            "source": {"type": "point", "position": source, "intensity": emitter_intensity(scene.intensity)},
             **_sensors(scene.sensors)}
 
 

@@ -6,11 +6,21 @@ bounce, and nothing can occlude it (the plane is convex and both ends lie
 above it), so no rays are traced. Each sample is a point x on the plane
 that serves every sensor: it adds
 
-    c_k = I ρ(x) a_k(x) / p(x),   a_k = cos θ_s cos θ_k / (π d_s² d_k²),
+    c_k = I ρ(x) a_k(x) / p(x)
 
 to the bins its path length d_s + d_k reaches, each with the illumination's
-kernel κ_n(d_s + d_k) (so any waveform renders directly). Geometry and sums
-are float64: float32 coordinates 400 m away are off by tens of micrometres.
+kernel κ_n(d_s + d_k) (so any waveform renders directly), with either
+attenuation of DESIGN.md section 2 (the ``attenuation`` property):
+
+    lambertian   a_k = cos θ_s cos θ_k / (π d_s² d_k²)   (physical transport, the default)
+    paper        a_k = cos θ_s / (d_s² d_k²)             (eq. 1: π / cos θ_k more per sample)
+
+Geometry, the intensity I and the sums are float64 from the scene to the
+deposit: float32 coordinates 400 m away are off by tens of micrometres, and
+float32 intensities round I = 1e30 by 1.5e-8 and flush I = 1e-300 to zero.
+Only the reflectance texture is float32 (Mitsuba's bitmaps are), and so is
+the (u, v) that looks it up: a point within a float32 rounding (~6e-8 of
+the plane) of a pixel border may read the neighbouring pixel, either way.
 
 How x is drawn (measured in the README; :func:`techniques`):
 
@@ -46,13 +56,17 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from analytic.attenuation import ATTENUATIONS, attenuation_code
+
 from . import spherical_rectangle
 from .chunks import ReplicaLayout
+from .intensity import emitter_intensity
 from .common import attenuation, deposit, height_over_cube, is_diffuse, jittered_point, opaque_f64, \
     opaque_u32, reduce_mode, replica_of, sample_stream, time_axis_and_waveform
 
 __all__ = ["TransientPlaneIntegrator", "PLUGIN_NAME", "Technique", "techniques", "plane_frame",
-           "AREA_SAMPLING_RATIO", "PEAK_RATIO_LIMIT", "STRATEGIES", "SAMPLERS"]
+           "AREA_SAMPLING_RATIO", "PEAK_RATIO_LIMIT", "STRATEGIES", "SAMPLERS",
+           "ATTENUATIONS"]
 
 PLUGIN_NAME = "transient_opl"
 
@@ -277,6 +291,17 @@ class TransientPlaneIntegrator(mi.SamplingIntegrator):
        - |point|
        - The point emitter's position in double precision; checked
          against the emitter. (Required)
+     * - source_intensity
+       - |float|
+       - The point emitter's intensity I (W/sr) in double precision, the
+         one rendered; the emitter must hold :func:`emitter_intensity` of
+         it (float32(I), or the smallest normal float32 where I is below
+         it). (Default: the emitter's own float32 intensity)
+     * - attenuation
+       - |string|
+       - ``lambertian`` (physical: cos θ_s cos θ_k / (π d_s² d_k²)) or
+         ``paper`` (eq. 1 of the paper: cos θ_s / (d_s² d_k²)), DESIGN.md
+         section 2 (Default: ``lambertian``).
      * - strategy
        - |string|
        - ``mis`` (the source's solid angle, plus low sensors' own, balance
@@ -309,6 +334,16 @@ class TransientPlaneIntegrator(mi.SamplingIntegrator):
         self.source = self.to_plane(self.source_world)
         if not self.source[2] > 0.0:
             raise ValueError("transient_opl: source_position must lie above the rectangle's front side")
+        self.source_intensity = None
+        if "source_intensity" in props:
+            self.source_intensity = float(props.get("source_intensity"))
+            if not (math.isfinite(self.source_intensity) and self.source_intensity > 0.0):
+                raise ValueError(f"transient_opl: source_intensity must be finite and > 0, "
+                                 f"got {self.source_intensity}")
+        self.attenuation = str(props.get("attenuation", "lambertian"))
+        if self.attenuation not in ATTENUATIONS:
+            raise ValueError(f"transient_opl: attenuation must be one of {ATTENUATIONS}, "
+                             f"got {self.attenuation!r}")
         self.strategy = str(props.get("strategy", "mis"))
         self.sampler = str(props.get("sampler", "stratified"))
         if self.strategy not in STRATEGIES:
@@ -325,12 +360,12 @@ class TransientPlaneIntegrator(mi.SamplingIntegrator):
     def to_string(self):
         return (f"TransientPlaneIntegrator[bins={self.bins}, start_opl={self.start_opl}, "
                 f"bin_width_opl={self.bin_width_opl}, waveform={self.waveform.description!r}, "
-                f"strategy={self.strategy!r}, sampler={self.sampler!r}]")
+                f"attenuation={self.attenuation!r}, strategy={self.strategy!r}, sampler={self.sampler!r}]")
 
     # -- scene checks -------------------------------------------------------------
 
     def _scene_parts(self, scene):
-        """(rectangle shape, point intensity, sensor positions in the plane's frame) of a scene that fits."""
+        """(rectangle shape, source intensity (float64, W/sr), sensor positions in the plane's frame)."""
         shapes = scene.shapes()
         if len(shapes) != 1 or shapes[0].shape_type() != mi.ShapeType.Rectangle:
             raise ValueError("transient_opl: the scene must hold exactly one 'rectangle' shape")
@@ -351,12 +386,30 @@ class TransientPlaneIntegrator(mi.SamplingIntegrator):
         if not np.allclose(position, self.source_world, rtol=_FLOAT32_MATCH,
                            atol=_FLOAT32_MATCH * np.abs(self.source_world).max()):
             raise ValueError("transient_opl: source_position differs from the point emitter's position")
-        intensity = float(np.array(parameters["intensity.value"]).ravel()[0])
+        intensity = self._intensity(float(np.array(parameters["intensity.value"]).ravel()[0]))
         sensors = scene.sensors()
         if not sensors or not all(hasattr(sensor, "position") for sensor in sensors):
             raise ValueError("transient_opl: every sensor must be an 'omni_point' sensor")
         positions = self.to_plane(np.array([sensor.position for sensor in sensors], dtype=np.float64))
         return plane, intensity, positions
+
+    def _intensity(self, emitted: float) -> float:
+        """The float64 intensity rendered, after checking the emitter's float32 one against it."""
+        if self.source_intensity is None:
+            return emitted
+        expected = emitter_intensity(self.source_intensity)
+        if not math.isclose(emitted, expected, rel_tol=_FLOAT32_MATCH):
+            raise ValueError(f"transient_opl: source_intensity {self.source_intensity!r} differs from the point "
+                             f"emitter's intensity {emitted!r} (expected {expected!r})")
+        return self.source_intensity
+
+    def intensity(self, scene) -> float:
+        """The source intensity I this integrator renders in ``scene``, W/sr (float64).
+
+        ``source_intensity`` when given (checked against the emitter), else
+        the emitter's float32 value.
+        """
+        return self._scene_parts(scene)[1]
 
     def techniques(self, sensors: np.ndarray) -> list[Technique]:
         """The sampling techniques for these sensors (plane frame), planned once per sensor set."""
@@ -368,7 +421,23 @@ class TransientPlaneIntegrator(mi.SamplingIntegrator):
     # -- the estimator ------------------------------------------------------------
 
     def render_chunk(self, scene, *, seed: int, layout: ReplicaLayout, first: int, count: int) -> np.ndarray:
-        """Per-replica sums Σc over samples [first, first + count) of a render.
+        """Per-replica sums Σc over samples [first, first + count) of a render, in units of y.
+
+        :meth:`render_chunk_per_unit_intensity` times the source intensity
+        I (float64): one rounding per entry. A renderer that keeps
+        accumulating per unit intensity and multiplies by I once at the end
+        gets y(I) / I identical for every I (:func:`transient.render.render`
+        does).
+
+        Parameters and returns as :meth:`render_chunk_per_unit_intensity`,
+        with c_k[n] = I ρ a_k κ_n / p (units of y).
+        """
+        sums = self.render_chunk_per_unit_intensity(scene, seed=seed, layout=layout, first=first, count=count)
+        return sums * self.intensity(scene)
+
+    def render_chunk_per_unit_intensity(self, scene, *, seed: int, layout: ReplicaLayout, first: int,
+                                        count: int) -> np.ndarray:
+        """Per-replica sums Σc over samples [first, first + count) of a render, per unit source intensity.
 
         Parameters
         ----------
@@ -388,8 +457,9 @@ class TransientPlaneIntegrator(mi.SamplingIntegrator):
         numpy.ndarray
             ``(replicas touched, K, N)`` float64: for each replica the chunk
             touches (in order), Σ c over its samples in the chunk, where
-            c_k[n] = I ρ a_k κ_n / p is one sample's contribution to y_k[n]
-            (units of y). A complete replica's sum over n is its estimate of y.
+            c_k[n] = ρ a_k κ_n / p is one sample's contribution to y_k[n] / I
+            (units of y per W/sr). A complete replica's sum over n is its
+            estimate of y / I.
 
         Notes
         -----
@@ -403,7 +473,7 @@ class TransientPlaneIntegrator(mi.SamplingIntegrator):
         if not (1 <= count <= 2**31 and 0 <= first and first + count <= layout.samples):
             raise ValueError(f"sample range [{first}, {first + count}) must be non-empty, at most 2^31 long "
                              f"and inside the render's {layout.samples} samples")
-        plane, intensity, sensors = self._scene_parts(scene)
+        plane, _, sensors = self._scene_parts(scene)
         plan = self.techniques(sensors)
         size = layout.size
         first_replica = first // size
@@ -435,19 +505,20 @@ class TransientPlaneIntegrator(mi.SamplingIntegrator):
         reflectance = self._reflectance(plane, x, y)
         # The balance heuristic: every point is weighted by the density of all techniques together.
         shares = [opaque_f64((bounds[t + 1] - bounds[t]) / size) for t in range(len(plan))]
-        weight_scale = intensity * reflectance / self._mixture(plan, shares, x, y)
+        weight_scale = reflectance / self._mixture(plan, shares, x, y)
 
         histogram = dr.zeros(mi.Float64, layout.histogram_rows * K * N)
         mode = reduce_mode()
         taps = self.waveform.bins_touched(self.bin_width_opl, self.bins)
         terms = self.waveform.terms
         source_distance = _distance(x, y, self.source)
+        kind = attenuation_code(self.attenuation)
         for k in range(K):
             sensor = sensors[k]
             if not sensor[2] > 0.0:
                 continue                        # below a one-sided plane: it sees no light
-            contribution = weight_scale * attenuation(x, y, self.source, sensor)
-            deposit(histogram, replica * K + k, contribution, source_distance + _distance(x, y, sensor),
+            weight = attenuation(x, y, self.source, sensor, kind)
+            deposit(histogram, replica * K + k, weight_scale * weight, source_distance + _distance(x, y, sensor),
                     mi.Bool(True), bins=N, start_opl=self.start_opl, bin_width_opl=self.bin_width_opl,
                     terms=terms, taps=taps, mode=mode)
         dr.eval(histogram)

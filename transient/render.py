@@ -7,17 +7,34 @@ means and its standard error their spread over sqrt(R), with R - 1 degrees
 of freedom (compare with ``validation.compare.compare_transients(...,
 dof=result.dof)``). Sample g's random numbers depend only on (seed, g), so
 the result does not depend on the chunking, on interruptions or on
-resuming (up to the rounding of float64 additions).
+resuming (up to the rounding of float64 additions). The replicas are
+rendered per unit source intensity and multiplied by I (float64) once at
+the end, so y(I) / I is the same for every I to one rounding.
 
-With ``out_dir`` the accumulated state goes to ``render_state.npz`` as soon
-as the first chunk is done and then every 5 seconds, and the current
-estimate (the complete replicas) to ``transient.{npy,exr}``, ``stderr.npy``
-and ``meta.json`` once two replicas are complete; every file is written
-atomically. The state carries a SHA-256 checksum of everything in it;
+With ``out_dir`` the folder holds, every file written atomically:
+
+- ``render_state.npz``: the accumulated state, as soon as the first chunk
+  is done and then every 5 seconds, with a SHA-256 checksum of everything
+  in it, and ``render_scene.npz``: the scene itself (its tables and
+  reflectance image). Together they are all a resume needs:
+  :func:`resume` (``diffuse-imaging render --resume DIR``) takes the scene,
+  seed, sample count, replicas, estimator and variant from them, and
+  refuses, naming each, any that is given again differently.
+- ``partial/``: while the render runs (and after an interruption), the
+  estimate of the complete replicas (once two are): ``transient.{npy,exr,h5}``,
+  ``stderr.npy``, ``replicas.npy`` and ``meta.json`` with
+  ``"complete": false``.
+- ``transient.{npy,exr,h5}``, ``stderr.npy``, ``replicas.npy`` (the R
+  replica means, ``(R, K, N)``, whose mean is ``transient.npy``) and
+  ``meta.json`` with ``"complete": true``: only when every replica is done;
+  ``partial/`` is then removed.
+
 ``resume=True`` refuses a state that is missing, unreadable, corrupted,
 inconsistent or from another scene, seed, variant or sample plan, with a
 :class:`RenderStateError` saying what, where and how to fix it. Ctrl-C,
-SIGTERM and ``kill -9`` lose at most the work since the last checkpoint.
+SIGTERM and ``kill -9`` lose at most the work since the last checkpoint;
+Ctrl-C and SIGTERM end in :class:`RenderInterrupted`, which says how far
+the render got.
 """
 
 from __future__ import annotations
@@ -36,15 +53,18 @@ from typing import Callable
 import numpy as np
 
 from analytic.errors import UserError
-from analytic.io import atomic_write, build_meta, write_transient
+from analytic.io import atomic_write, build_meta, save_npy, staged_writes, write_transient
+from analytic.resources import require_memory
 from analytic.scene import Scene
 from analytic.waveforms import make_waveform
 from analytic.window import window_share
 
-from .chunks import MAX_SAMPLES, Chunk, ReplicaAccumulator, ReplicaLayout
+from .chunks import MAX_SAMPLES, Chunk, ReplicaAccumulator, ReplicaLayout, render_memory_bytes
 
-__all__ = ["RenderResult", "RenderStateError", "render", "render_loaded", "scene_fingerprint", "sigterm_as_interrupt",
-           "DEFAULT_CHUNK", "DEFAULT_CHUNK_GPU", "FIRST_CHUNK", "STATE_FILE", "STATE_FORMAT", "MAX_SAMPLES"]
+__all__ = ["RenderResult", "RenderStateError", "RenderInterrupted", "SavedRender", "render", "resume",
+           "read_saved_render", "render_loaded", "scene_fingerprint", "sigterm_as_interrupt", "DEFAULT_CHUNK",
+           "DEFAULT_CHUNK_GPU", "FIRST_CHUNK", "STATE_FILE", "SCENE_FILE", "PARTIAL_FOLDER", "REPLICAS_FILE",
+           "STATE_FORMAT", "MAX_SAMPLES"]
 
 #: Largest chunk on a CPU, samples: one fused kernel of this width keeps
 #: memory flat (only the per-replica K x N sums are stored) and takes well
@@ -63,18 +83,55 @@ FIRST_CHUNK = 2**16
 
 STATE_FILE = "render_state.npz"
 
+#: The scene a render folder belongs to (tables and reflectance), written with its first checkpoint.
+SCENE_FILE = "render_scene.npz"
+
+#: Where an unfinished render's current estimate goes (``meta.json`` says ``"complete": false``).
+PARTIAL_FOLDER = "partial"
+
+#: The replica means, ``(R, K, N)`` float64, beside ``transient.npy`` and ``stderr.npy``.
+REPLICAS_FILE = "replicas.npy"
+
 #: Identifies the state's layout and the estimator that wrote it.
-STATE_FORMAT = "diffuse-imaging render state 2 (stratified replicas)"
+STATE_FORMAT = "diffuse-imaging render state 3 (replica means, per unit intensity)"
+
+_SCENE_FORMAT = "diffuse-imaging render scene 1"
 
 # Seconds between checkpoints: often enough that an interruption loses
 # little, rarely enough that fsyncs do not slow small chunks down.
 _CHECKPOINT_SECONDS = 5.0
 
-_STATE_ARRAYS = ("partial", "replica_mean", "deviations")
+_STATE_ARRAYS = ("partial", "replica_means")
+
+# What write_transient and this module write into a partial folder (and nothing else is removed from it).
+_OUTPUT_FILES = ("transient.npy", "transient.exr", "transient.h5", "stderr.npy", REPLICAS_FILE, "meta.json")
 
 
 class RenderStateError(UserError, ValueError):
     """A render state that cannot be resumed (one line: what, where, how to fix)."""
+
+
+class RenderInterrupted(KeyboardInterrupt):
+    """A render stopped by Ctrl-C, SIGTERM or ``on_chunk``, after its finished chunks were saved.
+
+    Attributes
+    ----------
+    done : int
+        Samples done (and saved, when ``folder`` is set).
+    planned : int
+        Samples of the whole render, R n.
+    completed, replicas : int
+        Replicas complete, of R.
+    folder : Path or None
+        The folder holding the state to resume from (None: nothing saved).
+    """
+
+    def __init__(self, *, done: int, planned: int, completed: int, replicas: int, folder: Path | None):
+        self.done, self.planned, self.completed, self.replicas = done, planned, completed, replicas
+        self.folder = folder
+        saved = f"; the state is in {folder}" if folder is not None else "; nothing was saved"
+        super().__init__(f"interrupted after {done:,} of {planned:,} samples ({completed} of {replicas} "
+                         f"replicas complete){saved}")
 
 
 @dataclass(frozen=True)
@@ -84,12 +141,17 @@ class RenderResult:
     Attributes
     ----------
     mean : numpy.ndarray
-        ``(K, N)`` float64 estimate of y_k[n] (units of y: m⁻² · m per unit
-        source intensity).
+        ``(K, N)`` float64 estimate of y_k[n] (units of y: W/sr x m⁻² x m
+        of path length, :data:`analytic.io.UNITS`).
     stderr : numpy.ndarray
         ``(K, N)`` float64 standard error of ``mean``, from the replicas.
+    replica_means : numpy.ndarray
+        ``(R, K, N)`` float64: each replica's own estimate of y; ``mean`` is
+        their mean and ``stderr`` their standard deviation over sqrt(R).
     samples : int
         Samples drawn, R n (points on the plane; each serves every sensor).
+    drawn : int
+        Samples drawn by this call (less than ``samples`` after a resume).
     seed : int
         Render seed.
     variant : str
@@ -104,7 +166,9 @@ class RenderResult:
 
     mean: np.ndarray
     stderr: np.ndarray
+    replica_means: np.ndarray
     samples: int
+    drawn: int
     seed: int
     variant: str
     seconds: float
@@ -112,11 +176,20 @@ class RenderResult:
     dof: int
 
 
+def _result(accumulator: ReplicaAccumulator, scale: float, *, drawn: int, seed: int, variant: str,
+            seconds: float) -> RenderResult:
+    """The accumulator's estimate times ``scale`` (the source intensity when it rendered per unit of it)."""
+    return RenderResult(mean=accumulator.mean() * scale, stderr=accumulator.stderr() * scale,
+                        replica_means=accumulator.replica_means() * scale, samples=accumulator.samples,
+                        drawn=int(drawn), seed=int(seed), variant=variant, seconds=seconds,
+                        replicas=accumulator.completed, dof=accumulator.dof)
+
+
 def scene_fingerprint(scene: Scene, estimator: dict | None = None) -> str:
     """SHA-256 of everything in a scene (and estimator options) that changes what the renderer computes.
 
-    The attenuation and noise settings are left out: the renderer always
-    renders physical transport, noiselessly.
+    Every field but ``tolerance`` (the model's quadrature accuracy),
+    ``noise`` (the model's; a render is noiseless) and ``name``.
     """
     waveform = make_waveform(scene.illumination, scene.sampling.bin_width_opl)
     description = {
@@ -127,26 +200,83 @@ def scene_fingerprint(scene: Scene, estimator: dict | None = None) -> str:
         "sampling": [repr(float(scene.sampling.bin_width_opl)), repr(float(scene.sampling.start_opl)),
                      int(scene.sampling.count)],
         "waveform": waveform.description,
-        "estimator": {str(k): str(v) for k, v in sorted((estimator or {}).items())},
+        "attenuation": scene.attenuation,
+        "estimator": _estimator_record(estimator),
     }
     digest = hashlib.sha256(json.dumps(description, sort_keys=True).encode())
     digest.update(np.ascontiguousarray(scene.reflectance, dtype=np.float64).tobytes())
     return digest.hexdigest()
 
 
+def _estimator_record(estimator: dict | None) -> dict:
+    return {str(k): str(v) for k, v in sorted((estimator or {}).items())}
+
+
+# -- the scene a folder belongs to ---------------------------------------------------
+
+
+def _save_scene(folder: Path, scene: Scene) -> None:
+    """Write ``render_scene.npz``: the scene's tables (JSON) and its reflectance image, atomically."""
+    from analytic.scene_file import scene_to_tables
+
+    tables = scene_to_tables(scene)
+    tables["plane"] = {key: value for key, value in tables["plane"].items() if key != "reflectance"}
+    # JSON writes a float's repr: the scene reads back bit for bit.
+    text = json.dumps(tables, sort_keys=True, allow_nan=False, default=_python_number)
+
+    def write(temporary):
+        with open(temporary, "wb") as stream:
+            np.savez(stream, format=np.array(_SCENE_FORMAT), tables=np.array(text),
+                     reflectance=np.ascontiguousarray(scene.reflectance, dtype=np.float64))
+    atomic_write(folder / SCENE_FILE, write)
+
+
+def _python_number(value):
+    """A NumPy scalar as the Python number JSON can write."""
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"not a number: {type(value).__name__}")
+
+
+def _load_saved_scene(folder: Path) -> Scene:
+    """The scene of ``render_scene.npz``; :class:`RenderStateError` when it cannot be read."""
+    from analytic.scene_file import scene_from_dict
+
+    path = folder / SCENE_FILE
+    fix = f"give the scene file again: diffuse-imaging render SCENE --resume {folder}"
+    if not path.is_file():
+        raise RenderStateError(f"resume: no {SCENE_FILE} in {folder} (a render state without its scene); {fix}")
+    try:
+        with open(path, "rb") as stream, np.load(stream, allow_pickle=False) as saved:
+            if str(saved["format"]) != _SCENE_FORMAT:
+                raise ValueError("written by another version of the renderer")
+            tables = json.loads(str(saved["tables"]))
+            tables["plane"]["reflectance"] = np.array(saved["reflectance"], dtype=np.float64)
+        return scene_from_dict(tables, folder)
+    except (OSError, ValueError, KeyError, TypeError, AttributeError, EOFError, zipfile.BadZipFile,
+            UserError) as error:
+        reason = " ".join(str(error).split()) or type(error).__name__
+        raise RenderStateError(f"resume: {path} is not a readable render scene ({reason[:120]}); {fix}") \
+            from None
+
+
 # -- the state file ------------------------------------------------------------------
 
 
-def _identity(fingerprint: str, seed: int, variant: str, layout: ReplicaLayout, requested: int) -> dict:
+def _identity(fingerprint: str, seed: int, variant: str, layout: ReplicaLayout, requested: int,
+              estimator: dict) -> dict:
     return {"format": STATE_FORMAT, "fingerprint": fingerprint, "seed": int(seed), "variant": variant,
-            "replicas": int(layout.replicas), "replica_size": int(layout.size), "requested": int(requested)}
+            "replicas": int(layout.replicas), "replica_size": int(layout.size), "requested": int(requested),
+            "estimator": _estimator_record(estimator)}
 
 
 def _checksum(identity: dict, progress: dict) -> str:
     digest = hashlib.sha256(json.dumps(identity, sort_keys=True).encode())
     digest.update(json.dumps({"done": int(progress["done"]), "completed": int(progress["completed"])}).encode())
     for name in _STATE_ARRAYS:
-        digest.update(np.ascontiguousarray(progress[name], dtype="<f8").tobytes())
+        array = np.ascontiguousarray(progress[name], dtype="<f8")
+        digest.update(json.dumps(list(array.shape)).encode())
+        digest.update(array.tobytes())
     return digest.hexdigest()
 
 
@@ -162,16 +292,19 @@ def _save_state(path: Path, identity: dict, accumulator: ReplicaAccumulator) -> 
     atomic_write(path, write)
 
 
-def _load_state(out_dir: Path, identity: dict, layout: ReplicaLayout, shape) -> ReplicaAccumulator:
-    """The accumulator saved in ``out_dir``, after every check; :class:`RenderStateError` otherwise."""
+_FRESH = "delete it and render again without --resume (or into a new --out)"
+
+
+def _read_state(out_dir: Path) -> tuple[dict, dict]:
+    """(identity, progress) of ``out_dir``'s state, read and verified by its checksum."""
     path = out_dir / STATE_FILE
-    fresh = "delete it and render again without --resume (or into a new --out)"
     if not out_dir.is_dir():
         raise RenderStateError(f"resume: folder {out_dir} does not exist; give the folder of the render to "
                                f"resume, or render without --resume")
     if not path.is_file():
         raise RenderStateError(f"resume: no {STATE_FILE} in {out_dir}: nothing to resume; "
                                f"render without --resume")
+    stored = progress = checksum = None
     try:
         # Open the file here: np.load leaks its own handle on a file that is not an archive.
         with open(path, "rb") as stream:
@@ -180,41 +313,123 @@ def _load_state(out_dir: Path, identity: dict, layout: ReplicaLayout, shape) -> 
                 raise ValueError("a single array, not an archive")
             with saved:
                 stored = json.loads(str(saved["identity"]))
-                progress = {"done": int(saved["done"]), "completed": int(saved["completed"]),
-                            **{name: np.array(saved[name], dtype=np.float64) for name in _STATE_ARRAYS}}
-                checksum = str(saved["checksum"])
+                if isinstance(stored, dict) and stored.get("format") == STATE_FORMAT:
+                    progress = {"done": int(saved["done"]), "completed": int(saved["completed"]),
+                                **{name: np.array(saved[name], dtype=np.float64) for name in _STATE_ARRAYS}}
+                    checksum = str(saved["checksum"])
     except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile) as error:
         reason = " ".join(str(error).split()) or type(error).__name__
-        raise RenderStateError(f"resume: {path} is not a readable render state ({reason[:120]}); {fresh}") \
+        raise RenderStateError(f"resume: {path} is not a readable render state ({reason[:120]}); {_FRESH}") \
             from None
-    if not isinstance(stored, dict) or stored.get("format") != STATE_FORMAT:
-        raise RenderStateError(f"resume: {path} was written by another version of the renderer; {fresh}")
+    if progress is None:
+        raise RenderStateError(f"resume: {path} was written by another version of the renderer; {_FRESH}")
     try:
         intact = checksum == _checksum(stored, progress)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, KeyError):
         intact = False
     if not intact:
         raise RenderStateError(f"resume: {path} is corrupted (its checksum does not match its contents); "
-                               f"{fresh}")
-    if stored.get("fingerprint") != identity["fingerprint"]:
-        raise RenderStateError(f"resume: {path} belongs to a different scene or estimator; resume with the "
-                               f"scene it was rendered from, or render into a new --out")
-    for key, flag in (("seed", "--seed"), ("variant", "--variant")):
-        if stored.get(key) != identity[key]:
-            raise RenderStateError(f"resume: {path} was rendered with {key} {stored.get(key)}, not "
-                                   f"{identity[key]}; pass {flag} {stored.get(key)} or render into a new --out")
-    planned = (stored.get("replicas"), stored.get("replica_size"))
-    if planned != (identity["replicas"], identity["replica_size"]):
-        requested = stored.get("requested")
-        if isinstance(requested, int) and identity["requested"] < progress["done"]:
-            raise RenderStateError(f"resume: spp = {identity['requested']} is below the {progress['done']} "
-                                   f"samples already done in {path}; resume with --spp {requested}")
-        raise RenderStateError(f"resume: {path} was planned for spp = {requested} ({planned[0]} replicas of "
-                               f"{planned[1]}); resume with --spp {requested}, or render into a new --out")
+                               f"{_FRESH}")
+    return stored, progress
+
+
+def _mismatches(stored: dict, identity: dict) -> list[str]:
+    """Each argument given for a resume that differs from the state's, as "FLAG given differs from ..."."""
+    found = [f"{flag} {identity[key]} differs from the state's {stored.get(key)}"
+             for key, flag in (("requested", "--spp"), ("seed", "--seed"), ("variant", "--variant"))
+             if stored.get(key) != identity[key]]
+    if stored.get("requested") == identity["requested"] and stored.get("replicas") != identity["replicas"]:
+        found.append(f"replicas {identity['replicas']} differ from the state's {stored.get('replicas')}")
+    if stored.get("estimator") != identity["estimator"]:
+        found.append(f"estimator options {identity['estimator']} differ from the state's "
+                     f"{stored.get('estimator')}")
+    elif stored.get("fingerprint") != identity["fingerprint"]:
+        found.append(f"the scene given differs from the one the render was started with, saved in {SCENE_FILE}")
+    return found
+
+
+def _load_state(out_dir: Path, identity: dict, layout: ReplicaLayout, shape) -> ReplicaAccumulator:
+    """The accumulator saved in ``out_dir``, after every check; :class:`RenderStateError` otherwise."""
+    stored, progress = _read_state(out_dir)
+    mismatches = _mismatches(stored, identity)
+    if mismatches:
+        raise RenderStateError(f"resume: {'; '.join(mismatches)} (in {out_dir / STATE_FILE}); leave them out "
+                               f"to resume with the state's own (diffuse-imaging render --resume {out_dir}), "
+                               f"or render into a new --out")
     try:
         return ReplicaAccumulator.from_state(layout, shape, progress)
     except ValueError as error:
-        raise RenderStateError(f"resume: {path} holds an inconsistent state ({error}); {fresh}") from None
+        raise RenderStateError(f"resume: {out_dir / STATE_FILE} holds an inconsistent state ({error}); "
+                               f"{_FRESH}") from None
+
+
+@dataclass(frozen=True)
+class SavedRender:
+    """What a render folder holds: everything :func:`resume` needs.
+
+    Attributes
+    ----------
+    folder : Path
+    scene : Scene
+        The scene the render was started with (from ``render_scene.npz``),
+        or the one given to :func:`read_saved_render`.
+    spp, seed : int
+        The sample count asked for and the seed.
+    variant : str
+        The Mitsuba variant it ran on.
+    replicas : int
+        R.
+    estimator : dict
+        ``transient_opl`` options (``strategy``, ``sampler``), as strings.
+    done, planned : int
+        Samples done, and R n.
+    """
+
+    folder: Path
+    scene: Scene
+    spp: int
+    seed: int
+    variant: str
+    replicas: int
+    estimator: dict
+    done: int
+    planned: int
+
+
+def read_saved_render(out_dir: str | Path, *, scene: Scene | None = None) -> SavedRender:
+    """The render saved in a folder, read and checked (state, checksum, scene).
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        The render's folder.
+    scene : Scene, optional
+        The scene given again: used instead of ``render_scene.npz`` (which
+        may then be missing or damaged). Whether it is the render's is
+        checked when the render resumes, with the other arguments.
+
+    Raises
+    ------
+    RenderStateError
+        No folder, no state, an unreadable, corrupted or foreign state, or
+        (no scene given) a saved scene that cannot be read or does not
+        match the state.
+    """
+    folder = Path(out_dir)
+    stored, progress = _read_state(folder)
+    given = scene is not None
+    scene = scene if given else _load_saved_scene(folder)
+    try:
+        spp, seed, variant = int(stored["requested"]), int(stored["seed"]), str(stored["variant"])
+        replicas, size = int(stored["replicas"]), int(stored["replica_size"])
+        estimator = dict(stored["estimator"])
+    except (KeyError, TypeError, ValueError) as error:
+        raise RenderStateError(f"resume: {folder / STATE_FILE} lacks {error}; {_FRESH}") from None
+    if not given and scene_fingerprint(scene, estimator) != stored.get("fingerprint"):
+        raise RenderStateError(f"resume: {folder / SCENE_FILE} does not hold the scene of {folder / STATE_FILE}; "
+                               f"give the scene file again: diffuse-imaging render SCENE --resume {folder}")
+    return SavedRender(folder=folder, scene=scene, spp=spp, seed=seed, variant=variant, replicas=replicas,
+                       estimator=estimator, done=int(progress["done"]), planned=replicas * size)
 
 
 @contextlib.contextmanager
@@ -247,8 +462,9 @@ def render_loaded(loaded, *, spp: int, seed: int = 0, replicas: int | None = Non
     """Render an already loaded Mitsuba scene of one of our integrators (no files, no resume).
 
     For scenes that are not an :class:`analytic.scene.Scene` (the corner of
-    ``transient.mitsuba_scene.corner_scene_dict``), rendered with the same
-    replicas and chunks as :func:`render`.
+    ``transient.mitsuba_scene.corner_scene_dict``, an exported XML), rendered
+    with the same replicas and chunks as :func:`render`, each chunk in units
+    of y (the integrator's ``render_chunk``).
 
     Parameters
     ----------
@@ -270,9 +486,8 @@ def render_loaded(loaded, *, spp: int, seed: int = 0, replicas: int | None = Non
     for chunk in _chunks(0, layout.samples, int(chunk_size)):
         accumulator.add(chunk, integrator.render_chunk(loaded, seed=int(seed), layout=layout, first=chunk.first,
                                                        count=chunk.count))
-    return RenderResult(mean=accumulator.mean(), stderr=accumulator.stderr(), samples=accumulator.samples,
-                        seed=int(seed), variant=mi.variant(), seconds=time.perf_counter() - started,
-                        replicas=accumulator.completed, dof=accumulator.dof)
+    return _result(accumulator, 1.0, drawn=accumulator.done, seed=seed, variant=mi.variant(),
+                   seconds=time.perf_counter() - started)
 
 
 def _check_arguments(spp, seed, chunk_size, replicas):
@@ -291,6 +506,49 @@ def _check_arguments(spp, seed, chunk_size, replicas):
         raise ValueError(f"replicas: must be an integer in [2, spp = {spp}], got {replicas!r}")
 
 
+def _remove_partial(folder: Path) -> None:
+    """Remove ``folder/partial`` (only the files a render writes there, then the folder if empty)."""
+    partial = folder / PARTIAL_FOLDER
+    # A stale partial estimate beside complete outputs is labelled ("complete": false), never wrong.
+    with contextlib.suppress(OSError):
+        for name in _OUTPUT_FILES:
+            (partial / name).unlink(missing_ok=True)
+        if partial.is_dir():
+            partial.rmdir()
+
+
+class _Outputs:
+    """The files a render writes into its folder: state, scene, and the estimate (partial or complete)."""
+
+    def __init__(self, folder: Path, scene: Scene, identity: dict):
+        self.folder, self.scene, self.identity = folder, scene, identity
+        # Written again by every run (a resumed one too): a damaged or missing copy is repaired.
+        self.scene_saved = False
+        self.share = window_share(scene)
+
+    def checkpoint(self, accumulator: ReplicaAccumulator, *, complete: bool) -> None:
+        """Save the scene (first time), then the state, then the estimate once 2 replicas are complete."""
+        if not self.scene_saved:
+            _save_scene(self.folder, self.scene)
+            self.scene_saved = True
+        _save_state(self.folder / STATE_FILE, self.identity, accumulator)
+        if accumulator.completed < 2:
+            return
+        identity = self.identity
+        meta = build_meta(self.scene, kind="render", samples=int(accumulator.samples), seed=identity["seed"],
+                          window_share=self.share, variant=identity["variant"],
+                          requested_samples=identity["requested"], scene_fingerprint=identity["fingerprint"],
+                          replicas=int(accumulator.completed), dof=int(accumulator.dof), complete=bool(complete))
+        estimate = _result(accumulator, float(self.scene.intensity), drawn=0, seed=identity["seed"],
+                           variant=identity["variant"], seconds=0.0)
+        target = self.folder if complete else self.folder / PARTIAL_FOLDER
+        with staged_writes():
+            write_transient(target, estimate.mean, meta, stderr=estimate.stderr)
+            save_npy(target / REPLICAS_FILE, estimate.replica_means)
+        if complete:
+            _remove_partial(self.folder)
+
+
 def render(scene: Scene, *, spp: int, seed: int = 0, out_dir: str | Path | None = None,
            variant: str | None = None, resume: bool = False, chunk_size: int | None = None,
            progress: bool = True, on_chunk: Callable[[int], None] | None = None,
@@ -300,22 +558,23 @@ def render(scene: Scene, *, spp: int, seed: int = 0, out_dir: str | Path | None 
     Parameters
     ----------
     scene : Scene
-        The scene. Its ``attenuation`` is not read: the renderer renders
-        physical transport (``lambertian``) only.
+        The scene, rendered with its ``attenuation`` (``lambertian`` or
+        ``paper``) and intensity (float64); its ``tolerance`` and ``noise``
+        belong to the model and are not read.
     spp : int
         Samples (points on the plane; each serves all K sensors),
         2 <= spp <= 2^48. The render draws R ⌈spp / R⌉, up to R - 1 more.
     seed : int
         Seed, 0 <= seed < 2^32; sample g depends on (seed, g) only.
     out_dir : str or Path, optional
-        Folder for checkpoints and outputs (``render_state.npz``,
-        ``transient.npy``/``.exr``, ``stderr.npy``, ``meta.json``).
+        Folder for checkpoints and outputs (see the module's docstring).
     variant : str, optional
         Mitsuba variant; see :func:`transient.backend.select_variant`.
     resume : bool
         Continue from ``out_dir/render_state.npz`` (same scene, seed,
-        variant, ``spp`` and ``replicas``); :class:`RenderStateError` if it
-        cannot.
+        variant, ``spp``, ``replicas`` and estimator);
+        :class:`RenderStateError` if it cannot. :func:`resume` needs only
+        the folder.
     chunk_size : int, optional
         Most samples per kernel launch (memory and checkpoint granularity),
         1 <= chunk_size <= 2^31. Default :data:`DEFAULT_CHUNK` (2^22) on a
@@ -325,7 +584,8 @@ def render(scene: Scene, *, spp: int, seed: int = 0, out_dir: str | Path | None 
     on_chunk : callable, optional
         Called with the number of samples done after each finished chunk has
         been added to the totals; it may raise KeyboardInterrupt to stop the
-        render as Ctrl-C would (checkpoint written, exception re-raised).
+        render as Ctrl-C would (checkpoint written, :class:`RenderInterrupted`
+        raised).
     replicas : int, optional
         R (default :data:`transient.chunks.DEFAULT_REPLICAS`).
     estimator : dict, optional
@@ -342,11 +602,14 @@ def render(scene: Scene, *, spp: int, seed: int = 0, out_dir: str | Path | None 
         A bad argument, before any work.
     RenderStateError
         ``resume`` and a state that cannot be resumed.
+    analytic.errors.ResourceError
+        The replicas would not fit in memory (before any work), or a file
+        cannot be written.
     transient.backend.BackendError
         The variant cannot run here (no CUDA device, old libLLVM).
-    KeyboardInterrupt
+    RenderInterrupted
         On Ctrl-C, SIGTERM or from ``on_chunk``, after the finished chunks
-        have been written to ``out_dir``.
+        have been written to ``out_dir`` (a KeyboardInterrupt).
     """
     gpu = variant is not None and str(variant).startswith("cuda")
     chunk_size = (DEFAULT_CHUNK_GPU if gpu else DEFAULT_CHUNK) if chunk_size is None else chunk_size
@@ -356,65 +619,92 @@ def render(scene: Scene, *, spp: int, seed: int = 0, out_dir: str | Path | None 
         raise ValueError("resume: needs out_dir")
     layout = ReplicaLayout.for_samples(spp, replicas)
     estimator = dict(estimator or {})
+    shape = (scene.sensor_count, scene.sampling.count)
+    require_memory(render_memory_bytes(layout, shape),
+                   f"{layout.replicas} replicas x {shape[0]} sensors x {shape[1]} bins",
+                   "use fewer bins (sampling.count), sensors or replicas")
 
     from .backend import select_variant
 
     variant = select_variant(variant)
-    shape = (scene.sensor_count, scene.sampling.count)
     fingerprint = scene_fingerprint(scene, estimator)
-    identity = _identity(fingerprint, seed, variant, layout, spp)
+    identity = _identity(fingerprint, seed, variant, layout, spp, estimator)
     out_dir = Path(out_dir) if out_dir is not None else None
     accumulator = (_load_state(out_dir, identity, layout, shape) if resume
                    else ReplicaAccumulator(layout, shape))
-
-    from .mitsuba_scene import load_scene
-
-    loaded = load_scene(scene, **estimator)
-    integrator = loaded.integrator()
-    share = window_share(scene) if out_dir is not None else None
-
-    def checkpoint():
-        if out_dir is None:
-            return
-        _save_state(out_dir / STATE_FILE, identity, accumulator)
-        if accumulator.completed < 2:
-            return
-        meta = build_meta(scene, kind="render", samples=int(accumulator.samples), seed=seed,
-                          window_share=share, variant=variant, requested_samples=spp,
-                          scene_fingerprint=fingerprint, replicas=int(accumulator.completed),
-                          dof=int(accumulator.dof))
-        write_transient(out_dir, accumulator.mean(), meta, stderr=accumulator.stderr())
-
+    outputs = None
+    if out_dir is not None:
+        outputs = _Outputs(out_dir, scene, identity)
+        if not resume:
+            _remove_partial(out_dir)          # an earlier render's estimate, not this one's
+    started_at = accumulator.done
     bar = None
-    if progress:
-        from tqdm import tqdm
-        bar = tqdm(total=layout.samples, initial=accumulator.done, unit="sample", unit_scale=True,
-                   desc="render", leave=False)
-    started = time.perf_counter()
-    last_checkpoint = None
     try:
         with sigterm_as_interrupt():
+            from .mitsuba_scene import load_scene
+
+            loaded = load_scene(scene, **estimator)
+            integrator = loaded.integrator()
+            if progress:
+                from tqdm import tqdm
+                bar = tqdm(total=layout.samples, initial=accumulator.done, unit="sample", unit_scale=True,
+                           desc="render", leave=False)
+            started = time.perf_counter()
+            last_checkpoint = None
             for chunk in _chunks(accumulator.done, layout.samples, chunk_size):
-                sums = integrator.render_chunk(loaded, seed=seed, layout=layout, first=chunk.first,
-                                               count=chunk.count)
+                sums = integrator.render_chunk_per_unit_intensity(loaded, seed=seed, layout=layout,
+                                                                  first=chunk.first, count=chunk.count)
                 accumulator.add(chunk, sums)
                 if bar is not None:
                     bar.update(chunk.count)
                 now = time.perf_counter()
                 # The first chunk (small) is checkpointed at once; then every few seconds.
-                if last_checkpoint is None or now - last_checkpoint >= _CHECKPOINT_SECONDS:
-                    checkpoint()
+                if outputs is not None and (last_checkpoint is None
+                                            or now - last_checkpoint >= _CHECKPOINT_SECONDS):
+                    outputs.checkpoint(accumulator, complete=False)
                     last_checkpoint = time.perf_counter()
                 if on_chunk is not None:
                     on_chunk(accumulator.done)
+            seconds = time.perf_counter() - started
     except KeyboardInterrupt:
-        checkpoint()
-        raise
+        if outputs is not None:
+            outputs.checkpoint(accumulator, complete=False)
+        raise RenderInterrupted(done=accumulator.done, planned=layout.samples, completed=accumulator.completed,
+                                replicas=layout.replicas, folder=out_dir) from None
     finally:
         if bar is not None:
             bar.close()
-    seconds = time.perf_counter() - started
-    checkpoint()
-    return RenderResult(mean=accumulator.mean(), stderr=accumulator.stderr(), samples=accumulator.samples,
-                        seed=seed, variant=variant, seconds=seconds, replicas=accumulator.completed,
-                        dof=accumulator.dof)
+    if outputs is not None:
+        outputs.checkpoint(accumulator, complete=True)
+    # The replicas are per unit intensity: I (float64, the scene's own) enters once, here.
+    return _result(accumulator, float(scene.intensity), drawn=accumulator.done - started_at, seed=seed,
+                   variant=variant, seconds=seconds)
+
+
+def resume(out_dir: str | Path, *, scene: Scene | None = None, spp: int | None = None, seed: int | None = None,
+           variant: str | None = None, chunk_size: int | None = None, progress: bool = True,
+           on_chunk: Callable[[int], None] | None = None) -> RenderResult:
+    """Finish the render saved in ``out_dir``, from the folder alone.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        The folder of an unfinished (or finished) render.
+    scene, spp, seed, variant : optional
+        Given again, each must match the state's (the scene by its
+        fingerprint; its ``noise``, ``tolerance`` and name may differ and
+        go to ``meta.json``); left out, the state's are used.
+    chunk_size, progress, on_chunk
+        As for :func:`render`.
+
+    Raises
+    ------
+    RenderStateError
+        The state or the saved scene cannot be read, or an argument given
+        differs from the state's (each named, on one line).
+    """
+    saved = read_saved_render(out_dir, scene=scene)
+    return render(saved.scene, spp=saved.spp if spp is None else spp,
+                  seed=saved.seed if seed is None else seed, out_dir=saved.folder,
+                  variant=saved.variant if variant is None else variant, resume=True, chunk_size=chunk_size,
+                  progress=progress, on_chunk=on_chunk, replicas=saved.replicas, estimator=saved.estimator)

@@ -3,6 +3,7 @@
 import glob
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -40,10 +41,14 @@ def test_render_command_writes_files_that_agree_with_forward(tmp_path):
     result = _cli("render", scene_path, "--spp", 2**20, "--seed", 3, "--out", tmp_path / "r", "--quiet")
     assert result.returncode == 0, result.stderr
     names = {p.name for p in (tmp_path / "r").iterdir()}
-    assert {"transient.exr", "transient.npy", "stderr.npy", "meta.json"} <= names
+    assert {"transient.exr", "transient.npy", "stderr.npy", "replicas.npy", "meta.json"} <= names
+    assert "partial" not in names
     meta = json.loads((tmp_path / "r" / "meta.json").read_text())
     assert meta["samples"] == 2**20 and meta["seed"] == 3 and meta["attenuation"] == "lambertian"
-    assert meta["replicas"] == 32 and meta["dof"] == 31
+    assert meta["replicas"] == 32 and meta["dof"] == 31 and meta["complete"] is True
+    replicas = np.load(tmp_path / "r" / "replicas.npy")
+    assert replicas.shape == (32, 2, 30)
+    np.testing.assert_allclose(replicas.mean(axis=0), np.load(tmp_path / "r" / "transient.npy"), rtol=1e-13)
     result = _cli("forward", scene_path, "--out", tmp_path / "f", "--quiet")
     assert result.returncode == 0, result.stderr
     agreement = compare_transients(np.load(tmp_path / "r" / "transient.npy"),
@@ -53,7 +58,9 @@ def test_render_command_writes_files_that_agree_with_forward(tmp_path):
 
 
 def test_terminated_render_resumes_to_the_same_numbers(tmp_path):
-    """SIGTERM after the first checkpoint: exit 130 with the state kept; --resume finishes it."""
+    """SIGTERM after the first checkpoint: exit 130, one line with the samples done and the exact resume
+    command, no complete-looking output; `--resume DIR` alone finishes it, and its samples/s counts only
+    the samples it drew."""
     scene_path = tmp_path / "scene.toml"
     scene_path.write_text(SCENE)
     samples = 2**24
@@ -71,11 +78,69 @@ def test_terminated_render_resumes_to_the_same_numbers(tmp_path):
     if child.returncode == 0:
         pytest.skip("the render finished before the signal arrived")
     assert child.returncode == 130, errors
-    resumed = _cli("render", scene_path, "--spp", samples, "--seed", 9, "--resume", tmp_path / "part", "--quiet")
+    lines = errors.strip().splitlines()
+    assert len(lines) == 1 and re.search(r"interrupted after [\d,]+ of 16,777,216 samples", lines[0]), errors
+    assert lines[0].endswith(f"resume with: diffuse-imaging render --resume {tmp_path / 'part'}")
+    assert not (tmp_path / "part" / "transient.npy").exists()
+    with np.load(tmp_path / "part" / "render_state.npz") as state:
+        done_before = int(state["done"])
+    resumed = _cli("render", "--resume", tmp_path / "part")
     assert resumed.returncode == 0, resumed.stderr
     np.testing.assert_allclose(np.load(tmp_path / "part" / "transient.npy"),
                                np.load(tmp_path / "whole" / "transient.npy"), rtol=1e-12, atol=0)
     assert json.loads((tmp_path / "part" / "meta.json").read_text())["samples"] == samples
+    summary = re.search(r"([\d,]+) samples \(([\d,]+) in this run\) in ([\d.]+) s \(([\d,]+) samples/s",
+                        resumed.stdout)
+    assert summary, resumed.stdout
+    total, drawn, seconds, rate = (float(group.replace(",", "")) for group in summary.groups())
+    assert total == samples and drawn == samples - done_before
+    # seconds are shown to 0.1 s
+    assert drawn / (seconds + 0.05) <= rate <= drawn / max(seconds - 0.05, 1e-9)
+
+
+def _interrupted_render(tmp_path):
+    """A render folder holding a state after its first chunks (seed 4, 2^22 samples)."""
+    from analytic.scene_file import load_scene
+    from transient.render import RenderInterrupted, render
+
+    scene_path = tmp_path / "scene.toml"
+    scene_path.write_text(SCENE)
+
+    def stop(done):
+        raise KeyboardInterrupt
+
+    with pytest.raises(RenderInterrupted):
+        render(load_scene(scene_path), spp=2**22, seed=4, out_dir=tmp_path / "part", progress=False, on_chunk=stop)
+    return scene_path, tmp_path / "part"
+
+
+def test_resume_refuses_arguments_that_differ_each_named_in_one_line(tmp_path):
+    scene_path, folder = _interrupted_render(tmp_path)
+    result = _cli("render", "--resume", folder, "--spp", 1000, "--seed", 5)
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "--spp 1000 differs from the state's 4194304" in lines[0]
+    assert "--seed 5 differs from the state's 4" in lines[0] and "scene" not in lines[0].split("(in")[0]
+    other = tmp_path / "other.toml"
+    other.write_text(SCENE.replace("[0.4, 0.6, 0.7]", "[0.4, 0.6, 0.8]"))
+    result = _cli("render", other, "--resume", folder)
+    assert result.returncode == 2 and "scene given differs" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+
+
+def test_new_render_needs_spp_and_help_offers_only_accepted_variants(tmp_path):
+    result = _cli("render", "--out", tmp_path / "r")
+    assert result.returncode == 2 and "--spp" in result.stderr and len(result.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "r").exists()
+    from transient.backend import select_variant, usable_variants
+
+    select_variant()
+    import mitsuba
+
+    offered = re.findall(r"\b(?:llvm|cuda)_\w+", _cli("render", "--help").stdout)
+    assert offered and set(offered) <= set(usable_variants(mitsuba.variants()))
+    refused = _cli("render", "--spp", 1000, "--variant", "llvm_rgb", "--out", tmp_path / "r")
+    assert refused.returncode == 2 and "mono" in refused.stderr
 
 
 def test_render_on_a_missing_cuda_device_is_one_backend_error(tmp_path):

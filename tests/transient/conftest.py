@@ -4,8 +4,12 @@ import numpy as np
 import pytest
 
 from analytic.scene import Sampling, Scene
+from render_checks import general_path_dict
 from transient import backend
 from transient.render import render
+
+# transient_opl's own keys beyond render_checks.general_path_dict's: Mitsuba refuses keys a plugin never reads.
+_PLANE_ONLY_KEYS = ("source_intensity", "attenuation")
 
 
 @pytest.fixture(scope="module")
@@ -35,3 +39,12 @@ def scene(image):
 @pytest.fixture(scope="module")
 def rendered(scene):
     return render(scene, spp=2**22, seed=11, progress=False)
+
+
+@pytest.fixture(scope="module")
+def path_dict():
+    """``general_path_dict`` for a ``scene_dict``: the same scene for transient_opl_path."""
+    def convert(entries: dict, **changes) -> dict:
+        integrator = {key: value for key, value in entries["integrator"].items() if key not in _PLANE_ONLY_KEYS}
+        return general_path_dict(dict(entries, integrator=integrator), **changes)
+    return convert

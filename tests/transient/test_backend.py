@@ -97,3 +97,39 @@ def test_fresh_process_refuses_llvm_15():
     assert done.returncode == 3, done.stdout + done.stderr
     assert "LLVM 15" in done.stdout and "apt-get install -y libllvm19" in done.stdout
     assert done.stdout.count("\n") == 1
+
+
+def test_without_home_dr_jit_keeps_its_kernel_cache_and_stays_quiet(tmp_path):
+    """HOME unset: Dr.Jit warned "HOME ... not set, disabling the kernel cache" on stderr. The backend names
+    the folder HOME would have given for Dr.Jit's import only: no noise, a cache, no variable left behind."""
+    environment = {k: v for k, v in os.environ.items() if k not in ("HOME", "DRJIT_CACHE_DIR")}
+    code = ("import os\n"
+            "from transient.backend import select_variant\n"
+            "select_variant()\n"
+            "import drjit as dr, mitsuba as mi\n"
+            "dr.eval(mi.Float64(dr.arange(mi.Float, 7)) * 3.0)\n"
+            "print('DRJIT_CACHE_DIR' in os.environ, 'HOME' in os.environ)\n")
+    done = _fresh_python(code, environment)
+    assert done.returncode == 0, done.stderr
+    assert done.stderr == ""
+    assert done.stdout.split() == ["False", "False"]
+
+
+def test_kernel_cache_folder_falls_back_to_a_private_temporary_folder(tmp_path, monkeypatch):
+    """A user without a home in the password database gets a temporary folder only they can write."""
+    import stat
+
+    def no_such_user(uid):
+        raise KeyError(uid)
+
+    monkeypatch.delenv("HOME", raising=False)
+    monkeypatch.delenv("DRJIT_CACHE_DIR", raising=False)
+    monkeypatch.setattr(backend.tempfile, "gettempdir", lambda: str(tmp_path))
+    monkeypatch.setattr(backend.pwd, "getpwuid", no_such_user)
+    folder = backend.kernel_cache_folder()
+    assert folder == str(tmp_path / f"drjit-{os.getuid()}")
+    assert stat.S_IMODE(os.stat(folder).st_mode) == 0o700
+    os.chmod(folder, 0o777)                       # writable by others: not a place to run kernels from
+    assert backend.kernel_cache_folder() is None
+    monkeypatch.setenv("HOME", str(tmp_path))
+    assert backend.kernel_cache_folder() is None  # Dr.Jit finds its own

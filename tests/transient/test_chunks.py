@@ -58,8 +58,23 @@ def test_accumulator_gives_the_replicas_mean_and_standard_error(rng):
         accumulator.add(chunk, sums)
     means = values.reshape(9, 777, 2, 3).mean(axis=1)
     assert accumulator.finished and accumulator.dof == 8 and accumulator.samples == layout.samples
+    np.testing.assert_allclose(accumulator.replica_means(), means, rtol=1e-13)
     np.testing.assert_allclose(accumulator.mean(), means.mean(axis=0), rtol=1e-13)
     np.testing.assert_allclose(accumulator.stderr(), means.std(axis=0, ddof=1) / 3, rtol=1e-10)
+
+
+@pytest.mark.parametrize("scale", [1e-300, 1e300])
+def test_standard_error_neither_underflows_nor_overflows(rng, scale):
+    """Replica means of 1e-300 have squared deviations of 1e-606: the error must not flush to zero."""
+    layout = ReplicaLayout(8, 50)
+    values = rng.exponential(1.0, (layout.samples, 1, 2))
+    reference, scaled = ReplicaAccumulator(layout, (1, 2)), ReplicaAccumulator(layout, (1, 2))
+    for chunk, sums in _chunk_sums(values, layout, ChunkPlan(layout, 64)):
+        reference.add(chunk, sums)
+        scaled.add(chunk, sums * scale)
+    assert np.all(reference.stderr() > 0)
+    np.testing.assert_allclose(scaled.stderr() / scale, reference.stderr(), rtol=1e-13)
+    np.testing.assert_allclose(scaled.mean() / scale, reference.mean(), rtol=1e-13)
 
 
 def test_accumulator_does_not_depend_on_arrival_order(rng):
@@ -90,8 +105,9 @@ def test_state_round_trip_and_refusals(rng):
         again.add(chunk, sums)
         accumulator.add(chunk, sums)
     np.testing.assert_array_equal(again.stderr(), accumulator.stderr())
-    bad = [dict(state, deviations=-state["deviations"] - 1), dict(state, partial=state["partial"] * np.nan),
-           dict(state, completed=3), dict(state, done=10**9), dict(state, replica_mean=np.zeros((3, 2))),
+    np.testing.assert_array_equal(again.replica_means(), accumulator.replica_means())
+    bad = [dict(state, replica_means=state["replica_means"] + np.inf), dict(state, partial=state["partial"] * np.nan),
+           dict(state, completed=3), dict(state, done=10**9), dict(state, replica_means=np.zeros((3, 2, 2))),
            dict(state, done=200, completed=2)]
     for broken in bad:
         with pytest.raises(ValueError):

@@ -92,16 +92,19 @@ def test_export_command(tmp_path, capsys):
     assert not (tmp_path / "x").exists()
 
 
-@pytest.mark.parametrize("illumination", [Illumination(waveform="impulse"), Illumination(waveform="square"),
-                                          Illumination(waveform="butterworth", order=2)])
-def test_our_plugins_render_the_exported_scene_as_render_does(tmp_path, illumination):
+@pytest.mark.parametrize("illumination, changes", [
+    (Illumination(waveform="impulse"), {}), (Illumination(waveform="square"), {}),
+    (Illumination(waveform="butterworth", order=2), {}),
+    # float32 would flush the intensity to 0: the XML carries it in float64 for our integrator
+    (Illumination(waveform="impulse"), {"intensity": 1e-300, "attenuation": "paper"})])
+def test_our_plugins_render_the_exported_scene_as_render_does(tmp_path, illumination, changes):
     from transient.backend import select_variant
     from transient.mitsuba_scene import plane_to_world
     from transient.render import render, render_loaded
 
     # Coordinates that float32 would round: the XML must carry doubles.
     scene = small_scene(illumination=illumination, source=(0.1 + 0.2 + 0.2, 0.5000000000000001, 1.0),
-                        sensors=[(0.8, 0.30000000000000004, 1.0), (0.25, 0.7, 0.8000000000000002)])
+                        sensors=[(0.8, 0.30000000000000004, 1.0), (0.25, 0.7, 0.8000000000000002)], **changes)
     export_scene(scene, tmp_path, "mitsuba")
     select_variant()
     import mitsuba as mi
@@ -259,11 +262,17 @@ def test_xml_that_does_not_parse_is_never_renamed_into_place(tmp_path, monkeypat
     assert list(tmp_path.iterdir()) == []                      # nor the texture: the writes are staged
 
 
-@pytest.mark.parametrize("changes, key", [
-    (dict(reflectance=np.full((4, 4), 1e-39)), "plane.reflectance"),   # the texture would read zeros
-    (dict(intensity=1e-300), "source.intensity"),                    # Mitsuba's float32 would read 0
+@pytest.mark.parametrize("changes, key, format", [
+    (dict(reflectance=np.full((4, 4), 1e-39)), "plane.reflectance", "mitsuba"),   # the texture would read zeros
+    (dict(intensity=1e-300), "source.intensity", "mitransient"),                 # its float32 would read 0
 ])
-def test_values_mitsuba_reads_as_float32_must_fit_it(tmp_path, changes, key):
+def test_values_mitsuba_reads_as_float32_must_fit_it(tmp_path, changes, key, format):
     with pytest.raises(SceneError, match=f"{key}.*float32"):
-        export_scene(small_scene(**changes), tmp_path, "mitsuba")
+        export_scene(small_scene(**changes), tmp_path, format)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_mitransient_refuses_the_papers_attenuation(tmp_path):
+    """mitransient renders physical transport only: exporting eq. (1) for it would be silently wrong."""
+    with pytest.raises(SceneError, match="model.attenuation"):
+        export_scene(small_scene(attenuation="paper"), tmp_path, "mitransient")

@@ -7,7 +7,7 @@ import numpy as np
 from scipy import stats
 
 from analytic.scene import Sampling, Scene
-from render_checks import FALSE_ALARM, agreement, general_path_dict, model, render_dict
+from render_checks import FALSE_ALARM, agreement, model, render_dict
 from validation.compare import combined_dof
 
 
@@ -17,18 +17,18 @@ CORNER_ALBEDO = 0.5
 CORNER_SAMPLING = Sampling(bin_width_opl=0.1, start_opl=0.6, count=30)
 
 
-def test_general_path_matches_model_on_the_plane(mitsuba, scene):
+def test_general_path_matches_model_on_the_plane(mitsuba, scene, path_dict):
     """The general estimator (area sampling over all shapes, shadow rays, next-event
     estimation) on the single-plane scene: same answer as the model."""
     from transient.mitsuba_scene import scene_dict
 
-    result = render_dict(mitsuba, general_path_dict(scene_dict(scene), max_depth=3), 2**22, 21)   # a plane cannot see itself
+    result = render_dict(mitsuba, path_dict(scene_dict(scene), max_depth=3), 2**22, 21)   # a plane cannot see itself
     chi2_per_dof, largest, dof, passes = agreement(result.mean, result.stderr, model(scene), result.dof)
     assert dof >= 50
     assert passes, f"chi2/dof {chi2_per_dof:.3f}, max|z| {largest:.2f} over {dof} bins"
 
 
-def test_general_path_bins_float32_lengths_right_at_100_times_their_error(mitsuba):
+def test_general_path_bins_float32_lengths_right_at_100_times_their_error(mitsuba, path_dict):
     """Bins 100 times the stated float32 path-length error, over a window inside the response."""
     from transient.mitsuba_scene import scene_dict
     from transient.path import path_length_error
@@ -37,7 +37,7 @@ def test_general_path_bins_float32_lengths_right_at_100_times_their_error(mitsub
     error = path_length_error(2.5, 1.0, 1)
     window = Sampling(bin_width_opl=100 * error, start_opl=2.2, count=120)
     scene = Scene(size=1.0, pixels=1, reflectance=0.5, source=source, sensors=[sensor], sampling=window)
-    result = render_dict(mitsuba, general_path_dict(scene_dict(scene)), 2**24, 25)
+    result = render_dict(mitsuba, path_dict(scene_dict(scene)), 2**24, 25)
     chi2_per_dof, largest, dof, passes = agreement(result.mean, result.stderr, model(scene), result.dof)
     assert error < 2e-6 and dof >= 100
     assert passes, f"chi2/dof {chi2_per_dof:.3f}, max|z| {largest:.2f} over {dof} bins"

@@ -9,7 +9,7 @@ import pytest
 
 from analytic.scene import Illumination, Sampling, Scene
 from analytic.system import forward, system_matrix
-from render_checks import agreement, general_path_dict, model, render_dict
+from render_checks import agreement, model, render_dict
 from transient.render import render, render_loaded
 from validation.suite import hard_cases, validation_suite
 
@@ -41,6 +41,59 @@ def test_wrong_model_fails(scene, rendered, wrong):
         reference = model(scene.replace(attenuation="paper")) / np.pi
     *_, passes = agreement(rendered.mean, rendered.stderr, reference, rendered.dof)
     assert not passes
+
+
+def test_paper_attenuation_renders_the_papers_model(scene):
+    """attenuation = "paper" renders eq. (1): it agrees with the paper's model and not with physical transport."""
+    paper = scene.replace(attenuation="paper")
+    result = render(paper, spp=2**20, seed=19, progress=False)
+    chi2_per_dof, largest, dof, passes = agreement(result.mean, result.stderr, model(paper), result.dof)
+    assert dof >= 50
+    assert passes, f"chi2/dof {chi2_per_dof:.3f}, max|z| {largest:.2f} over {dof} bins"
+    *_, lambertian_passes = agreement(result.mean, result.stderr, model(scene), result.dof)
+    assert not lambertian_passes
+
+
+def test_y_scales_with_the_intensity_exactly(scene):
+    """y(I) / I is one array for every legal I (same seed), and each y(I) agrees with the model's.
+
+    A float32 intensity flushes I = 1e-300 to zero (y = 0, stderr = 0) and
+    rounds I = 1e30 by 1.5e-8 relative.
+    """
+    results = {intensity: render(scene.replace(intensity=intensity), spp=2**16, seed=23, progress=False)
+               for intensity in (1e-300, 1e-30, 1.0, 1e30)}
+    unit = results[1.0]
+    assert np.all(unit.stderr[unit.mean > 0] > 0)
+    for intensity, result in results.items():
+        np.testing.assert_allclose(result.mean / intensity, unit.mean, rtol=1e-15, atol=0)
+        np.testing.assert_allclose(result.stderr / intensity, unit.stderr, rtol=1e-15, atol=0)
+        np.testing.assert_allclose(result.replica_means / intensity, unit.replica_means, rtol=1e-15, atol=0)
+        chi2_per_dof, largest, dof, passes = agreement(result.mean, result.stderr,
+                                                       model(scene.replace(intensity=intensity)), result.dof)
+        assert passes, f"I = {intensity:g}: chi2/dof {chi2_per_dof:.3f}, max|z| {largest:.2f} over {dof} bins"
+
+
+def test_the_emitter_holds_a_float32_stand_in_of_the_float64_intensity(mitsuba, scene):
+    """Below float32's normal range the emitter holds the smallest normal float32; the plugin's float64
+    source_intensity is what is rendered, and an emitter that disagrees with it is refused."""
+    from transient.chunks import ReplicaLayout
+    from transient.mitsuba_scene import scene_dict
+    from transient.intensity import emitter_intensity
+
+    assert emitter_intensity(1e-300) == float(np.finfo(np.float32).tiny)
+    assert emitter_intensity(1e30) == float(np.float32(1e30))
+    layout = ReplicaLayout(2, 2**10)
+
+    def sums(entries):
+        loaded = mitsuba.load_dict(entries)
+        return loaded.integrator().render_chunk(loaded, seed=4, layout=layout, first=0, count=layout.samples)
+
+    unit = sums(scene_dict(scene))
+    tiny = sums(scene_dict(scene.replace(intensity=1e-300)))
+    np.testing.assert_allclose(tiny / 1e-300, unit, rtol=1e-15, atol=0)
+    parts = scene_dict(scene)
+    with pytest.raises(ValueError, match="source_intensity"):
+        sums(dict(parts, source=dict(parts["source"], intensity=2.0)))
 
 
 @pytest.mark.parametrize("estimator", [{"strategy": "source"}, {"strategy": "area"},
@@ -206,6 +259,7 @@ def test_one_compiled_kernel_serves_every_chunk_seed_and_sample_count(mitsuba, s
         dr.kernel_history()
         render(scene, spp=3 * 2**17 + 5, seed=2, progress=False, chunk_size=2**16)
         render(scene, spp=2**18, seed=3, progress=False)
+        render(scene.replace(intensity=1e-300), spp=2**18, seed=3, progress=False)     # I is not in the kernel
         # Scene loading launches its own small kernels (4096 lanes); the chunks are the others.
         launches = [k for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT and k["size"] not in (1, 4096)]
     finally:
@@ -213,7 +267,7 @@ def test_one_compiled_kernel_serves_every_chunk_seed_and_sample_count(mitsuba, s
     assert len(launches) >= 8 and len({k["hash"] for k in launches}) == 1
 
 
-def test_plugins_refuse_what_they_cannot_render(mitsuba, scene):
+def test_plugins_refuse_what_they_cannot_render(mitsuba, scene, path_dict):
     from transient.chunks import ReplicaLayout
     from transient.mitsuba_scene import scene_dict
 
@@ -230,13 +284,16 @@ def test_plugins_refuse_what_they_cannot_render(mitsuba, scene):
         chunk(dict(parts, integrator=dict(parts["integrator"], source_position=[0.3, 0.6, 0.81])))
     for change, message in (({"waveform": "sine"}, "waveform"), ({"max_depth": 2}, "max_depth"),
                             ({"strategy": "best"}, "strategy"), ({"sampler": "sobol"}, "sampler"),
-                            ({"source_position": [0.3, 0.6, -0.8]}, "above")):
+                            ({"source_position": [0.3, 0.6, -0.8]}, "above"),
+                            ({"attenuation": "cosine"}, "attenuation"),
+                            ({"source_intensity": -1.0}, "source_intensity"),
+                            ({"source_intensity": float("inf")}, "source_intensity")):
         with pytest.raises(RuntimeError, match=message):
             mitsuba.load_dict(dict(parts, integrator=dict(parts["integrator"], **change)))
     without = {key: value for key, value in parts["integrator"].items() if key != "plane_to_world"}
     with pytest.raises(RuntimeError, match="plane_to_world"):
         mitsuba.load_dict(dict(parts, integrator=without))
-    mirror = dict(general_path_dict(parts), plane=dict(parts["plane"], bsdf={"type": "conductor"}))
+    mirror = dict(path_dict(parts), plane=dict(parts["plane"], bsdf={"type": "conductor"}))
     with pytest.raises(ValueError, match="diffuse"):
         chunk(mirror)
     with pytest.raises(ValueError, match="seed"):

@@ -1,7 +1,8 @@
-"""Checkpoints, resume and refusals of transient.render (the render's state file).
+"""Checkpoints, resume and refusals of transient.render (the render's state and scene files).
 
-An interrupted render (Ctrl-C, SIGTERM, kill -9) resumes to the numbers of
-an uninterrupted one; every bad argument is refused before any work; every
+An interrupted render (Ctrl-C, SIGTERM, kill -9) resumes, from its folder
+alone, to the numbers of an uninterrupted one; until then its outputs say
+they are partial; every bad argument is refused before any work; every
 state that cannot be resumed is refused with a one-line RenderStateError
 naming the file and the fix.
 """
@@ -20,7 +21,8 @@ import numpy as np
 import pytest
 
 from analytic.scene import Sampling, Scene
-from transient.render import STATE_FILE, RenderStateError, render, scene_fingerprint
+from transient.render import (PARTIAL_FOLDER, REPLICAS_FILE, SCENE_FILE, STATE_FILE, RenderInterrupted,
+                              RenderStateError, read_saved_render, render, resume, scene_fingerprint)
 
 
 @pytest.fixture(scope="module")
@@ -39,14 +41,15 @@ def straight(scene):
     return render(scene, spp=SAMPLES, seed=17, chunk_size=CHUNK, progress=False)
 
 
-def _interrupted(scene, folder, *, after: int, seed: int = 17):
+def _interrupted(scene, folder, *, after: int, seed: int = 17) -> RenderInterrupted:
     """Render into ``folder`` and stop (as Ctrl-C would) once ``after`` samples are done."""
     def stop(done):
         if done >= after:
             raise KeyboardInterrupt
 
-    with pytest.raises(KeyboardInterrupt):
+    with pytest.raises(RenderInterrupted) as stopped:
         render(scene, spp=SAMPLES, seed=seed, chunk_size=CHUNK, out_dir=folder, progress=False, on_chunk=stop)
+    return stopped.value
 
 
 def test_first_checkpoint_comes_with_the_first_chunk(scene, tmp_path):
@@ -65,16 +68,70 @@ def test_interrupt_then_resume_matches_uninterrupted(scene, straight, tmp_path):
     _interrupted(scene, tmp_path, after=3 * CHUNK)
     with np.load(tmp_path / STATE_FILE) as state:
         assert int(state["done"]) >= 3 * CHUNK
-    meta = json.loads((tmp_path / "meta.json").read_text())
-    assert meta["kind"] == "render" and meta["seed"] == 17 and meta["replicas"] >= 2
+    # The estimate so far is labelled partial, and no complete-looking file exists yet.
+    assert not (tmp_path / "transient.npy").exists() and not (tmp_path / "meta.json").exists()
+    meta = json.loads((tmp_path / PARTIAL_FOLDER / "meta.json").read_text())
+    assert meta["complete"] is False and meta["kind"] == "render" and meta["seed"] == 17 and meta["replicas"] >= 2
     assert meta["samples"] == meta["replicas"] * SAMPLES // 32
+    partial = np.load(tmp_path / PARTIAL_FOLDER / REPLICAS_FILE)
+    assert partial.shape == (meta["replicas"], 2, 30)
     resumed = render(scene, spp=SAMPLES, seed=17, chunk_size=CHUNK, out_dir=tmp_path, resume=True, progress=False)
     assert resumed.samples == SAMPLES and resumed.dof == 31
+    assert resumed.drawn == SAMPLES - 3 * CHUNK                 # this run's samples only
     np.testing.assert_allclose(resumed.mean, straight.mean, rtol=1e-12, atol=0)
     np.testing.assert_allclose(resumed.stderr, straight.stderr, rtol=1e-9, atol=0)
     np.testing.assert_allclose(np.load(tmp_path / "transient.npy"), straight.mean, rtol=1e-12, atol=0)
     np.testing.assert_allclose(np.load(tmp_path / "stderr.npy"), straight.stderr, rtol=1e-9, atol=0)
-    assert json.loads((tmp_path / "meta.json").read_text())["samples"] == SAMPLES
+    meta = json.loads((tmp_path / "meta.json").read_text())
+    assert meta["samples"] == SAMPLES and meta["complete"] is True
+    assert not (tmp_path / PARTIAL_FOLDER).exists()
+
+
+def test_outputs_hold_the_replica_means(scene, straight, tmp_path):
+    """replicas.npy: the R replica estimates whose mean is transient.npy and whose spread is stderr.npy."""
+    result = render(scene, spp=SAMPLES, seed=17, chunk_size=CHUNK, out_dir=tmp_path, progress=False)
+    replicas = np.load(tmp_path / REPLICAS_FILE)
+    assert replicas.shape == (32, 2, 30) and replicas.dtype == np.float64
+    np.testing.assert_allclose(replicas, result.replica_means, rtol=0, atol=0)
+    np.testing.assert_allclose(replicas.mean(axis=0), np.load(tmp_path / "transient.npy"), rtol=1e-13, atol=0)
+    np.testing.assert_allclose(replicas.std(axis=0, ddof=1) / np.sqrt(32), np.load(tmp_path / "stderr.npy"),
+                               rtol=1e-10, atol=0)
+    # Independent replicas: their spread is the estimate's, not a copy of one replica.
+    assert np.all(np.ptp(replicas, axis=0)[straight.mean > 0] > 0)
+
+
+def test_resume_from_the_folder_alone(scene, straight, tmp_path):
+    """The folder holds the scene, seed, samples and variant: nothing else is needed to finish."""
+    stopped = _interrupted(scene, tmp_path, after=2 * CHUNK)
+    assert (stopped.done, stopped.planned, stopped.folder) == (2 * CHUNK, SAMPLES, tmp_path)
+    saved = read_saved_render(tmp_path)
+    assert (saved.spp, saved.seed, saved.done) == (SAMPLES, 17, 2 * CHUNK)
+    assert scene_fingerprint(saved.scene) == scene_fingerprint(scene)
+    resumed = resume(tmp_path, chunk_size=CHUNK, progress=False)
+    np.testing.assert_allclose(resumed.mean, straight.mean, rtol=1e-12, atol=0)
+
+
+def test_resume_names_every_argument_that_differs(scene, saved):
+    message = _resume_refused(saved, spp=1000, seed=3)
+    assert "--spp 1000 differs from the state's 524288" in message
+    assert "--seed 3 differs from the state's 17" in message
+    assert "different" not in message                                  # not blamed on the scene
+    message = _resume_refused(saved, scene=scene.replace(source=(0.4, 0.6, 0.71)))
+    assert "scene given differs" in message
+    # Fields a render does not read may differ: they only go to meta.json.
+    resume(saved, scene=scene.replace(tolerance=1e-4, name="renamed"), chunk_size=CHUNK, progress=False)
+    assert json.loads((saved / "meta.json").read_text())["scene"] == "renamed"
+
+
+def test_a_damaged_scene_file_is_refused_in_one_line_and_the_scene_given_again_resumes(scene, straight, saved):
+    (saved / SCENE_FILE).write_bytes(b"not an archive")
+    message = _resume_refused(saved)
+    assert SCENE_FILE in message and "SCENE --resume" in message
+    resumed = resume(saved, scene=scene, chunk_size=CHUNK, progress=False)      # as the message says
+    np.testing.assert_allclose(resumed.mean, straight.mean, rtol=1e-12, atol=0)
+    assert scene_fingerprint(read_saved_render(saved).scene) == scene_fingerprint(scene)   # repaired
+    (saved / SCENE_FILE).unlink()
+    assert "no " + SCENE_FILE in _resume_refused(saved)
 
 
 def test_sigterm_keeps_finished_chunks(scene, straight, tmp_path):
@@ -160,8 +217,7 @@ def _rewrite(tmp_path, state, *, reseal: bool):
     if reseal:
         identity = json.loads(str(state["identity"]))
         progress = {"done": int(state["done"]), "completed": int(state["completed"]),
-                    **{name: np.asarray(state[name], dtype=np.float64) for name in ("partial", "replica_mean",
-                                                                                   "deviations")}}
+                    **{name: np.asarray(state[name], dtype=np.float64) for name in ("partial", "replica_means")}}
         state = dict(state, checksum=np.array(module._checksum(identity, progress)))
     with open(tmp_path / STATE_FILE, "wb") as stream:
         np.savez(stream, **state)
@@ -172,6 +228,14 @@ def _refused(scene, folder, pattern, **changes):
                  "progress": False} | changes
     with pytest.raises(RenderStateError, match=pattern) as error:
         render(scene, **arguments)
+    message = str(error.value)
+    assert "\n" not in message and message.startswith("resume: ")
+    return message
+
+
+def _resume_refused(folder, **given):
+    with pytest.raises(RenderStateError) as error:
+        resume(folder, chunk_size=CHUNK, progress=False, **given)
     message = str(error.value)
     assert "\n" not in message and message.startswith("resume: ")
     return message
@@ -202,21 +266,21 @@ def test_unreadable_states_are_refused(scene, saved, damage):
 
 def test_tampered_state_is_refused_by_its_checksum(scene, saved):
     state = _state(saved)
-    state["replica_mean"] = state["replica_mean"] * 1.001
+    state["replica_means"] = state["replica_means"] * 1.001
     _rewrite(saved, state, reseal=False)
     _refused(scene, saved, "corrupted")
 
 
 @pytest.mark.parametrize("damage, pattern", [
-    ("nan", "NaN"), ("negative", "negative"), ("wrong shape", "shape"), ("counts", "replicas complete")])
+    ("nan", "NaN"), ("infinite", "infinite"), ("wrong shape", "shape"), ("counts", "replicas complete")])
 def test_inconsistent_states_are_refused_even_with_a_valid_checksum(scene, saved, damage, pattern):
     state = _state(saved)
     if damage == "nan":
         state["partial"] = state["partial"] * np.nan
-    elif damage == "negative":
-        state["deviations"] = -1.0 - state["deviations"]
+    elif damage == "infinite":
+        state["replica_means"] = state["replica_means"] + np.inf
     elif damage == "wrong shape":
-        state["replica_mean"] = np.zeros((3, 30))
+        state["replica_means"] = np.zeros((3, 30))
     else:
         state["completed"] = np.int64(int(state["completed"]) + 1)
     _rewrite(saved, state, reseal=True)
@@ -224,20 +288,32 @@ def test_inconsistent_states_are_refused_even_with_a_valid_checksum(scene, saved
 
 
 def test_state_of_another_render_is_refused(scene, saved):
-    _refused(scene, saved, "seed 17", seed=18)
-    _refused(scene.replace(source=(0.3, 0.6, 0.9)), saved, "different scene")
-    _refused(scene, saved, "different scene or estimator", estimator={"sampler": "independent"})
-    assert "--spp 524288" in _refused(scene, saved, "planned for spp", spp=2 * SAMPLES)
-    assert "below" in _refused(scene, saved, "below", spp=2**16)
+    _refused(scene, saved, "--seed 18 differs from the state's 17", seed=18)
+    _refused(scene.replace(source=(0.3, 0.6, 0.9)), saved, "scene given differs")
+    _refused(scene.replace(attenuation="paper"), saved, "scene given differs")
+    _refused(scene, saved, "estimator options", estimator={"sampler": "independent"})
+    _refused(scene, saved, "--spp 1048576 differs from the state's 524288", spp=2 * SAMPLES)
+    _refused(scene, saved, "--spp 65536 differs from the state's 524288", spp=2**16)
     state = _state(saved)
     identity = json.loads(str(state["identity"]))
     state["identity"] = np.array(json.dumps(dict(identity, variant="cuda_ad_mono"), sort_keys=True))
     _rewrite(saved, state, reseal=True)
-    _refused(scene, saved, "variant")
+    _refused(scene, saved, "--variant llvm_.*differs from the state's cuda_ad_mono")
+
+
+def test_a_state_of_the_previous_format_is_refused(scene, saved):
+    state = _state(saved)
+    identity = json.loads(str(state["identity"]))
+    state["identity"] = np.array(json.dumps(dict(identity, format="diffuse-imaging render state 2 "
+                                                                 "(stratified replicas)"), sort_keys=True))
+    _rewrite(saved, state, reseal=True)
+    _refused(scene, saved, "another version")
 
 
 def test_fingerprint_covers_scene_and_estimator(scene):
     base = scene_fingerprint(scene)
     assert base != scene_fingerprint(scene.replace(source=(0.4, 0.6, 0.70000001)))
     assert base != scene_fingerprint(scene, {"strategy": "area"})
-    assert base == scene_fingerprint(scene.replace(attenuation="paper"))       # the renderer ignores it
+    assert base != scene_fingerprint(scene.replace(attenuation="paper"))       # the renderer renders it
+    assert base != scene_fingerprint(scene.replace(intensity=2.0))
+    assert base == scene_fingerprint(scene.replace(tolerance=1e-4, name="other"))   # the model's alone

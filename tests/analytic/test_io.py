@@ -114,6 +114,8 @@ def test_one_schema_for_model_and_render(waveform):
     assert model["illumination"] == render["illumination"] == waveform
     assert model["illumination_parameters"] == render["illumination_parameters"]
     assert render["attenuation"] == "lambertian" and render["tolerance"] is None
+    # the renderer renders the paper's attenuation too, and the metadata says which it rendered
+    assert build_meta(scene.replace(attenuation="paper"), kind="render")["attenuation"] == "paper"
     assert model["intensity"] == scene.intensity and model["bin_width_opl"] == scene.sampling.bin_width_opl
     with pytest.raises(ValueError, match="schema"):
         build_meta(scene, kind="model", bins=3)

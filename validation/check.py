@@ -8,14 +8,22 @@ in two steps:
    :func:`validation.compare.compare_transients` (DESIGN.md section 6).
    The per-bin error se comes from ``stderr`` for one transient, or from R
    independent replicas (mean and standard error of the mean; z then
-   follows Student's t with R - 1 degrees of freedom).
+   follows Student's t with R - 1 degrees of freedom, and the limits of χ²
+   and max |z| come from the replicas' sign flips, which hold whatever the
+   correlation between bins, when R is large enough).
 2. **After the two convention errors users make**: a global scale s and a
    time offset δ, y_data[n] ≈ s y_model(t0 + δ)[n], fitted by weighted least
    squares (Gauss–Newton on the exact model evaluated at the shifted
    start), with standard errors, and the verdict again against
    s y_model(t0 + δ). ``scale`` is data / model; ``offset_opl`` is what must
    be added to the data's start_opl for it to match the model, positive when
-   the data read path lengths short (DESIGN.md section 5).
+   the data read path lengths short (DESIGN.md section 5). The fit needs
+   :data:`FIT_BINS` judged bins; with fewer (a one-bin scene) the data are
+   judged as given only, and the result says so.
+
+A convention the user expects (``expect``: a :class:`Convention`, such as
+mitransient's :func:`irradiancemeter`) is judged too, with the same test
+against s y_model(t0 + δ) for the stated s and δ.
 
 One transient without ``stderr`` carries no noise level: it is judged by
 shape only (relative L2 error against ``shape_tolerance``, the same fit
@@ -25,6 +33,8 @@ Readers (:func:`read_data`) accept our ``transient.npy`` / ``transient.exr``
 (or their folder), a ``(K, N)`` ``.npy`` from any tool, tal's HDF5 capture
 (``analytic.capture``), and mitransient's film output (see
 :func:`read_data`). A bad file raises :class:`DataError` with one line.
+Our render's own errors are found beside its output:
+:func:`replicas_beside` (``replicas.npy``) and :func:`stderr_beside`.
 """
 
 from __future__ import annotations
@@ -41,8 +51,9 @@ from analytic.errors import DataError
 from analytic.scene import Sampling, Scene
 from validation.compare import Agreement, compare_transients
 
-__all__ = ["Fit", "CheckResult", "check_transient", "fit_scale_offset", "read_data",
-           "read_stderr", "stderr_beside", "diagnose", "write_check_report", "KNOWN_SCALES", "MAX_RELATIVE_STDERR"]
+__all__ = ["Fit", "CheckResult", "Convention", "check_transient", "fit_scale_offset", "read_data",
+           "read_stderr", "stderr_beside", "replicas_beside", "irradiancemeter", "diagnose",
+           "write_check_report", "KNOWN_SCALES", "MAX_RELATIVE_STDERR", "FIT_BINS"]
 
 #: Largest |y| accepted: the squares that χ² and the L2 norms form stay float64 numbers.
 MAX_DATA = 1e150
@@ -57,7 +68,7 @@ _RESOLUTION = 1e-6
 #: Scale factors (data / model) that a known convention explains.
 KNOWN_SCALES = (
     (1.0, "reads the fluence, as the model"),
-    (0.25, "reads 1/4 of the fluence (the mean irradiance over a small sphere)"),
+    (0.25, "reads 1/4 of the fluence (the mean irradiance over a sphere)"),
     (4.0, "reads 4 times the fluence"),
     (1.0 / math.pi, "reads 1/π of the fluence (an extra 1/π: BRDF or sensor normalisation)"),
     (math.pi, "reads π times the fluence (a missing 1/π: BRDF or sensor normalisation)"),
@@ -180,15 +191,19 @@ def _capture(path: Path, scene: Scene) -> np.ndarray:
     transient = capture.transient
     if capture.sensors is None or transient.shape[0] != scene.sensor_count:
         return transient   # the shape check in read_data reports a count mismatch
-    # Sensors by position: a T_Sx_Sy grid may be flattened in another order than the scene's.
+    # Sensors by position: a T_Sx_Sy grid may be flattened in another order than the scene's. Sensors
+    # that share a point are interchangeable: the k-th of the scene's there takes the k-th of the file's.
     order = []
     for k, position in enumerate(scene.sensors):
-        distance = np.max(np.abs(capture.sensors - position), axis=1)
-        j = int(np.argmin(distance))
-        if distance[j] > tolerance or j in order:
-            raise DataError(f"{path}: no sensor of sensor_grid_xyz at the scene's sensor {k} "
-                            f"{position.tolist()}; check it against the scene it was rendered from")
-        order.append(j)
+        near = np.max(np.abs(capture.sensors - position), axis=1) <= tolerance
+        free = [j for j in np.flatnonzero(near) if j not in order]
+        if not free:
+            held = (f"only {int(near.sum())} sensor(s) of sensor_grid_xyz at the point of the scene's sensor {k} "
+                    f"{position.tolist()}, where the scene places "
+                    f"{int(np.sum(np.max(np.abs(scene.sensors - position), axis=1) <= tolerance))}" if near.any()
+                    else f"no sensor of sensor_grid_xyz at the scene's sensor {k} {position.tolist()}")
+            raise DataError(f"{path}: {held}; check it against the scene it was rendered from")
+        order.append(int(free[0]))
     return transient[order]
 
 
@@ -267,14 +282,26 @@ def read_data(path: str | Path, scene: Scene) -> np.ndarray:
     else:
         raise DataError(f"{path}: unknown format (expected .npy, .exr, .h5/.hdf5 or a folder of them)")
     if data.shape != (sensors, bins):
-        hint = ("it looks transposed: save (sensors, bins)" if data.shape == (bins, sensors)
-                else f"save a ({sensors}, {bins}) array of the scene's sensors and bins")
+        if data.shape == (bins, sensors):
+            hint = "it looks transposed: save (sensors, bins)"
+        elif data.ndim == 3 and data.shape[1:] == (sensors, bins):
+            hint = (f"it looks like a stack of {data.shape[0]} replicas (a render's replicas.npy): give the "
+                    f"render's folder, or one file per replica")
+        else:
+            hint = f"save a ({sensors}, {bins}) array of the scene's sensors and bins"
         raise DataError(f"{path}: shape {data.shape} does not match the scene's {sensors} sensors x "
                         f"{bins} bins; {hint}")
     if not np.all(np.isfinite(data)):
         bad = int(np.sum(~np.isfinite(data)))
         raise DataError(f"{path}: {bad} value(s) are NaN or infinite; re-render or drop the file")
     return data
+
+
+def _our_render_folder(path: Path) -> Path | None:
+    """The folder of our render's output that ``path`` names (itself or its transient file), else None."""
+    if path.is_dir():
+        return path
+    return path.parent if path.name in ("transient.npy", "transient.exr") else None
 
 
 def stderr_beside(path: str | Path, scene: Scene) -> tuple[np.ndarray, int | None] | None:
@@ -285,13 +312,10 @@ def stderr_beside(path: str | Path, scene: Scene) -> tuple[np.ndarray, int | Non
     tuple or None
         (``stderr.npy`` beside the data, the render's ``dof`` from
         ``meta.json``, None when absent), or None when ``path`` is not one of
-        our render's outputs.
+        our render's outputs or has no ``stderr.npy``.
     """
-    path = Path(path)
-    folder = path if path.is_dir() else path.parent
-    if not (path.is_dir() or path.name in ("transient.npy", "transient.exr")):
-        return None
-    if not (folder / "stderr.npy").is_file():
+    folder = _our_render_folder(Path(path))
+    if folder is None or not (folder / "stderr.npy").is_file():
         return None
     dof = None
     try:
@@ -299,6 +323,57 @@ def stderr_beside(path: str | Path, scene: Scene) -> tuple[np.ndarray, int | Non
     except (OSError, ValueError, AttributeError):
         pass
     return read_stderr(folder / "stderr.npy", scene), dof if isinstance(dof, int) and dof >= 1 else None
+
+
+def replicas_beside(path: str | Path, scene: Scene, data: np.ndarray) -> np.ndarray | None:
+    """Our render's replicas for its output (folder, ``transient.npy`` or ``.exr``), when it wrote them.
+
+    Parameters
+    ----------
+    path : str or Path
+        What the user named as data.
+    scene : Scene
+        The scene.
+    data : numpy.ndarray
+        ``(K, N)`` the transient read from ``path``: the replicas must
+        average to it (float32 rounding allowed for the EXR).
+
+    Returns
+    -------
+    numpy.ndarray or None
+        ``(R, K, N)`` the ``replicas.npy`` beside the data (R >= 3: each a
+        complete estimate of y), or None when ``path`` is not our render's
+        output, there is no ``replicas.npy``, or it holds fewer than 3
+        (then ``stderr.npy`` serves).
+
+    Raises
+    ------
+    DataError
+        ``replicas.npy`` unreadable, of the wrong shape, not finite, or not
+        averaging to the transient beside it.
+    """
+    folder = _our_render_folder(Path(path))
+    if folder is None or not (folder / "replicas.npy").is_file():
+        return None
+    name = folder / "replicas.npy"
+    try:
+        replicas = np.load(name, allow_pickle=False)
+    except (ValueError, OSError) as error:
+        raise DataError(f"{name}: not a readable .npy ({error})") from None
+    expected = (scene.sensor_count, scene.sampling.count)
+    if replicas.ndim != 3 or replicas.shape[1:] != expected or not np.issubdtype(replicas.dtype, np.floating):
+        raise DataError(f"{name}: shape {replicas.shape} ({replicas.dtype}), expected float (R, {expected[0]}, "
+                        f"{expected[1]}) replicas of the scene's sensors x bins; re-render or remove it")
+    replicas = np.asarray(replicas, dtype=np.float64)
+    if not np.all(np.isfinite(replicas)):
+        raise DataError(f"{name}: NaN or infinite values; re-render or remove it")
+    if replicas.shape[0] < 3:
+        return None
+    mean = replicas.mean(axis=0)
+    if np.any(np.abs(mean - data) > 2.0**-22 * np.abs(data) + 1e-12 * float(np.max(np.abs(data)))):
+        raise DataError(f"{name}: the replicas do not average to the transient beside them (files of different "
+                        f"renders?); re-render, or remove replicas.npy to judge by stderr.npy")
+    return replicas
 
 
 def read_stderr(path: str | Path, scene: Scene) -> np.ndarray:
@@ -547,7 +622,124 @@ def fit_scale_offset(data, sigma, mask, model_at, bin_width_opl: float, *, repli
                stderr_from=method)
 
 
+# --------------------------------------------------------------------------- stated conventions
+
+#: Mitsuba's ``math::RayEpsilon`` in single-precision variants (1500 x 2⁻²⁴ m): an
+#: irradiancemeter starts its rays this far off its sphere (mitransient runs float32 variants).
+RAY_EPSILON_FLOAT32 = 1500 * 2.0**-24
+
+
+@dataclass(frozen=True)
+class Convention:
+    """What the data are stated to read: scale · y_model(start_opl + offset_opl).
+
+    Attributes
+    ----------
+    scale : float
+        Data / model, dimensionless (as :attr:`Fit.scale`).
+    offset_opl : float
+        Metres of path length added to the model's start_opl before the
+        comparison: positive when the data read path lengths short (as
+        :attr:`Fit.offset_opl`).
+    name : str
+        What states it, for reports.
+    """
+
+    scale: float
+    offset_opl: float
+    name: str
+
+    def __post_init__(self):
+        if not (math.isfinite(self.scale) and self.scale > 0):
+            raise ValueError(f"scale: the stated scale must be a finite number > 0, got {self.scale!r}")
+        if not math.isfinite(self.offset_opl):
+            raise ValueError(f"offset: the stated offset must be a finite number of metres, got {self.offset_opl!r}")
+
+    def as_dict(self) -> dict:
+        return {"name": self.name, "scale": self.scale, "offset_opl": self.offset_opl}
+
+
+def irradiancemeter(scene: Scene, radius: float, *, ray_epsilon: float = RAY_EPSILON_FLOAT32) -> Convention:
+    """What mitransient's irradiancemeter spheres read, against the model's point sensors.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene; each sensor is a sphere of ``radius`` centred on its
+        position (``diffuse-imaging export --format mitransient``).
+    radius : float
+        Sphere radius r, metres: 0 < r < every sensor's height, so that no
+        sphere reaches the plane (the export's bound).
+    ray_epsilon : float
+        Metres the meter moves each ray's origin off the sphere: Mitsuba's
+        ``math::RayEpsilon``, :data:`RAY_EPSILON_FLOAT32` in the
+        single-precision variants mitransient runs (1500 x 2⁻⁵³ m, i.e.
+        negligible, in double ones).
+
+    Returns
+    -------
+    Convention
+        scale 1/4, offset_opl 2r/3 + ε.
+
+    Raises
+    ------
+    ValueError
+        A radius outside (0, lowest sensor height), or a negative ``ray_epsilon``.
+
+    Notes
+    -----
+    Mitsuba's ``irradiancemeter`` (``src/sensors/irradiancemeter.cpp``)
+    starts each ray at a uniform point of its sphere, in a cosine-weighted
+    direction about the outward normal, with weight π, from the point moved
+    ε along the ray, and mitransient's ``transient_path`` bins the path
+    length from that origin. It reads the irradiance averaged over the
+    sphere, Ē = P / (4π r²), P the power the sphere intercepts.
+
+    *Scale: exactly 1/4, with no finite-sphere correction.* A Lambertian
+    element dA of the plane, of radiance B/π, sends the sphere
+    P = (B/π) dA Ω⊥, Ω⊥ the sphere's solid angle projected on dA's plane.
+    By Nusselt's analogue Ω⊥ is the area of the orthographic projection,
+    onto dA's plane, of the cap the sphere's cone cuts from the unit
+    hemisphere: a circle of radius sin α = r/d tilted by θ, which projects
+    to an ellipse of area π (r/d)² cos θ, exactly, whenever the whole cap
+    lies above dA's horizon (the sphere above the plane). d is the distance
+    from dA to the centre and θ the angle between the plane's normal and
+    the centre's direction. The same element adds (B/π) dA cos θ / d² to
+    the fluence rate Φ at the centre, which the model's point sensor reads,
+    so every element, hence every bin of every sensor, gives Ē = Φ / 4,
+    whatever r/d. (Light from an isotropic point source would give
+    Ē / Φ = 1 / (2 (1 + sqrt(1 - (r/d)²))) = (1/4)(1 + (r/d)²/4 + ...):
+    the Lambertian element's cosine is what removes the correction.)
+
+    *Offset: 2r/3 + ε.* The light from dA that the sphere intercepts fills
+    its cone with an intensity that varies across it only at first order in
+    r/d, and oddly; to first order it crosses the plane through the centre
+    perpendicular to the cone's axis uniformly within the disc of radius r,
+    at distance b from the axis, after meeting the sphere sqrt(r² - b²)
+    before that plane: path lengths short by 2r/3 on average, plus ε where
+    the meter's rays start, for every element, sensor and bin.
+
+    Neglected: O(r²/d) in the offset, the spread of the shortfall
+    (standard deviation r/sqrt(18)) within a bin of width T, a relative
+    O((r/T)²) effect, and the sphere's own shadow on the plane, O(r²)
+    relative: ~1e-6 of y for r = 1 mm, d ~ 1 m, T ~ 0.05 m.
+    """
+    lowest = float(np.min(scene.sensors[:, 2]))
+    radius = float(radius)
+    if not (math.isfinite(radius) and 0.0 < radius < lowest):
+        raise ValueError(f"radius: must lie in (0, {lowest:g}) m, below the lowest sensor's height (the spheres "
+                         f"must not reach the plane), got {radius:g}")
+    if not (math.isfinite(ray_epsilon) and ray_epsilon >= 0):
+        raise ValueError(f"ray_epsilon: must be a finite number of metres >= 0, got {ray_epsilon!r}")
+    return Convention(scale=0.25, offset_opl=2.0 * radius / 3.0 + float(ray_epsilon),
+                      name=f"irradiancemeter spheres of radius {radius:g} m")
+
+
 # --------------------------------------------------------------------------- the verdict
+
+#: Fewest judged bins that a scale and a time offset are fitted to (two parameters and a residual).
+FIT_BINS = 3
+
 
 @dataclass(frozen=True)
 class CheckResult:
@@ -560,10 +752,12 @@ class CheckResult:
     chi2_per_dof, max_abs_z : float or None
         As given (None when judged by shape only). With replicas z is
         judged as Student's t (see Notes of :func:`check_transient`).
-    fit : Fit
-        Best scale and offset.
-    agrees_after_fit : bool
-        The data agree with scale · y_model(start_opl + offset).
+    fit : Fit or None
+        Best scale and offset; None when too few bins allow no fit
+        (``fit_skipped`` says why).
+    agrees_after_fit : bool or None
+        The data agree with scale · y_model(start_opl + offset) (None
+        without a fit).
     judged_by : {"stderr", "replicas", "shape"}
         Where the per-bin error came from.
     replicas : int
@@ -571,32 +765,44 @@ class CheckResult:
     dof : int or None
         Student-t degrees of freedom of z (R - 1), None for Gaussian z.
     relative_l2, relative_l2_after_fit : float
-        ||y_data - y_model|| / ||y_model||, as given and after the fit.
+        ||y_data - y_model|| / ||y_model||, as given and after the fit
+        (None without a fit).
     chi2_per_dof_after_fit, max_abs_z_after_fit : float or None
         After the fit.
     diagnosis : str
         One sentence for the user.
     as_given, after_fit : Agreement or None
-        The full verdicts (None when judged by shape only).
+        The full verdicts (None when judged by shape only, or without a fit).
     shape_tolerance : float or None
         The relative L2 tolerance when judged by shape only.
     data, stderr, model, fitted_model : numpy.ndarray
         ``(K, N)``: the (mean) data, its standard error (None by shape),
-        the model as given and scale · y_model(start_opl + offset).
+        the model as given and scale · y_model(start_opl + offset) (the
+        model as given without a fit).
     edges : numpy.ndarray
         ``(N + 1,)`` bin edges of the scene, metres of path length.
+    fit_skipped : str or None
+        Why no scale and offset were fitted.
+    expected : Convention or None
+        The convention the user stated (``check --expect``).
+    agrees_as_expected : bool or None
+        The data agree with the stated convention's model.
+    as_expected : Agreement or None
+        Its full verdict (None by shape only or without a stated convention).
+    relative_l2_as_expected : float or None
+        ||y_data - y_expected|| / ||y_expected||.
     """
 
     agrees: bool
     chi2_per_dof: float | None
     max_abs_z: float | None
-    fit: Fit
-    agrees_after_fit: bool
+    fit: Fit | None
+    agrees_after_fit: bool | None
     judged_by: str
     replicas: int
     dof: int | None
     relative_l2: float
-    relative_l2_after_fit: float
+    relative_l2_after_fit: float | None
     chi2_per_dof_after_fit: float | None
     max_abs_z_after_fit: float | None
     diagnosis: str
@@ -608,40 +814,75 @@ class CheckResult:
     model: np.ndarray = field(repr=False)
     fitted_model: np.ndarray = field(repr=False)
     edges: np.ndarray = field(repr=False)
+    fit_skipped: str | None = None
+    expected: Convention | None = None
+    agrees_as_expected: bool | None = None
+    as_expected: Agreement | None = field(default=None, repr=False)
+    relative_l2_as_expected: float | None = None
+
+    @property
+    def verdict(self) -> bool:
+        """What the exit status reports: agreement with the stated convention, else as given."""
+        return bool(self.agrees_as_expected) if self.expected is not None else self.agrees
 
     def as_dict(self) -> dict:
         """metrics.json: DESIGN.md section 5's keys plus the figures behind them."""
         result = {"agrees": self.agrees, "chi2_per_dof": self.chi2_per_dof, "max_abs_z": self.max_abs_z,
-                  "fit": self.fit.as_dict(), "agrees_after_fit": self.agrees_after_fit,
+                  "fit": None if self.fit is None else self.fit.as_dict(),
+                  "agrees_after_fit": self.agrees_after_fit, "fit_skipped": self.fit_skipped,
                   "judged_by": self.judged_by, "replicas": self.replicas, "dof": self.dof,
                   "relative_l2": self.relative_l2, "relative_l2_after_fit": self.relative_l2_after_fit,
                   "chi2_per_dof_after_fit": self.chi2_per_dof_after_fit,
                   "max_abs_z_after_fit": self.max_abs_z_after_fit, "diagnosis": self.diagnosis}
+        if self.expected is not None:
+            result["expected"] = self.expected.as_dict() | {
+                "agrees": self.agrees_as_expected, "relative_l2": self.relative_l2_as_expected}
+            if self.as_expected is not None:
+                result["expected"] |= {"chi2_per_dof": self.as_expected.chi2_per_dof,
+                                       "max_abs_z": self.as_expected.max_abs_z}
         if self.as_given is not None:
+            result["null"] = self.as_given.null
             result["as_given_detail"] = self.as_given.as_dict()
-            result["after_fit_detail"] = self.after_fit.as_dict()
+            result["after_fit_detail"] = None if self.after_fit is None else self.after_fit.as_dict()
+            if self.as_expected is not None:
+                result["as_expected_detail"] = self.as_expected.as_dict()
         else:
             result["shape_tolerance"] = self.shape_tolerance
         return result
 
     def summary(self) -> str:
-        """Two lines: the verdict as given, and the diagnosis."""
+        """The verdict as given, the stated convention's when there is one, and the diagnosis."""
         if self.judged_by == "shape":
             head = (f"{'AGREES' if self.agrees else 'DISAGREES'} by shape only (no errors given): "
                     f"relative L2 = {self.relative_l2:.3e} (tolerance {self.shape_tolerance:g})")
         else:
             source = (f"{self.replicas} replicas, t with {self.dof} dof" if self.judged_by == "replicas"
                       else "given standard errors")
-            head = (f"{'AGREES' if self.agrees else 'DISAGREES'} as given ({source}): "
+            head = (f"{'AGREES' if self.agrees else 'DISAGREES'} as given ({source}; {self.as_given.null_note}): "
                     f"χ²/dof = {self.chi2_per_dof:.3f}, max |z| = {self.max_abs_z:.2f}, "
                     f"relative L2 = {self.relative_l2:.3e}")
-        return f"{head}\n{self.diagnosis}"
+        lines = [head]
+        if self.expected is not None:
+            lines.append(_expected_sentence(self))
+        return "\n".join(lines + [self.diagnosis])
 
 
-def _agreement(data, stderr, model, dof, false_alarm) -> Agreement:
-    """compare_transients, with Student-t z on ``dof`` degrees of freedom when the error comes from replicas."""
-    return compare_transients(data, stderr, model, dof=np.inf if dof is None else dof,
-                              false_alarm=false_alarm, max_relative_stderr=MAX_RELATIVE_STDERR)
+def _expected_sentence(result: CheckResult) -> str:
+    expected = result.expected
+    stated = (f"{expected.name}: scale {expected.scale:.6g}, offset {expected.offset_opl:+.6g} m")
+    if result.as_expected is None:
+        figures = f"relative L2 = {result.relative_l2_as_expected:.3e}"
+    else:
+        figures = (f"χ²/dof = {result.as_expected.chi2_per_dof:.3f}, "
+                   f"max |z| = {result.as_expected.max_abs_z:.2f}")
+    verdict = "AGREES" if result.agrees_as_expected else "DISAGREES"
+    return f"{verdict} with the stated convention ({stated}): {figures}"
+
+
+def _agreement(data, stderr, model, dof, false_alarm, replicas=None) -> Agreement:
+    """compare_transients: Student-t z on ``dof`` degrees of freedom, and the replicas' own null, when given."""
+    return compare_transients(data, stderr, model, dof=np.inf if dof is None and replicas is None else dof,
+                              replicas=replicas, false_alarm=false_alarm, max_relative_stderr=MAX_RELATIVE_STDERR)
 
 
 def _relative_l2(data, model) -> float:
@@ -707,62 +948,13 @@ def diagnose(fit: Fit, *, agrees: bool, agrees_after_fit: bool, bin_width_opl: f
         parts.append("path lengths long (an extra leg or a late start?)")
     explanation = " and ".join(parts) if parts else "within its errors of the model"
     if factor == 0.25 and parts and parts[0].startswith("a sensor") and shifted and fit.offset_opl > 0:
-        explanation = "a sensor that reads 1/4 of the fluence and path lengths short (an irradiancemeter?)"
+        explanation = ("a sensor that reads 1/4 of the fluence and path lengths short (an irradiancemeter? "
+                       "--expect irradiancemeter states that convention)")
     return f"agrees after {scale_text} and {offset_text}: {explanation}."
 
 
-def check_transient(scene: Scene, data, *, stderr=None, dof: int | None = None, shape_only: bool = False,
-                    model=None, false_alarm: float = 1e-3, shape_tolerance: float = 1e-2) -> CheckResult:
-    """Judge a transient against the exact model of ``scene`` and fit its conventions.
-
-    Parameters
-    ----------
-    scene : Scene
-        The scene the data were rendered (or measured) from.
-    data : array_like
-        ``(K, N)`` one transient, or ``(R, K, N)`` R >= 3 independent
-        replicas (e.g. renders with different seeds); units of y.
-    stderr : array_like, optional
-        ``(K, N)`` standard error of a single transient (units of y).
-        Refused with replicas, whose error comes from their spread.
-    dof : int, optional
-        Degrees of freedom of ``stderr`` when it comes from replicas (our
-        render's: ``replicas - 1``): z is then judged as Student's t.
-        None: z is judged as normal.
-    shape_only : bool
-        Judge a single transient without ``stderr`` by shape only: relative
-        L2 error against ``shape_tolerance``, unweighted fit. Refused
-        together with ``stderr`` or replicas.
-    model : array_like, optional
-        ``forward(scene)`` if already computed.
-    false_alarm : float
-        α: probability that data consistent with the model fail (section 6).
-    shape_tolerance : float
-        Relative L2 error accepted when judging by shape only.
-
-    Returns
-    -------
-    CheckResult
-
-    Raises
-    ------
-    DataError
-        Wrong shapes, NaN, a single transient with neither ``stderr`` nor
-        ``shape_only``, or contradictory options.
-
-    Notes
-    -----
-    Replicas y_r: mean ȳ = Σ y_r / R, standard error
-    se = sqrt(Σ (y_r - ȳ)² / (R (R - 1))), and z = (ȳ - y_model) / se follows
-    Student's t with R - 1 degrees of freedom, which
-    :func:`validation.compare.compare_transients` judges with its t
-    thresholds (so they keep their false-alarm rate α). The fit minimises
-    Σ ((y_data - s y_model(t0 + δ)) / se)² over the judged bins
-    (:func:`fit_scale_offset`); the verdict after it uses the same
-    thresholds (two fitted parameters against D judged bins: the χ²
-    interval's D is not reduced by them, a 2/D effect).
-    """
-    shape = (scene.sensor_count, scene.sampling.count)
+def _checked_data(data, shape) -> np.ndarray:
+    """The data as float64, ``(K, N)`` or ``(R, K, N)``, finite, not all zero, squarable."""
     data = np.asarray(data, dtype=np.float64)
     if data.ndim == 3 and data.shape[0] == 1:
         data = data[0]
@@ -777,7 +969,11 @@ def check_transient(scene: Scene, data, *, stderr=None, dof: int | None = None, 
                         f"float64; rescale the data")
     if largest == 0:
         raise DataError("data: every value is 0, no light to judge or fit; check the file against the scene")
-    replicas = 1 if data.ndim == 2 else data.shape[0]
+    return data
+
+
+def _check_options(replicas: int, stderr, shape_only: bool) -> None:
+    """Refuse the combinations of data, ``stderr`` and ``shape_only`` that mean nothing."""
     if replicas == 2:
         raise DataError("data: two replicas give each bin's error one degree of freedom; give at least 3 "
                         "(or one transient with its standard error)")
@@ -788,64 +984,211 @@ def check_transient(scene: Scene, data, *, stderr=None, dof: int | None = None, 
     if replicas == 1 and stderr is None and not shape_only:
         raise DataError("one transient without errors: give its standard error (--stderr FILE), several "
                         "independent replicas, or ask for a shape-only judgement (--shape-only)")
-    edges = scene.sampling.edges
+
+
+def _checked_stderr(stderr, dof, shape) -> np.ndarray:
+    error = np.asarray(stderr, dtype=np.float64)
+    if error.shape != shape:
+        raise DataError(f"stderr: shape {error.shape} does not match the data's {shape}")
+    if not np.all(np.isfinite(error)) or np.any(error < 0):
+        raise DataError("stderr: must be finite and >= 0 in every bin")
+    if dof is not None and not (isinstance(dof, (int, np.integer)) and dof >= 1):
+        raise DataError(f"dof: the standard error's degrees of freedom must be an integer >= 1, got {dof!r}")
+    return error
+
+
+def _judged_bins(data, error, judged_by: str) -> np.ndarray:
+    """Bins with a standard error, and one under MAX_RELATIVE_STDERR of the value; refuse when none."""
+    positive = error > 0
+    if not np.any(positive):
+        if judged_by == "replicas":
+            raise DataError("data: the replicas are equal in every bin (zero spread), so no bin has an error to "
+                            "judge it by; give independent replicas (renders with different seeds)")
+        raise DataError("stderr: the standard errors are all zero, so no bin has an error to judge it by; "
+                        "give each bin's standard error (zero only where no sample landed)")
+    mask = positive & (error < MAX_RELATIVE_STDERR * np.abs(data))
+    if not np.any(mask):
+        raise DataError(f"data: no bin has a standard error under {MAX_RELATIVE_STDERR:g} of its value "
+                        f"({int(positive.sum())} bin(s) with an error): too noisy to judge; render more samples")
+    return mask
+
+
+def _fit_skipped(bins: int, scene: Scene, what: str) -> str | None:
+    """Why no scale and offset are fitted to ``bins`` bins (``what`` they are), or None when they can be."""
+    if bins >= FIT_BINS:
+        return None
+    total = scene.sensor_count * scene.sampling.count
+    if total < FIT_BINS:
+        return (f"no scale or time offset fitted: the scene's {total} bin(s) cannot fit them (two parameters "
+                f"need at least {FIT_BINS} bins)")
+    return (f"no scale or time offset fitted: only {bins} bin(s) {what}, and two parameters need at least "
+            f"{FIT_BINS}")
+
+
+def check_transient(scene: Scene, data, *, stderr=None, dof: int | None = None, shape_only: bool = False,
+                    model=None, false_alarm: float = 1e-3, shape_tolerance: float = 1e-2,
+                    expect: Convention | None = None) -> CheckResult:
+    """Judge a transient against the exact model of ``scene`` and fit its conventions.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene the data were rendered (or measured) from.
+    data : array_like
+        ``(K, N)`` one transient, or ``(R, K, N)`` R >= 3 independent
+        replicas (renders with different seeds, our render's
+        ``replicas.npy``, another tool's files); units of y. With replicas
+        the per-bin error comes from their spread, and the limits of χ² and
+        max |z| from their sign flips when R is large enough
+        (:func:`validation.compare.replica_null_resolves`), which holds
+        whatever the correlation between bins.
+    stderr : array_like, optional
+        ``(K, N)`` standard error of a single transient (units of y).
+        Refused with replicas, whose error comes from their spread. Its
+        limits assume independent bins (the result says so).
+    dof : int, optional
+        Degrees of freedom of ``stderr`` when it comes from replicas (our
+        render's: ``replicas - 1``): z is then judged as Student's t.
+        None: z is judged as normal.
+    shape_only : bool
+        Judge a single transient without ``stderr`` by shape only: relative
+        L2 error against ``shape_tolerance``, unweighted fit. Refused
+        together with ``stderr`` or replicas.
+    model : array_like, optional
+        ``forward(scene)`` if already computed.
+    false_alarm : float
+        α: probability that data consistent with the model fail (section 6).
+    shape_tolerance : float
+        Relative L2 error accepted when judging by shape only.
+    expect : Convention, optional
+        The convention the data are stated to follow (e.g.
+        :func:`irradiancemeter`): they are judged against
+        scale · y_model(start_opl + offset_opl) as well
+        (:attr:`CheckResult.agrees_as_expected`).
+
+    Returns
+    -------
+    CheckResult
+
+    Raises
+    ------
+    DataError
+        Wrong shapes, NaN, a single transient with neither ``stderr`` nor
+        ``shape_only``, contradictory options, standard errors all zero, or
+        no bin precise enough to judge.
+
+    Notes
+    -----
+    Replicas y_r: mean ȳ = Σ y_r / R, standard error
+    se = sqrt(Σ (y_r - ȳ)² / (R (R - 1))), and z = (ȳ - y_model) / se follows
+    Student's t with R - 1 degrees of freedom, which
+    :func:`validation.compare.compare_transients` judges (so its limits
+    keep their false-alarm rate α). The fit minimises
+    Σ ((y_data - s y_model(t0 + δ)) / se)² over the judged bins
+    (:func:`fit_scale_offset`), and needs :data:`FIT_BINS` of them: with
+    fewer (a one-bin scene) the data are judged as given only, and the
+    result says so. The verdict after the fit uses the same limits (two
+    fitted parameters against D judged bins: a 2/D effect).
+    """
+    shape = (scene.sensor_count, scene.sampling.count)
+    data = _checked_data(data, shape)
+    replicas = 1 if data.ndim == 2 else data.shape[0]
+    _check_options(replicas, stderr, shape_only)
     model_at = _ShiftedModel(scene, model)
     y_model = model_at(0.0)
     if y_model.shape != shape:
         raise DataError(f"model: shape {y_model.shape}, expected {shape}")
-    dof = dof if stderr is not None else None        # replicas set their own below
-    replica_data = data if replicas > 1 else None
+    if shape_only:
+        return _judge_by_shape(scene, data, model_at, expect, shape_tolerance)
     if replicas > 1:
         mean = data.mean(axis=0)
         error = data.std(axis=0, ddof=1) / math.sqrt(replicas)
-        judged_by, dof, data = "replicas", replicas - 1, mean
-    elif stderr is not None:
-        error = np.asarray(stderr, dtype=np.float64)
-        if error.shape != shape:
-            raise DataError(f"stderr: shape {error.shape} does not match the data's {shape}")
-        if not np.all(np.isfinite(error)) or np.any(error < 0):
-            raise DataError("stderr: must be finite and >= 0 in every bin")
-        if dof is not None and not (isinstance(dof, (int, np.integer)) and dof >= 1):
-            raise DataError(f"dof: the standard error's degrees of freedom must be an integer >= 1, got {dof!r}")
-        judged_by = "stderr"
-    else:
-        judged_by, error = "shape", None
+        return _judge_with_errors(scene, mean, error, replicas - 1, data, model_at, expect, false_alarm)
+    return _judge_with_errors(scene, data, _checked_stderr(stderr, dof, shape), dof, None, model_at, expect,
+                              false_alarm)
 
-    if judged_by == "shape":
-        mask = (y_model != 0) | (data != 0)
-        if mask.sum() < 3 or not np.any(y_model != 0):
-            raise DataError("data: fewer than 3 bins with light, or none in the model; check the scene's "
-                            "sampling (start, period, count) against the data's")
-        fit = fit_scale_offset(data, np.ones(shape), mask, model_at, scene.sampling.bin_width_opl,
-                               sigma_known=False)
-        fitted = fit.scale * model_at(fit.offset_opl)
-        relative, relative_fit = _relative_l2(data, y_model), _relative_l2(data, fitted)
-        agrees, agrees_fit = bool(relative <= shape_tolerance), bool(relative_fit <= shape_tolerance)
-        diagnosis = ("judged by shape only (no errors given, no statistical test): "
-                     + diagnose(fit, agrees=agrees, agrees_after_fit=agrees_fit,
-                                bin_width_opl=scene.sampling.bin_width_opl))
-        return CheckResult(agrees, None, None, fit, agrees_fit, judged_by, replicas, dof, relative,
-                           relative_fit, None, None, diagnosis, None, None, shape_tolerance, data, None,
-                           y_model, fitted, edges)
 
-    mask = (error > 0) & (error < MAX_RELATIVE_STDERR * np.abs(data))
-    if mask.sum() < 3:
-        raise DataError(f"data: {int(mask.sum())} bin(s) with a standard error under "
-                        f"{MAX_RELATIVE_STDERR:g} of the value; render more samples to judge them")
+def _expected_model(model_at, expect: Convention | None) -> np.ndarray | None:
+    """scale · y_model(start_opl + offset_opl) of the stated convention (None without one)."""
+    return None if expect is None else expect.scale * model_at(expect.offset_opl)
+
+
+def _judge_with_errors(scene, data, error, dof, replica_data, model_at, expect, false_alarm) -> CheckResult:
+    """The statistical verdicts: as given, as stated, and after the fitted scale and offset.
+
+    ``replica_data``: the ``(R, K, N)`` replicas ``data`` and ``error`` come from, or None for a
+    transient with its standard error.
+    """
+    y_model = model_at(0.0)
+    expected_model = _expected_model(model_at, expect)
+    judged_by = "stderr" if replica_data is None else "replicas"
+    mask = _judged_bins(data, error, judged_by)
     if not np.any(y_model[mask] != 0):
         raise DataError("scene: the model puts no light in the bins the data fill; check the scene's "
                         "sampling (start, period, count) against the data's")
-    as_given = _agreement(data, error, y_model, dof, false_alarm)
-    fit = fit_scale_offset(data, np.where(mask, error, 1.0), mask, model_at, scene.sampling.bin_width_opl,
-                           replicas=replica_data)
-    fitted = fit.scale * model_at(fit.offset_opl)
-    after = _agreement(data, error, fitted, dof, false_alarm)
-    diagnosis = diagnose(fit, agrees=as_given.agrees, agrees_after_fit=after.agrees,
-                         bin_width_opl=scene.sampling.bin_width_opl)
-    return CheckResult(bool(as_given.agrees), as_given.chi2_per_dof, as_given.max_abs_z, fit, bool(after.agrees),
-                       judged_by, replicas, dof, _relative_l2(data, y_model), _relative_l2(data, fitted),
-                       after.chi2_per_dof, after.max_abs_z, diagnosis, as_given, after, None, data, error,
-                       y_model, fitted, edges)
+    as_given = _agreement(data, error, y_model, dof, false_alarm, replica_data)
+    as_expected = (None if expected_model is None
+                   else _agreement(data, error, expected_model, dof, false_alarm, replica_data))
+    skipped = _fit_skipped(int(mask.sum()), scene, f"have a standard error under {MAX_RELATIVE_STDERR:g} of "
+                                                   f"their value")
+    fit = after = None
+    fitted = y_model
+    if skipped is None:
+        fit = fit_scale_offset(data, np.where(mask, error, 1.0), mask, model_at, scene.sampling.bin_width_opl,
+                               replicas=replica_data)
+        fitted = fit.scale * model_at(fit.offset_opl)
+        after = _agreement(data, error, fitted, dof, false_alarm, replica_data)
+        diagnosis = diagnose(fit, agrees=as_given.agrees, agrees_after_fit=after.agrees,
+                             bin_width_opl=scene.sampling.bin_width_opl)
+    else:
+        diagnosis = f"{'agrees' if as_given.agrees else 'disagrees'} as given; {skipped}."
+    return CheckResult(
+        agrees=bool(as_given.agrees), chi2_per_dof=as_given.chi2_per_dof, max_abs_z=as_given.max_abs_z, fit=fit,
+        agrees_after_fit=None if after is None else bool(after.agrees), judged_by=judged_by,
+        replicas=1 if replica_data is None else replica_data.shape[0], dof=dof,
+        relative_l2=_relative_l2(data, y_model),
+        relative_l2_after_fit=None if fit is None else _relative_l2(data, fitted),
+        chi2_per_dof_after_fit=None if after is None else after.chi2_per_dof,
+        max_abs_z_after_fit=None if after is None else after.max_abs_z, diagnosis=diagnosis,
+        as_given=as_given, after_fit=after, shape_tolerance=None, data=data, stderr=error, model=y_model,
+        fitted_model=fitted, edges=scene.sampling.edges, fit_skipped=skipped, expected=expect,
+        agrees_as_expected=None if as_expected is None else bool(as_expected.agrees), as_expected=as_expected,
+        relative_l2_as_expected=None if expected_model is None else _relative_l2(data, expected_model))
+
+
+def _judge_by_shape(scene, data, model_at, expect, shape_tolerance) -> CheckResult:
+    """Relative L2 errors as given, as stated and after an unweighted fit: no statistical test."""
+    y_model = model_at(0.0)
+    expected_model = _expected_model(model_at, expect)
+    shape = y_model.shape
+    if not np.any(y_model != 0):
+        raise DataError("scene: the model puts no light in the window; check the scene's sampling (start, "
+                        "period, count) against the data's")
+    mask = (y_model != 0) | (data != 0)
+    relative = _relative_l2(data, y_model)
+    agrees = bool(relative <= shape_tolerance)
+    skipped = _fit_skipped(int(mask.sum()), scene, "hold light")
+    fit, fitted, relative_fit, agrees_fit = None, y_model, None, None
+    if skipped is None:
+        fit = fit_scale_offset(data, np.ones(shape), mask, model_at, scene.sampling.bin_width_opl,
+                               sigma_known=False)
+        fitted = fit.scale * model_at(fit.offset_opl)
+        relative_fit = _relative_l2(data, fitted)
+        agrees_fit = bool(relative_fit <= shape_tolerance)
+        verdict = diagnose(fit, agrees=agrees, agrees_after_fit=agrees_fit,
+                           bin_width_opl=scene.sampling.bin_width_opl)
+    else:
+        verdict = f"{'agrees' if agrees else 'disagrees'} as given; {skipped}."
+    relative_expected = None if expected_model is None else _relative_l2(data, expected_model)
+    return CheckResult(
+        agrees=agrees, chi2_per_dof=None, max_abs_z=None, fit=fit, agrees_after_fit=agrees_fit,
+        judged_by="shape", replicas=1, dof=None, relative_l2=relative, relative_l2_after_fit=relative_fit,
+        chi2_per_dof_after_fit=None, max_abs_z_after_fit=None,
+        diagnosis="judged by shape only (no errors given, no statistical test): " + verdict,
+        as_given=None, after_fit=None, shape_tolerance=shape_tolerance, data=data, stderr=None, model=y_model,
+        fitted_model=fitted, edges=scene.sampling.edges, fit_skipped=skipped, expected=expect,
+        agrees_as_expected=None if expect is None else bool(relative_expected <= shape_tolerance),
+        relative_l2_as_expected=relative_expected)
 
 
 # --------------------------------------------------------------------------- the report
@@ -876,42 +1219,64 @@ def write_check_report(out: str | Path, result: CheckResult, *, scene_name: str 
 
     out = Path(out)
     metrics = json_ready(result.as_dict() | {"scene": scene_name, "data": [str(p) for p in data_paths]})
-    fit = result.fit
     lines = [f"# check: {scene_name or 'scene'}", ""]
     if data_paths:
         lines += ["Data: " + ", ".join(f"`{p}`" for p in data_paths), ""]
     lines += [f"**{'Agrees' if result.agrees else 'Disagrees'} as given.** {result.diagnosis}", ""]
+    if result.expected is not None:
+        lines += [f"**{_expected_sentence(result)}.**", ""]
     if result.judged_by == "shape":
-        lines += ["Judged by shape only: no standard error was given, so there is no statistical test; "
-                  f"the verdict is relative L2 ≤ {result.shape_tolerance:g}.", "",
-                  "| | relative L2 |", "|---|---|",
-                  f"| as given | {result.relative_l2:.3e} |",
-                  f"| after the fit | {result.relative_l2_after_fit:.3e} |"]
+        lines += _shape_lines(result)
     else:
-        source = (f"{result.replicas} independent replicas (z ~ Student's t, {result.dof} dof)"
-                  if result.judged_by == "replicas" else "the standard error given with the data"
-                  + ("" if result.dof is None else f" (z ~ Student's t, {result.dof} dof)"))
-        given, after = result.as_given, result.after_fit
-        low, high = given.chi2_interval
-        lines += [f"Per-bin error from {source}. Thresholds: χ²/dof in [{low:.3f}, {high:.3f}] and max |z| ≤ "
-                  f"{given.z_threshold:.2f} over {given.bins} judged bins ({given.skipped} with too few "
-                  f"samples not judged); false-alarm rate {given.false_alarm:g}.", "",
-                  "| | verdict | χ²/dof | max \\|z\\| | relative L2 |", "|---|---|---|---|---|",
-                  f"| as given | {'agrees' if given.agrees else 'disagrees'} | {given.chi2_per_dof:.4g} | "
-                  f"{given.max_abs_z:.3g} | {result.relative_l2:.3e} |",
-                  f"| after the fit | {'agrees' if after.agrees else 'disagrees'} | {after.chi2_per_dof:.4g} | "
-                  f"{after.max_abs_z:.3g} | {result.relative_l2_after_fit:.3e} |"]
-    lines += ["", "| fitted | value | standard error |", "|---|---|---|",
-              f"| scale (data / model) | {fit.scale:.6g} | {fit.scale_stderr:.2g} |",
-              f"| offset_opl (m, add to the data's start_opl) | {fit.offset_opl:+.6g} | {fit.offset_stderr:.2g} |",
-              "", f"Gauss–Newton: {fit.iterations} iteration(s), "
-              f"{'converged' if fit.converged else 'NOT converged'}.", ""]
+        lines += _statistical_lines(result)
+    lines += _fit_lines(result)
     with staged_writes():
         save_json(out / "metrics.json", metrics)
-        plot_check_transients(out / "check_transients.png", result)
-        lines += ["![data against the model](check_transients.png)", ""]
-        if result.as_given is not None:
-            plot_check_z(out / "check_z.png", result)
-            lines += ["![z by bin, as given and after the fit](check_z.png)", ""]
+        if result.fit is not None:    # the figures draw the fitted model beside the data
+            plot_check_transients(out / "check_transients.png", result)
+            lines += ["![data against the model](check_transients.png)", ""]
+            if result.as_given is not None:
+                plot_check_z(out / "check_z.png", result)
+                lines += ["![z by bin, as given and after the fit](check_z.png)", ""]
         write_markdown(out / "report.md", lines)
     return metrics
+
+
+def _shape_lines(result: CheckResult) -> list[str]:
+    rows = [("as given", result.relative_l2)]
+    if result.expected is not None:
+        rows.append(("as stated", result.relative_l2_as_expected))
+    if result.fit is not None:
+        rows.append(("after the fit", result.relative_l2_after_fit))
+    return (["Judged by shape only: no standard error was given, so there is no statistical test; "
+             f"the verdict is relative L2 ≤ {result.shape_tolerance:g}.", "",
+             "| | relative L2 |", "|---|---|"] + [f"| {name} | {value:.3e} |" for name, value in rows])
+
+
+def _statistical_lines(result: CheckResult) -> list[str]:
+    source = (f"{result.replicas} independent replicas (z ~ Student's t, {result.dof} dof)"
+              if result.judged_by == "replicas" else "the standard error given with the data"
+              + ("" if result.dof is None else f" (z ~ Student's t, {result.dof} dof)"))
+    given = result.as_given
+    rows = [("as given", given, result.relative_l2)]
+    if result.as_expected is not None:
+        rows.append(("as stated", result.as_expected, result.relative_l2_as_expected))
+    if result.after_fit is not None:
+        rows.append(("after the fit", result.after_fit, result.relative_l2_after_fit))
+    return ([f"Per-bin error from {source}, over {given.bins} judged bin(s) ({given.skipped} with too few "
+             f"samples not judged). False-alarm rate {given.false_alarm:g}: {given.null_note}.", "",
+             "| | verdict | χ²/dof [accepted] | max \\|z\\| (limit) | relative L2 |", "|---|---|---|---|---|"]
+            + [f"| {name} | {'agrees' if agreement.agrees else 'disagrees'} | {agreement.chi2_per_dof:.4g} "
+               f"[{agreement.chi2_interval[0]:.3f}, {agreement.chi2_interval[1]:.3f}] | {agreement.max_abs_z:.3g} "
+               f"(≤ {agreement.z_threshold:.2f}) | {relative:.3e} |" for name, agreement, relative in rows])
+
+
+def _fit_lines(result: CheckResult) -> list[str]:
+    fit = result.fit
+    if fit is None:
+        return ["", "No figures: they draw the fitted model beside the data, and there is none.", ""]
+    return ["", "| fitted | value | standard error |", "|---|---|---|",
+            f"| scale (data / model) | {fit.scale:.6g} | {fit.scale_stderr:.2g} |",
+            f"| offset_opl (m, add to the data's start_opl) | {fit.offset_opl:+.6g} | {fit.offset_stderr:.2g} |",
+            "", f"Gauss–Newton: {fit.iterations} iteration(s), "
+            f"{'converged' if fit.converged else 'NOT converged'}.", ""]

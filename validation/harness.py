@@ -5,7 +5,8 @@ For a scene, :func:`check_scene`
 1. assembles A and y = A f (the exact `lambertian` model);
 2. renders y with the Monte Carlo renderer at ``spp`` samples and judges
    the difference with :func:`validation.compare.compare_transients`
-   (DESIGN.md section 6);
+   (DESIGN.md section 6), its limits from the render's replicas (valid
+   whatever the correlation between bins);
 3. shows that the model's own quadrature error is far below the render's
    noise: y at looser tolerances against y at 1e-7, over each judged bin's
    standard error;
@@ -247,7 +248,9 @@ def check_scene(scene: Scene, *, spp: int, seed: int = 0, convergence: bool = Tr
     timings["model_seconds"] = time.perf_counter() - started
     result = render(scene, spp=spp, seed=seed, progress=progress)
     timings["render_seconds"] = result.seconds
-    agreement = compare_transients(result.mean, result.stderr, model, dof=result.dof)
+    # the replicas give the null of χ² and max |z| whatever the correlation between bins
+    agreement = compare_transients(result.mean, result.stderr, model, dof=result.dof,
+                                   replicas=result.replica_means)
     check = SceneCheck(scene.name, scene, spp, seed, model, result.mean, result.stderr, agreement)
     check.metrics.update(timings)
     check.metrics["window_share"] = share

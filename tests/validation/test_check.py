@@ -27,6 +27,10 @@ from validation.cli import main
 
 START, WIDTH, COUNT = 1.7, 0.05, 24
 
+# The synthetic replicas below are few (6) and independent from bin to bin: the limits' fallback to
+# independent bins, and its warning, are what test_compare.py tests; here they are expected.
+pytestmark = pytest.mark.filterwarnings("ignore::validation.compare.CorrelationWarning")
+
 
 def small_scene(**changes) -> Scene:
     """4 x 4 asymmetric image, two sensors at different heights, 24 bins around the light."""
@@ -153,7 +157,8 @@ def test_diagnosis_of_an_irradiancemeter():
     fit = Fit(0.2501, 0.0004, 1.55e-4, 0.1e-4, 3, True, "replicas")
     text = diagnose(fit, agrees=False, agrees_after_fit=True, bin_width_opl=0.05)
     assert text == ("agrees after scale 0.2501 ± 0.0004 and offset +1.55e-4 ± 0.10e-4 m: a sensor that "
-                    "reads 1/4 of the fluence and path lengths short (an irradiancemeter?).")
+                    "reads 1/4 of the fluence and path lengths short (an irradiancemeter? --expect "
+                    "irradiancemeter states that convention).")
 
 
 # ---------------------------------------------------------------- our own renderer
@@ -169,8 +174,9 @@ def test_our_render_passes_with_no_fit_needed(scene, model):
     assert result.agrees, result.summary()
 
 
-def test_check_command_takes_our_renders_own_standard_error(tmp_path, scene_file, scene):
-    """`check` on our render's folder or transient.npy judges with its stderr.npy and Student's t."""
+def test_check_command_takes_our_renders_own_errors(tmp_path, scene_file):
+    """`check` on our render's folder or transient.npy judges with its replicas.npy (sign flips, Student's
+    t on R - 1 degrees of freedom), or without them with its stderr.npy and the render's dof."""
     from analytic.scene_file import load_scene
 
     assert main(["render", str(scene_file), "--spp", str(2**20), "--seed", "5", "--out", str(tmp_path / "r"),
@@ -180,12 +186,23 @@ def test_check_command_takes_our_renders_own_standard_error(tmp_path, scene_file
         out = tmp_path / f"check_{data.name}"
         assert run_check(scene_file, "--data", data, "--out", out) == 0
         metrics = json.loads((out / "metrics.json").read_text())
-        assert metrics["agrees"] is True and metrics["judged_by"] == "stderr" and metrics["dof"] == dof
-    # the same numbers passed by hand, and a bare (K, N) .npy elsewhere still needs --stderr
-    mean, stderr = np.load(tmp_path / "r" / "transient.npy"), np.load(tmp_path / "r" / "stderr.npy")
-    by_hand = check_transient(load_scene(scene_file), mean, stderr=stderr, dof=dof)
+        assert metrics["agrees"] is True and metrics["judged_by"] == "replicas" and metrics["dof"] == dof
+        assert metrics["null"] == "sign-flip"
+    # the same numbers passed by hand
+    replicas = np.load(tmp_path / "r" / "replicas.npy")
+    from_file = load_scene(scene_file)          # its EXR holds the image in float32
+    by_hand = check_transient(from_file, replicas)
     assert by_hand.dof == dof and by_hand.chi2_per_dof == pytest.approx(metrics["chi2_per_dof"], rel=1e-12)
-    assert check_transient(scene, mean, stderr=stderr).dof is None          # without dof: normal z
+    # without replicas.npy: stderr.npy, with the render's degrees of freedom
+    (tmp_path / "r" / "replicas.npy").unlink()
+    assert run_check(scene_file, "--data", tmp_path / "r", "--out", tmp_path / "by_stderr") == 0
+    metrics = json.loads((tmp_path / "by_stderr" / "metrics.json").read_text())
+    assert metrics["judged_by"] == "stderr" and metrics["dof"] == dof and metrics["null"] == "independent"
+    mean, stderr = np.load(tmp_path / "r" / "transient.npy"), np.load(tmp_path / "r" / "stderr.npy")
+    assert check_transient(from_file, mean, stderr=stderr, dof=dof).chi2_per_dof == pytest.approx(
+        metrics["chi2_per_dof"], rel=1e-12)
+    assert check_transient(from_file, mean, stderr=stderr).dof is None          # without dof: normal z
+    # a bare (K, N) .npy elsewhere still needs --stderr
     np.save(tmp_path / "bare.npy", mean)
     assert run_check(scene_file, "--data", tmp_path / "bare.npy", "--out", tmp_path / "bare") == 2
 
@@ -359,3 +376,191 @@ def test_report_of_a_render_check(tmp_path, scene, model):
     result = check_transient(scene, single.mean, stderr=single.stderr, model=model)
     metrics = write_check_report(tmp_path, result, scene_name="small", data_paths=["render"])
     assert json.loads((tmp_path / "metrics.json").read_text()) == json.loads(json.dumps(metrics))
+
+
+# ---------------------------------------------------------------- too little to fit, nothing to judge
+
+def one_bin_scene() -> Scene:
+    """One sensor and one bin holding the whole response: nothing to fit a scale and an offset to."""
+    return small_scene(sensors=[(0.8, 0.3, 1.0)], sampling=Sampling(bin_width_opl=1.5, start_opl=1.5, count=1))
+
+
+def test_a_one_bin_scene_is_judged_as_given_without_a_fit(rng):
+    scene = one_bin_scene()
+    model = forward(scene)
+    result = check_transient(scene, noisy_replicas(model, rng), model=model)
+    assert result.agrees and result.fit is None and result.agrees_after_fit is None
+    assert result.diagnosis == ("agrees as given; no scale or time offset fitted: the scene's 1 bin(s) cannot "
+                                "fit them (two parameters need at least 3 bins).")
+    metrics = result.as_dict()
+    assert metrics["fit"] is None and metrics["agrees_after_fit"] is None and "cannot fit" in metrics["fit_skipped"]
+    wrong = check_transient(scene, noisy_replicas(1.1 * model, rng), model=model)
+    assert not wrong.agrees and wrong.diagnosis.startswith("disagrees as given; no scale")
+    shape = check_transient(scene, model, shape_only=True, model=model)
+    assert shape.agrees and shape.fit is None and "cannot fit" in shape.diagnosis
+
+
+def test_too_few_precise_bins_are_judged_without_a_fit(scene, model, rng):
+    """Two bins precise enough to judge: judged as given, and the sentence says why nothing was fitted."""
+    sigma = np.where(model > 0, model, 1.0)        # 100 % errors: nothing judged ...
+    sigma[0, 10:12] = 1e-3 * model[0, 10:12]       # ... but two bins
+    result = check_transient(scene, model + 0.1 * sigma * rng.standard_normal(model.shape), stderr=sigma,
+                             model=model)
+    assert result.as_given.bins == 2 and result.fit is None
+    assert "only 2 bin(s) have a standard error under 0.1 of their value" in result.diagnosis
+
+
+def test_zero_errors_are_named_for_what_they_are(scene, model):
+    with pytest.raises(DataError, match="standard errors are all zero"):
+        check_transient(scene, model, stderr=np.zeros_like(model), model=model)
+    with pytest.raises(DataError, match="replicas are equal in every bin"):
+        check_transient(scene, np.stack([model] * 4), model=model)
+    with pytest.raises(DataError, match="too noisy to judge; render more samples"):
+        check_transient(scene, model, stderr=np.abs(model) + 1.0, model=model)
+
+
+def test_the_report_of_a_result_without_a_fit(tmp_path, rng):
+    scene = one_bin_scene()
+    model = forward(scene)
+    result = check_transient(scene, noisy_replicas(model, rng), model=model)
+    metrics = write_check_report(tmp_path, result, scene_name="one bin")
+    assert metrics["fit"] is None
+    assert "cannot fit them" in (tmp_path / "report.md").read_text()
+
+
+# ---------------------------------------------------------------- tal captures with shared points
+
+def test_a_capture_with_sensors_sharing_a_point_is_read_in_order(tmp_path):
+    """Two of the scene's sensors at one point: the file's two sensors there are taken in order."""
+    scene = small_scene(sensors=[(0.8, 0.3, 1.0), (0.25, 0.7, 0.8), (0.8, 0.3, 1.0)])
+    data = forward(scene) * np.array([[1.0], [2.0], [3.0]])         # rows told apart
+    write_transient(tmp_path / "out", data, build_meta(scene, kind="model"))
+    assert np.array_equal(read_data(tmp_path / "out" / "transient.h5", scene), data)
+    fewer = small_scene(sensors=[(0.8, 0.3, 1.0), (0.25, 0.7, 0.8), (0.25, 0.7, 0.8)])
+    with pytest.raises(DataError, match="only 1 sensor.s. of sensor_grid_xyz at the point of the scene's sensor 2"):
+        read_data(tmp_path / "out" / "transient.h5", fewer)
+
+
+# ---------------------------------------------------------------- our render's replicas beside its output
+
+def render_folder(folder, scene, replicas: np.ndarray):
+    """A render's output as `render` writes it: the replicas' mean, their standard error, replicas.npy."""
+    count = replicas.shape[0]
+    meta = build_meta(scene, kind="render", samples=count, seed=0, replicas=count, dof=count - 1)
+    write_transient(folder, replicas.mean(axis=0), meta,
+                    stderr=replicas.std(axis=0, ddof=1) / np.sqrt(count))
+    np.save(folder / "replicas.npy", replicas)
+    return folder
+
+
+def test_check_takes_the_replicas_beside_our_render(tmp_path, scene_file, scene, model, rng):
+    folder = render_folder(tmp_path / "r", scene, noisy_replicas(model, rng, replicas=16))
+    for data in (folder, folder / "transient.npy"):
+        out = tmp_path / f"check_{data.name}"
+        assert run_check(scene_file, "--data", data, "--out", out) == 0
+        metrics = json.loads((out / "metrics.json").read_text())
+        assert metrics["judged_by"] == "replicas" and metrics["replicas"] == 16 and metrics["dof"] == 15
+        assert metrics["null"] == "sign-flip"
+    (folder / "replicas.npy").unlink()
+    assert run_check(scene_file, "--data", folder, "--out", tmp_path / "by_stderr") == 0
+    metrics = json.loads((tmp_path / "by_stderr" / "metrics.json").read_text())
+    assert metrics["judged_by"] == "stderr" and metrics["dof"] == 15 and metrics["null"] == "independent"
+    np.save(folder / "replicas.npy", noisy_replicas(model, rng, replicas=16))       # another render's
+    assert run_check(scene_file, "--data", folder, "--out", tmp_path / "mixed") == 2
+    assert not (tmp_path / "mixed").exists()
+
+
+# ---------------------------------------------------------------- a stated convention: the irradiancemeter
+
+def sphere_mean_irradiance(centre_distance: float, radius: float, intensity, points: int = 64) -> float:
+    """Irradiance from a point emitter at the origin averaged over a sphere's surface, by quadrature.
+
+    The sphere's centre lies at distance d on the direction at 60° from the +z axis; ``intensity(ω)``
+    is the emitter's intensity toward the unit direction ω. Gauss–Legendre in μ (the cosine about the
+    axis toward the emitter, over the lit cap μ > r/d) and uniform in the azimuth.
+    """
+    axis = np.array([np.sin(np.pi / 3), 0.0, np.cos(np.pi / 3)])
+    centre = centre_distance * axis
+    helper = np.cross(axis, [0.0, 1.0, 0.0])
+    u, v = helper / np.linalg.norm(helper), np.array([0.0, 1.0, 0.0])
+    nodes, weights = np.polynomial.legendre.leggauss(points)
+    low = radius / centre_distance
+    mu = low + (1 - low) * (nodes + 1) / 2
+    phi = np.linspace(0.0, 2 * np.pi, 2 * points, endpoint=False)
+    mu, phi = np.meshgrid(mu, phi, indexing="ij")
+    sine = np.sqrt(1 - mu**2)
+    normal = (-mu[..., None] * axis + sine[..., None] * (np.cos(phi)[..., None] * u + np.sin(phi)[..., None] * v))
+    point = centre + radius * normal
+    distance = np.linalg.norm(point, axis=-1)
+    towards = -point / distance[..., None]                      # from the sphere's point to the emitter
+    irradiance = intensity(-towards) * np.maximum(np.sum(normal * towards, axis=-1), 0.0) / distance**2
+    area_weight = (1 - low) / 2 * weights[:, None] * (2 * np.pi / phi.shape[1])     # dA / r² = dμ dφ
+    return float(np.sum(irradiance * area_weight) / (4 * np.pi))
+
+
+def test_an_irradiancemeter_reads_a_quarter_of_a_lambertian_plane_exactly():
+    """A sphere of any radius above a Lambertian element intercepts exactly 1/4 of the fluence rate at
+    its centre (its projected solid angle is π (r/d)² cos θ), unlike a sphere near an isotropic point,
+    which reads 1 / (2 (1 + sqrt(1 - (r/d)²))) of it: the scale `--expect irradiancemeter` states."""
+    distance = 1.0
+    cosine = np.cos(np.pi / 3)                                   # the centre's angle from the normal
+    for radius in (0.05, 0.3, 0.49):
+        lambertian = sphere_mean_irradiance(distance, radius, lambda w: w[..., 2])
+        assert lambertian == pytest.approx(cosine / distance**2 / 4, rel=1e-9)
+        isotropic = sphere_mean_irradiance(distance, radius, lambda w: np.ones(w.shape[:-1]))
+        ratio = 1 / (2 * (1 + np.sqrt(1 - (radius / distance) ** 2)))
+        assert isotropic == pytest.approx(ratio / distance**2, rel=1e-9)
+        assert abs(isotropic * distance**2 - 0.25) > 1e-4                 # the correction is real there
+
+
+def test_the_irradiancemeters_paths_are_short_by_two_thirds_of_its_radius():
+    """Irradiance-weighted mean shortfall of the path to the sphere's surface against its centre: 2r/3,
+    to first order in r/d (the offset `--expect irradiancemeter` states, with Mitsuba's ray epsilon)."""
+    distance, radius = 1.0, 1e-3
+    nodes, weights = np.polynomial.legendre.leggauss(64)
+    low = radius / distance
+    mu = low + (1 - low) * (nodes + 1) / 2           # the lit cap, μ the cosine about the axis to the emitter
+    # the emitter's intensity is the same toward the whole cap to first order: the weight is the irradiance
+    point_distance = np.sqrt(distance**2 + radius**2 - 2 * distance * radius * mu)
+    weight = weights * (distance * mu - radius) / point_distance**3
+    shortfall = np.sum(weight * (distance - point_distance)) / np.sum(weight)
+    assert shortfall == pytest.approx(2 * radius / 3, rel=2 * radius / distance)
+
+
+def irradiancemeter_data(scene, rng, radius: float, scale: float = 0.25) -> np.ndarray:
+    """16 replicas of what spheres of ``radius`` read, from the formula: scale x the model with start_opl
+    moved by 2r/3 + Mitsuba's float32 RayEpsilon (1500 x 2^-24 m)."""
+    return noisy_replicas(scale * shifted(scene, 2 * radius / 3 + 1500 * 2.0**-24), rng, replicas=16)
+
+
+def test_check_expect_irradiancemeter_judges_the_stated_convention(tmp_path, scene_file, scene, rng):
+    radius = 0.015
+    paths = []
+    for r, replica in enumerate(irradiancemeter_data(scene, rng, radius)):
+        paths.append(tmp_path / f"meter_{r}.npy")
+        np.save(paths[-1], replica)
+    assert run_check(scene_file, "--data", *paths, "--out", tmp_path / "plain") == 1
+    assert run_check(scene_file, "--data", *paths, "--expect", "irradiancemeter", "--radius", radius,
+                     "--out", tmp_path / "meter") == 0
+    metrics = json.loads((tmp_path / "meter" / "metrics.json").read_text())
+    assert metrics["agrees"] is False and metrics["expected"]["agrees"] is True
+    assert metrics["expected"]["scale"] == 0.25
+    assert metrics["expected"]["offset_opl"] == pytest.approx(2 * radius / 3 + 1500 * 2.0**-24, rel=1e-15)
+    assert "with the stated convention" in (tmp_path / "meter" / "report.md").read_text()
+    # a sphere of another radius, or data of another scale, is not the stated convention
+    assert run_check(scene_file, "--data", *paths, "--expect", "irradiancemeter", "--radius", radius / 3,
+                     "--out", tmp_path / "smaller") == 1
+    offset = 2 * radius / 3 + 1500 * 2.0**-24
+    assert run_check(scene_file, "--data", *paths, "--expect-scale", 0.25, "--expect-offset", offset,
+                     "--out", tmp_path / "numbers") == 0
+    assert run_check(scene_file, "--data", *paths, "--expect-scale", 0.26, "--expect-offset", offset,
+                     "--out", tmp_path / "wrong_scale") == 1
+
+
+def test_the_irradiancemeter_convention_refuses_a_sphere_that_reaches_the_plane(scene):
+    from validation.check import irradiancemeter
+
+    with pytest.raises(ValueError, match=r"radius: must lie in \(0, 0.8\) m"):
+        irradiancemeter(scene, 0.8)
+    meter = irradiancemeter(scene, 1e-3)
+    assert (meter.scale, meter.offset_opl) == (0.25, 2e-3 / 3 + 1500 * 2.0**-24)

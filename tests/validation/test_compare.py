@@ -4,7 +4,9 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from validation.compare import assert_transients_agree, combined_dof, compare_transients, normal_scores
+from analytic.errors import DataError
+from validation.compare import (CorrelationWarning, assert_transients_agree, combined_dof, compare_transients,
+                                normal_scores)
 
 
 def _synthetic(rng, shape=(4, 50)):
@@ -102,6 +104,116 @@ def test_replica_errors_still_find_a_biased_bin(rng):
     assert result.dof == 31 and "31 degrees of freedom" in result.summary()
 
 
+# -- correlated bins: the null from the replicas' sign flips ----------------------------
+
+
+def _correlated_replicas(rng, model, replicas=32):
+    """Replicas whose noise is mostly one random multiple of a shape spread over every bin (as a
+    pulse wider than the window deposits each sample into all of them) plus a little noise of its own."""
+    bins = model.shape[1]
+    shape = 0.02 * np.exp(-((np.arange(bins) - bins / 2) / (bins / 3)) ** 2)
+    common = rng.standard_normal((replicas, 1, 1)) * shape
+    own = 0.002 * rng.standard_normal((replicas,) + model.shape)
+    means = model + common + own
+    return means.mean(axis=0), means.std(axis=0, ddof=1) / np.sqrt(replicas), means
+
+
+def _failures(result) -> tuple[bool, bool]:
+    """(χ² outside its interval, max |z| beyond its limit): the two tests that share α."""
+    low, high = result.chi2_interval
+    return not low <= result.chi2_per_dof <= high, result.max_abs_z > result.z_threshold
+
+
+def test_correlated_bins_keep_the_stated_false_alarm_rate_with_replicas(rng):
+    """Under the hypothesis, judged with the replicas' sign flips, each test fails at its share α/2 of
+    the rate although the bins are correlated; the independent-bins limits on the same data fail
+    several times as often as α."""
+    model = rng.uniform(1.0, 2.0, (1, 24))
+    alpha, trials = 0.1, 300
+    chi2_fails = max_fails = fails = independent = 0
+    for _ in range(trials):
+        mean, stderr, replicas = _correlated_replicas(rng, model)
+        result = compare_transients(mean, stderr, model, replicas=replicas, false_alarm=alpha, flips=1024)
+        assert result.null == "sign-flip" and result.flips == 1024
+        chi2_fail, max_fail = _failures(result)
+        chi2_fails, max_fails, fails = chi2_fails + chi2_fail, max_fails + max_fail, fails + (not result.agrees)
+        independent += not compare_transients(mean, stderr, model, dof=31, false_alarm=alpha).agrees
+    half = 3 * np.sqrt(trials * alpha / 2 * (1 - alpha / 2))
+    assert abs(chi2_fails - alpha / 2 * trials) <= half, chi2_fails
+    assert abs(max_fails - alpha / 2 * trials) <= half, max_fails
+    # the union: at most α (Bonferroni), at least the larger share (the two overlap when bins move together)
+    allowance = 3 * np.sqrt(trials * alpha * (1 - alpha))
+    assert alpha / 2 * trials - half <= fails <= alpha * trials + allowance, fails
+    assert independent > alpha * trials + 5 * allowance, independent
+
+
+def test_independent_bins_keep_the_stated_false_alarm_rate_with_replicas(rng):
+    model = rng.uniform(1.0, 2.0, (2, 12))
+    alpha, trials = 0.1, 300
+    fails = np.zeros(2)
+    for _ in range(trials):
+        means = model + 0.01 * rng.standard_normal((32,) + model.shape)
+        fails += _failures(compare_transients(means.mean(axis=0), means.std(axis=0, ddof=1) / np.sqrt(32), model,
+                                              replicas=means, false_alarm=alpha, flips=1024))
+    assert np.all(np.abs(fails - alpha / 2 * trials) <= 3 * np.sqrt(trials * alpha / 2 * (1 - alpha / 2))), fails
+
+
+def test_the_sign_flip_null_still_finds_wrong_models(rng):
+    """A model off by a few standard errors everywhere (along the correlated noise itself), or in one
+    bin only, is rejected: the flips widen the limits only as far as the replicas' noise reaches."""
+    model = rng.uniform(1.0, 2.0, (1, 24))
+    mean, stderr, replicas = _correlated_replicas(rng, model)
+    assert compare_transients(mean, stderr, model, replicas=replicas).agrees
+    shifted = compare_transients(mean, stderr, model + 5 * stderr, replicas=replicas)
+    assert not shifted.agrees and shifted.null == "sign-flip"
+    one_bin = model.copy()
+    one_bin[0, 7] += 8 * stderr[0, 7]
+    result = compare_transients(mean, stderr, one_bin, replicas=replicas)
+    assert not result.agrees and result.worst[0][:2] == (0, 7)
+
+
+def test_the_sign_flip_null_keeps_the_power_to_find_a_small_global_error(rng):
+    """Independent bins, a model off by one standard error everywhere: found with the replicas' limits,
+    as with the independent-bins ones (the flips widen them by only ~q/R of the signal)."""
+    model = rng.uniform(1.0, 2.0, (16, 40))
+    means = model + 0.01 * rng.standard_normal((32,) + model.shape)
+    mean, stderr = means.mean(axis=0), means.std(axis=0, ddof=1) / np.sqrt(32)
+    assert compare_transients(mean, stderr, model, replicas=means).agrees
+    result = compare_transients(mean, stderr, model + stderr, replicas=means)
+    assert not result.agrees and result.chi2_per_dof > result.chi2_interval[1]
+    assert result.max_abs_z < result.z_threshold              # no single bin gives it away
+    assert not compare_transients(mean, stderr, model + stderr, dof=31).agrees
+
+
+def test_few_replicas_fall_back_to_independent_bins_and_say_so(rng):
+    model = rng.uniform(1.0, 2.0, (1, 24))
+    mean, stderr, replicas = _correlated_replicas(rng, model, replicas=8)
+    with pytest.warns(CorrelationWarning, match="8 replicas are too few"):
+        result = compare_transients(mean, stderr, model, replicas=replicas)
+    assert result.null == "independent" and result.flips == 0
+    assert "assume independent bins" in result.summary()
+    plain = compare_transients(mean, stderr, model, dof=7)
+    assert plain.null == "independent" and "no replicas given" in plain.summary()
+    assert (plain.chi2_interval, plain.z_threshold) == (result.chi2_interval, result.z_threshold)
+
+
+def test_replicas_must_be_those_of_the_render(rng):
+    model = rng.uniform(1.0, 2.0, (1, 24))
+    mean, stderr, replicas = _correlated_replicas(rng, model)
+    with pytest.raises(ValueError, match="replicas of the same render"):
+        compare_transients(mean + stderr, stderr, model, replicas=replicas)
+    with pytest.raises(ValueError, match="31 degrees of freedom"):
+        compare_transients(mean, stderr, model, replicas=replicas, dof=5)
+
+
+def test_all_zero_standard_errors_are_named(rng):
+    model = rng.uniform(1.0, 2.0, (1, 24))
+    with pytest.raises(DataError, match="standard errors are all zero"):
+        compare_transients(model, np.zeros_like(model), model)
+    with pytest.raises(DataError, match="too noisy to judge"):
+        compare_transients(model, model, model)
+
+
 def test_normal_scores_match_the_t_tail_far_out():
     t = np.array([-40.0, -3.0, 0.0, 2.5, 1e3])
     z = normal_scores(t, 5)
@@ -138,3 +250,56 @@ def test_real_renders_keep_the_stated_false_alarm_rate():
     assert fails <= alpha * trials + 3 * np.sqrt(trials * alpha), fails
     assert abs(np.mean(np.abs(pooled) > 2) - 2 * stats.norm.sf(2)) < 0.01
     assert stats.kstest(pooled, "norm").pvalue > 1e-3
+
+
+# -- real renders whose bins are correlated -------------------------------------------
+
+
+def _repro_scene(**changes):
+    """A plane of 8 x 8 pixels, one sensor, 12 bins of 0.1 m from 1.9 m (the issue's repro scene)."""
+    from analytic.scene import Sampling, Scene
+
+    values = dict(size=1.0, pixels=8, reflectance=0.5, source=(0.5, 0.5, 1.0), sensors=[(0.2, 0.7, 1.0)],
+                  sampling=Sampling(bin_width_opl=0.1, start_opl=1.9, count=12))
+    return Scene(**(values | changes))
+
+
+def _pulse_scene(pulse: str):
+    from analytic.scene import Illumination, Sampling
+
+    if pulse == "impulse":
+        return _repro_scene()
+    if pulse == "wide square":           # 5 m: every sample lands in every bin of the 1.2 m window
+        return _repro_scene(illumination=Illumination(waveform="square", width=5.0))
+    # an exponential tail 12 m long: every sample lands in the ~120 bins after its path length
+    return _repro_scene(illumination=Illumination(waveform="butterworth", order=1, cutoff=0.5, duration=12.0),
+                        sampling=Sampling(bin_width_opl=0.1, start_opl=1.9, count=160))
+
+
+@pytest.mark.parametrize("pulse", ["impulse", "wide square", "long butterworth"])
+def test_renders_with_correlated_bins_keep_the_stated_false_alarm_rate(pulse):
+    """100 seeds against the exact model, judged with their replicas' sign flips: each test fails at
+    its share α/2, within binomial error; a wide pulse makes the bins move together, and the
+    independent-bins limits then fail far more often than α."""
+    from analytic.system import forward
+    from transient.render import render
+
+    scene = _pulse_scene(pulse)
+    model = forward(scene)
+    alpha, trials = 0.1, 100
+    fails = np.zeros(2)
+    union = independent = 0
+    for seed in range(trials):
+        result = render(scene, spp=2**14, seed=seed, progress=False)
+        agreement = compare_transients(result.mean, result.stderr, model, replicas=result.replica_means,
+                                       false_alarm=alpha)
+        assert agreement.null == "sign-flip"
+        fails += _failures(agreement)
+        union += not agreement.agrees
+        independent += not compare_transients(result.mean, result.stderr, model, dof=result.dof,
+                                              false_alarm=alpha).agrees
+    half = 3 * np.sqrt(trials * alpha / 2 * (1 - alpha / 2))
+    assert np.all(np.abs(fails - alpha / 2 * trials) <= half), fails
+    assert union <= alpha * trials + 3 * np.sqrt(trials * alpha * (1 - alpha)), union
+    if pulse != "impulse":
+        assert independent > alpha * trials + 3 * np.sqrt(trials * alpha * (1 - alpha)), independent

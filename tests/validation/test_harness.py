@@ -24,6 +24,7 @@ def outside():
 def test_right_model_passes(outside):
     scene, result = outside
     assert compare_transients(result.mean, result.stderr, forward(scene)).agrees
+    assert compare_transients(result.mean, result.stderr, forward(scene), replicas=result.replica_means).agrees
 
 
 
@@ -52,6 +53,8 @@ def test_wrong_models_fail(outside, wrong):
         reference = forward(scene.replace(attenuation="paper")) / np.pi
         reference *= np.linalg.norm(model) / np.linalg.norm(reference)  # shape only
     assert not compare_transients(result.mean, result.stderr, reference).agrees
+    # the replicas' own limits keep the power to see it
+    assert not compare_transients(result.mean, result.stderr, reference, replicas=result.replica_means).agrees
 
 
 
@@ -59,6 +62,8 @@ def test_check_scene_reports_every_figure():
     scene = hard_cases(pixels=6)["colocated"]
     check = check_scene(scene, spp=2**20, seed=1)
     assert check.agreement.agrees
+    # judged with the render's replicas: limits that hold whatever the correlation between bins
+    assert check.agreement.null == "sign-flip" and check.metrics["agreement"]["null"] == "sign-flip"
     metrics = check.metrics
     assert metrics["window_share"] == pytest.approx(1.0)
     assert metrics["model_convergence"][-1]["over_stderr"] < 1e-2    # model ≪ noise

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import argparse
+import contextlib
+import math
 from pathlib import Path
 
 from .common import UsageError, add_quiet, load_scene_argument, positive_float_type
@@ -9,15 +12,66 @@ from .common import UsageError, add_quiet, load_scene_argument, positive_float_t
 __all__ = ["add_commands", "command_check", "command_export"]
 
 
-def command_check(args) -> int:
-    """Judge transient file(s) against the exact model of the scene; fit scale and offset.
+def _read_inputs(args, scene):
+    """The data (one transient or replicas), its stderr and dof, read under the data folders' shared locks.
 
-    Exit status 0 when the data agree with the model as given, 1 when not.
+    Our render's output (its folder or transient file) brings its own
+    error: ``replicas.npy`` beside it when present (three or more), else
+    ``stderr.npy`` with the render's degrees of freedom.
     """
     import numpy as np
 
+    from analytic.io import reading_folder
+    from validation.check import read_data, read_stderr, replicas_beside, stderr_beside
+
+    with contextlib.ExitStack() as locks:
+        for path in args.data:
+            locks.enter_context(reading_folder(path, option="--data"))
+        if args.stderr is not None:
+            locks.enter_context(reading_folder(args.stderr, option="--stderr"))
+        arrays = [read_data(path, scene) for path in args.data]
+        stderr = read_stderr(args.stderr, scene) if args.stderr is not None else None
+        dof = None
+        if stderr is None and len(arrays) == 1 and not args.shape_only:
+            replicas = replicas_beside(args.data[0], scene, arrays[0])
+            if replicas is not None:
+                return replicas, None, None
+            stderr, dof = stderr_beside(args.data[0], scene) or (None, None)
+    return (arrays[0] if len(arrays) == 1 else np.stack(arrays)), stderr, dof
+
+
+def _convention(args, scene):
+    """The convention stated by --expect, or --expect-scale / --expect-offset; None when none is."""
+    from validation.check import Convention, irradiancemeter
+
+    numbers = args.expect_scale is not None or args.expect_offset is not None
+    if args.expect is not None and numbers:
+        raise UsageError("--expect: give a named convention or --expect-scale/--expect-offset, not both")
+    if args.radius is not None and args.expect != "irradiancemeter":
+        raise UsageError("--radius: applies to --expect irradiancemeter only")
+    if args.expect == "irradiancemeter":
+        from transient.export import RADIUS
+
+        try:
+            return irradiancemeter(scene, RADIUS if args.radius is None else args.radius)
+        except ValueError as error:
+            raise UsageError(f"--{error}") from None
+    if numbers:
+        scale = 1.0 if args.expect_scale is None else args.expect_scale
+        offset = 0.0 if args.expect_offset is None else args.expect_offset
+        return Convention(scale=scale, offset_opl=offset, name="the stated scale and offset")
+    return None
+
+
+def command_check(args) -> int:
+    """Judge transient file(s) against the exact model of the scene; fit scale and offset.
+
+    Exit status 0 when the data agree with the model as given, or with the
+    convention stated by ``--expect``/``--expect-scale``/``--expect-offset``
+    when one is; 1 when not.
+    """
     from analytic.io import output_folder
-    from validation.check import check_transient, read_data, read_stderr, stderr_beside, write_check_report
+    from validation.check import check_transient, write_check_report
 
     scene = load_scene_argument(args.scene)
     if args.stderr is not None and len(args.data) > 1:
@@ -25,20 +79,15 @@ def command_check(args) -> int:
                          "spread is their error")
     if args.shape_only and (args.stderr is not None or len(args.data) > 1):
         raise UsageError("--shape-only: only for one --data file without --stderr")
-    arrays = [read_data(path, scene) for path in args.data]
-    stderr = read_stderr(args.stderr, scene) if args.stderr is not None else None
-    dof = None
-    if stderr is None and len(arrays) == 1 and not args.shape_only:
-        # our render's output carries its own standard error (and the replicas' degrees of freedom)
-        stderr, dof = stderr_beside(args.data[0], scene) or (None, None)
-    data = arrays[0] if len(arrays) == 1 else np.stack(arrays)
-    result = check_transient(scene, data, stderr=stderr, dof=dof, shape_only=args.shape_only)
+    expect = _convention(args, scene)
+    data, stderr, dof = _read_inputs(args, scene)
+    result = check_transient(scene, data, stderr=stderr, dof=dof, shape_only=args.shape_only, expect=expect)
     with output_folder(args.out) as out:
         write_check_report(out, result, scene_name=scene.name, data_paths=args.data)
     if not args.quiet:
         print(result.summary())
         print(f"-> {Path(args.out) / 'report.md'}")
-    return 0 if result.agrees else 1
+    return 0 if result.verdict else 1
 
 
 def command_export(args) -> int:
@@ -65,6 +114,19 @@ def command_export(args) -> int:
     return 0
 
 
+def _finite_float(option: str):
+    """An argparse type for a finite float, naming ``option`` in its error."""
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{option}: expected a number, got {text!r}") from None
+        if not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"{option}: must be finite, got {text}")
+        return value
+    return parse
+
+
 def add_commands(commands) -> None:
     """Add ``check`` and ``export``."""
     from transient.export import FORMATS, RADIUS, SPP
@@ -73,7 +135,8 @@ def add_commands(commands) -> None:
         "check", help="judge a transient from any tool against the exact model",
         description="Judge transient(s) rendered by anything against the exact model of SCENE, then "
                     "fit a global scale and a time offset (the two usual convention errors) and judge "
-                    "again. Exit 0 when the data agree as given, 1 when not, 2 on a bad file.")
+                    "again. Exit 0 when the data agree as given (or with the convention --expect states), "
+                    "1 when not, 2 on a bad file.")
     check.add_argument("scene", nargs="?", help="scene TOML (default: the built-in scene)")
     check.add_argument("--data", nargs="+", required=True, metavar="FILE",
                        help="transient file(s): our transient.npy/.exr/.h5 or their folder, a (K, N) .npy, "
@@ -81,9 +144,24 @@ def add_commands(commands) -> None:
                             "several files are independent replicas")
     check.add_argument("--stderr", metavar="FILE",
                        help="per-bin standard error of a single --data file (default for our render's "
-                            "output: its stderr.npy, judged with its replicas' degrees of freedom)")
+                            "output: its replicas.npy, else its stderr.npy with the replicas' degrees of "
+                            "freedom)")
     check.add_argument("--shape-only", action="store_true",
                        help="judge a single file without errors by shape only (relative L2)")
+    check.add_argument("--expect", choices=("irradiancemeter",),
+                       help="judge against a stated convention, exit 0 when it holds: irradiancemeter = "
+                            "mitransient's irradiancemeter spheres (--format mitransient export): the model "
+                            "scaled by exactly 1/4 (a Lambertian plane needs no finite-sphere correction) "
+                            "and its start_opl moved by 2r/3 + 8.94e-5 m (rays start on the sphere, plus "
+                            "Mitsuba's float32 RayEpsilon)")
+    check.add_argument("--radius", type=positive_float_type("--radius"),
+                       help=f"--expect irradiancemeter: the spheres' radius, metres (default {RADIUS:g}, "
+                            f"the export's)")
+    check.add_argument("--expect-scale", type=positive_float_type("--expect-scale"), metavar="S",
+                       help="judge against S x the model (data / model; default 1 with --expect-offset)")
+    check.add_argument("--expect-offset", type=_finite_float("--expect-offset"), metavar="M",
+                       help="judge against the model with its start_opl moved by +M metres (positive when "
+                            "the data read path lengths short; default 0 with --expect-scale)")
     check.add_argument("--out", required=True, help="output folder (report.md, metrics.json, figures)")
     add_quiet(check)
     check.set_defaults(run=command_check)

@@ -418,6 +418,11 @@ class Scene:
             raise SceneError("noise", "expected a Noise or None")
         if not isinstance(self.name, str):
             raise SceneError("name", f"expected a string, got {self.name!r}")
+        # the name labels reports, figures and printed lines: one line of printable text
+        unprintable = next((c for c in self.name if not c.isprintable()), None)
+        if unprintable is not None:
+            raise SceneError("name", f"holds the unprintable character U+{ord(unprintable):04X} (a control or "
+                                     f"format character, or a separator other than the space); use printable text")
 
     @property
     def pixel_size(self) -> float:

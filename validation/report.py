@@ -1,14 +1,97 @@
-"""report.md, metrics.json and the figures of a validation run (``validate`` and ``run``)."""
+"""report.md, metrics.json and the figures of a validation run (``validate`` and ``run``).
+
+Layout of the output folder
+---------------------------
+One scene (``run``, ``write_report(..., headline=True)``): everything at the
+top of the folder::
+
+    report.md  metrics.json  transients.png  z_map.png  [convergence.png]  [reconstructions.png]
+
+Several scenes (``validate``): the report at the top, each scene's figures
+in a folder of its own, and the corner's in ``corner/``::
+
+    report.md  metrics.json  <folder>/transients.png  <folder>/z_map.png  ...  corner/transients.png
+
+A scene's folder is its name made safe by :func:`scene_folder_names`;
+metrics.json's ``scenes`` is keyed by that folder and keeps the scene's own
+name in each entry's ``name``. Nothing is ever written outside the output
+folder, whatever the scenes are called.
+"""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 from analytic.io import save_json, save_text
 from analytic.window import FULL_SHARE
 from validation.plots import (plot_convergence, plot_reconstructions, plot_transients, plot_z_map)
 
-__all__ = ["write_report", "write_markdown"]
+__all__ = ["write_report", "write_markdown", "scene_folder_names", "FIGURE_FILES", "RESERVED_NAMES",
+           "MAX_FOLDER_NAME"]
+
+#: The figures drawn for one scene, in its folder (or, for ``run``, at the top).
+FIGURE_FILES = ("transients.png", "z_map.png", "convergence.png", "reconstructions.png")
+#: Names the report itself uses at the top of its folder: a scene folder never takes one.
+RESERVED_NAMES = frozenset({"report.md", "metrics.json", "model", "render", "corner", *FIGURE_FILES})
+#: Longest scene folder name, in characters (all ASCII, so also bytes), before a "-2" suffix.
+MAX_FOLDER_NAME = 64
+
+_UNSAFE = re.compile(r"[^A-Za-z0-9._-]")
+
+
+def _safe_name(name: str) -> str:
+    """One name made safe, before uniqueness (see :func:`scene_folder_names`)."""
+    text = _UNSAFE.sub("_", name)[:MAX_FOLDER_NAME]
+    # a leading dot hides the folder (and ".", ".." are not folders of their own); a trailing one
+    # is dropped by some file systems, which would merge two names
+    text = re.sub(r"^\.+", lambda dots: "_" * len(dots.group()), text)
+    text = re.sub(r"\.+$", lambda dots: "_" * len(dots.group()), text)
+    return text or "scene"
+
+
+def scene_folder_names(names) -> list[str]:
+    """The folder of each scene's files: its name made safe, unique and never one the report uses.
+
+    The rule, applied to each name in order:
+
+    1. every character outside ``A-Z a-z 0-9 . _ -`` becomes ``_`` (so no
+       ``/``, no space, nothing outside ASCII);
+    2. only the first 64 characters are kept;
+    3. leading and trailing dots become ``_`` (no hidden folder, no ``..``);
+       an empty name becomes ``scene``;
+    4. a name already taken, by an earlier scene or by the report itself
+       (:data:`RESERVED_NAMES`: ``report.md``, ``metrics.json``, ``model``,
+       ``render``, ``corner`` and the figure files), compared without regard
+       to case, gets the first free suffix ``-2``, ``-3``, ...
+
+    Parameters
+    ----------
+    names : iterable of str
+        The scenes' names, in report order.
+
+    Returns
+    -------
+    list of str
+        One folder name per scene, in the same order; all different, even
+        on a file system that ignores case.
+
+    Examples
+    --------
+    >>> scene_folder_names(["low", "../x", "metrics.json", "low", "a b"])
+    ['low', '.._x', 'metrics.json-2', 'low-2', 'a_b']
+    """
+    taken = {name.lower() for name in RESERVED_NAMES}
+    folders = []
+    for name in names:
+        base = _safe_name(name)
+        folder, suffix = base, 1
+        while folder.lower() in taken:
+            suffix += 1
+            folder = f"{base}-{suffix}"
+        taken.add(folder.lower())
+        folders.append(folder)
+    return folders
 
 
 def write_markdown(path: str | Path, lines: list[str]) -> Path:
@@ -16,93 +99,168 @@ def write_markdown(path: str | Path, lines: list[str]) -> Path:
     return save_text(path, "\n".join(lines).rstrip("\n") + "\n")
 
 
-def _reconstruction_cell(check) -> str:
-    recon = check.metrics.get("reconstruction", {})
-    if "model" not in recon:
-        return "-"
-    return (f"{recon['model']['psnr']:.1f} / {recon['render']['psnr']:.1f} ({recon['rule']}); "
-            f"oracle {recon['oracle']['psnr']:.1f}, flat {recon['flat_psnr']:.1f}")
+def _markdown_text(text: str) -> str:
+    """A scene's name as literal markdown text: its table pipes, links and emphasis escaped."""
+    return re.sub(r"([\\|*`\[\]<>])", r"\\\1", text)
 
 
-def _row(check) -> str:
+_AGREEMENT_COLUMNS = [
+    ("scene", "the scene's name"),
+    ("verdict", "agree, or DISAGREE: both tests below must pass"),
+    ("samples", "Monte Carlo samples of the render"),
+    ("χ²/dof [accept]", "the mean of z² over the judged bins (pure noise gives about 1) and the interval "
+                        "that pure noise leaves with probability 1 − α/2"),
+    ("max abs z (limit)", "the largest |z| of any judged bin, and the Šidák limit that pure noise stays "
+                          "under with probability 1 − α/2"),
+    ("bins", "bins judged (se < 0.1 of the rendered value)"),
+    ("rel. L2", "‖y_render − y_model‖ / ‖y_model‖: reported beside the verdict, never instead of it"),
+    ("window", f"the share of the scene's light its time bins hold (**cut** below {100 * FULL_SHARE:g} %)"),
+    ("model err / se", "the model's own quadrature error at its default tolerance (against tolerance "
+                       "1e-7) over the standard error, worst judged bin: far below 1 means the model is "
+                       "exact at this noise level"),
+    ("slope", "the render error's slope against samples on log axes (−0.5 for Monte Carlo noise)"),
+]
+
+_COST_COLUMNS = [
+    ("scene", "the scene's name"),
+    ("eq. (1): error / shape error", "how far the paper's attenuation (eq. 1: no cos θ_k, no 1/π) is from "
+                                     "physical transport: ‖y_eq1 − y‖ / ‖y‖ as is, and again after scaling "
+                                     "y_eq1 to y's norm (what a constant factor cannot explain)"),
+    ("eq. (3): shape error", "how far eq. (3)'s contour integral without the coarea factor 1/|∇d| is from "
+                             "the correct impulse response g_k(t), both scaled to one norm"),
+    ("PSNR model / render", "PSNR (dB, data range 1) of the images reconstructed from the model's and from "
+                            "the render's transient, each with the scene's noise added (the same draw)"),
+    ("rule: λ model / render", "the rule that chose the regularisation weight λ from the data alone, and "
+                               "the λ it chose for each"),
+    ("oracle PSNR (λ)", "the best PSNR any λ gives on the model's noisy data (a bound: it needs the true "
+                        "image), and that λ"),
+    ("flat PSNR", "the best flat image's PSNR (the floor: what knowing only the mean gives)"),
+]
+
+
+def _table(columns: list[tuple[str, str]], rows: list[str]) -> list[str]:
+    return ["| " + " | ".join(title for title, _ in columns) + " |",
+            "|" + "---|" * len(columns), *rows]
+
+
+def _legend(columns: list[tuple[str, str]]) -> list[str]:
+    return [f"- **{title}**: {meaning}." for title, meaning in columns]
+
+
+def _agreement_row(check) -> str:
     a = check.agreement
-    costs = check.metrics.get("simplifications", {})
     model_noise = (f"{check.model_convergence[-1]['over_stderr']:.1e}"
                    if check.model_convergence else "-")
     slope = f"{check.metrics['render_slope']:.2f}" if "render_slope" in check.metrics else "-"
     share = check.metrics.get("window_share")
     window = "-" if share is None else f"{100 * share:.2f} %" + (" **cut**" if share < FULL_SHARE else "")
-    coarea = f"{costs['no_coarea_factor']:.3f}" if "no_coarea_factor" in costs else "-"
-    return (f"| {check.name} | **{'agree' if a.agrees else 'DISAGREE'}** | {check.spp:.3g} | "
+    return (f"| {_markdown_text(check.name)} | **{'agree' if a.agrees else 'DISAGREE'}** | {check.spp:.3g} | "
             f"{a.chi2_per_dof:.3f} [{a.chi2_interval[0]:.2f}, {a.chi2_interval[1]:.2f}] | "
             f"{a.max_abs_z:.2f} (≤ {a.z_threshold:.2f}) | {a.bins} | {a.relative_l2:.2e} | {window} | "
-            f"{model_noise} | {slope} | {costs.get('paper_attenuation', float('nan')):.2f} / "
-            f"{costs.get('paper_attenuation_shape', float('nan')):.3f} | {coarea} | "
-            f"{_reconstruction_cell(check)} |")
+            f"{model_noise} | {slope} |")
+
+
+def _cost_row(check) -> str:
+    costs = check.metrics.get("simplifications", {})
+    attenuation = (f"{costs['paper_attenuation']:.2f} / {costs['paper_attenuation_shape']:.3f}"
+                   if "paper_attenuation" in costs else "-")
+    coarea = f"{costs['no_coarea_factor']:.3f}" if "no_coarea_factor" in costs else "-"
+    recon = check.metrics.get("reconstruction", {})
+    if "model" in recon:
+        cells = (f"{recon['model']['psnr']:.1f} / {recon['render']['psnr']:.1f} | "
+                 f"{recon['rule']}: {recon['model']['lambda']:.3g} / {recon['render']['lambda']:.3g} | "
+                 f"{recon['oracle']['psnr']:.1f} ({recon['oracle']['lambda']:.3g}) | {recon['flat_psnr']:.1f}")
+    else:
+        cells = "- | - | - | -"
+    return f"| {_markdown_text(check.name)} | {attenuation} | {coarea} | {cells} |"
+
+
+def _draw_scene(check, folder: Path, link: str, heading: str) -> list[str]:
+    """One scene's figures in ``folder`` (linked as ``link`` + file name) and its report section."""
+    sampling = check.scene.sampling
+    agreement = check.agreement
+    plot_transients(folder / "transients.png", sampling, {"model": check.model, "render": check.render},
+                    errors={"render": check.stderr}, z_limit=agreement.z_threshold,
+                    title=f"{check.name}: the model (steps) against the render (points)")
+    plot_z_map(folder / "z_map.png", agreement.z, agreement.z_threshold, sampling,
+               f"{check.name}: z over sensors x bins")
+    lines = ["", heading, "", agreement.summary(), "",
+             "Transients of up to 8 sensors (named in the figure) with z below each; the z map shows "
+             "every sensor.", "",
+             f"![transients]({link}transients.png)", "", f"![z map]({link}z_map.png)"]
+    if check.render_convergence:
+        plot_convergence(folder / "convergence.png", check.name, check.render_convergence,
+                         check.metrics.get("render_slope"), check.model_convergence)
+        lines += ["", f"![convergence]({link}convergence.png)"]
+    recon = check.reconstructions
+    if "model" in recon:
+        panels = [(f"from the model's data\n({recon['rule']})", recon["model"]["image"],
+                   f"PSNR {recon['model']['psnr']:.1f} dB, λ = {recon['model']['lambda']:.3g}"),
+                  (f"from the render's data\n({recon['rule']})", recon["render"]["image"],
+                   f"PSNR {recon['render']['psnr']:.1f} dB, λ = {recon['render']['lambda']:.3g}"),
+                  ("oracle λ (a bound)", recon["oracle"]["image"],
+                   f"PSNR {recon['oracle']['psnr']:.1f} dB, λ = {recon['oracle']['lambda']:.3g}")]
+        plot_reconstructions(folder / "reconstructions.png",
+                             f"{check.name}: reconstructions (the best flat image scores {recon['flat_psnr']:.1f} dB)",
+                             check.scene.reflectance, panels)
+        lines += ["", recon["data"] + f" λ chosen: {recon['model']['lambda']:.3g} (model's data), "
+                                      f"{recon['render']['lambda']:.3g} (render's data); the oracle's "
+                                      f"{recon['oracle']['lambda']:.3g}.",
+                  "", f"![reconstructions]({link}reconstructions.png)"]
+    return lines
 
 
 def write_report(out: Path, checks: list, corner: dict | None = None, *, false_alarm: float = 1e-3,
                  headline: bool = False) -> dict:
     """Write report.md, metrics.json and the figures for a list of SceneCheck (and the corner result).
 
-    With ``headline`` (one scene: the ``run`` command) metrics.json also holds
-    that scene's ``agreement``, ``window_share`` and ``reconstruction`` at its
-    top level (DESIGN.md section 5).
+    Parameters
+    ----------
+    out : Path
+        The output folder; the layout is the module docstring's.
+    checks : list of SceneCheck
+        The scenes, in report order.
+    corner : dict, optional
+        :func:`validation.corner.check_corner`'s result.
+    false_alarm : float
+        α, the false-alarm rate per scene the verdicts used.
+    headline : bool
+        One scene (the ``run`` command): its figures at the top of ``out``
+        beside report.md, and metrics.json also holds that scene's
+        ``agreement``, ``window_share`` and ``reconstruction`` at its top
+        level (DESIGN.md section 5). Without it each scene's figures are in
+        its folder (:func:`scene_folder_names`).
 
     Returns
     -------
     dict
-        What metrics.json holds: per scene its metrics, the corner's, and
-        ``all_agree``.
+        What metrics.json holds: per scene (keyed by its folder name) its
+        metrics and ``name``, the corner's, and ``all_agree``.
     """
     out = Path(out)
+    if headline and len(checks) != 1:
+        raise ValueError(f"headline: one scene, got {len(checks)}")
     lines = ["# Cross-check: Monte Carlo render against the exact model", "",
-             f"Per bin z = (y_render − y_model) / se_render over bins with se < 0.1 y_render. "
-             f"A scene agrees when χ²/dof lies in the central interval that pure noise leaves with "
-             f"probability 1 − α/2 and max |z| is below the Šidák limit at α/2; together the "
-             f"false-alarm rate is α = {false_alarm:g} per scene. Relative L2 is reported beside the "
-             f"verdict. 'window' is the share of the light the scene's bins hold (cut below "
-             f"{100 * FULL_SHARE:g} %). 'model err / se' is the model's own quadrature error at its "
-             f"default tolerance (against tolerance 1e-7) over each judged bin's standard error, worst "
-             f"bin: far below 1 means the model is exact at this noise level. Paper attenuation: relative "
-             f"difference of eq. (1) from physical transport (raw / after rescaling to the same norm). No "
-             f"coarea: relative shape difference of eq. (3)'s contour integral from the correct one. "
-             f"Reconstruction: PSNR (dB, range 1) of images recovered from the model's / the render's "
-             f"transient, each with the scene's noise added (the same draw), λ by the named rule; the "
-             f"oracle λ (a bound) and the best flat image (the floor) beside them.",
-             "",
-             "| scene | verdict | samples | χ²/dof [accept] | max abs z (limit) | bins | rel. L2 | window | "
-             "model err / se | slope | paper atten. | no coarea | reconstruction PSNR model / render (rule) |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    lines += [_row(check) for check in checks]
+             f"Per bin z = (y_render − y_model) / se_render over the bins with se < 0.1 y_render. A scene "
+             f"agrees when χ²/dof lies in the central interval that pure noise leaves with probability "
+             f"1 − α/2 and max |z| is below the Šidák limit at α/2; together the false-alarm rate is "
+             f"α = {false_alarm:g} per scene.", "", "## Agreement", ""]
+    lines += _table(_AGREEMENT_COLUMNS, [_agreement_row(check) for check in checks])
+    lines += ["", *_legend(_AGREEMENT_COLUMNS), "",
+              "## What the paper's simplifications cost, and the reconstructions", ""]
+    lines += _table(_COST_COLUMNS, [_cost_row(check) for check in checks])
+    lines += ["", *_legend(_COST_COLUMNS)]
     metrics = {"false_alarm": false_alarm, "scenes": {}}
-    for check in checks:
-        folder = out / check.name
-        sampling = check.scene.sampling
-        plot_transients(folder / "transients.png", sampling, {"model": check.model, "render": check.render},
-                        errors={"render": check.stderr},
-                        title=f"{check.name}: model (steps) and render (points, ±1 se; z below)")
-        plot_z_map(folder / "z_map.png", check.agreement.z, check.agreement.z_threshold, sampling,
-                   f"{check.name}: z over sensors x bins")
-        lines += ["", f"## {check.name}", "", check.agreement.summary(), "",
-                  f"![transients]({check.name}/transients.png)", "", f"![z map]({check.name}/z_map.png)"]
-        if check.render_convergence:
-            plot_convergence(folder / "convergence.png", check.name, check.render_convergence,
-                             check.metrics.get("render_slope"), check.model_convergence)
-            lines += ["", f"![convergence]({check.name}/convergence.png)"]
-        recon = check.reconstructions
-        if "model" in recon:
-            panels = [(f"from the model's data\n({recon['rule']})", recon["model"]["image"],
-                       f"PSNR {recon['model']['psnr']:.1f} dB"),
-                      (f"from the render's data\n({recon['rule']})", recon["render"]["image"],
-                       f"PSNR {recon['render']['psnr']:.1f} dB"),
-                      ("oracle λ (a bound)", recon["oracle"]["image"], f"PSNR {recon['oracle']['psnr']:.1f} dB")]
-            plot_reconstructions(folder / "reconstructions.png",
-                                 f"{check.name}: reconstructions (the best flat image scores {recon['flat_psnr']:.1f} dB)",
-                                 check.scene.reflectance,
-                                 panels)
-            lines += ["", recon["data"], "", f"![reconstructions]({check.name}/reconstructions.png)"]
-        metrics["scenes"][check.name] = check.metrics
+    folders = scene_folder_names(check.name for check in checks)
+    for check, folder in zip(checks, folders):
+        heading = f"## {_markdown_text(check.name)}"
+        if headline:
+            lines += _draw_scene(check, out, "", heading)
+        else:
+            if folder != check.name:
+                heading += f" (files in `{folder}/`)"
+            lines += _draw_scene(check, out / folder, f"{folder}/", heading)
+        metrics["scenes"][folder] = {"name": check.name, **check.metrics}
     if corner is not None:
         lines += ["", "## corner (outside the one-bounce model)", "", corner["text"], "",
                   "![corner](corner/transients.png)"]
@@ -112,6 +270,7 @@ def write_report(out: Path, checks: list, corner: dict | None = None, *, false_a
                         {"one-bounce model": arrays["model"], "render, 1 bounce": arrays["one"],
                          "render, 3 bounces": arrays["many"]},
                         errors={"render, 1 bounce": arrays["one_se"], "render, 3 bounces": arrays["many_se"]},
+                        z_limit=corner["one_bounce"]["z_threshold"],
                         title="corner: one-bounce model against renders")
     metrics["all_agree"] = all(check.agreement.agrees for check in checks) and (
         corner is None or (corner["one_bounce_agrees"] and corner["mitransient"].get("agrees") is not False))

@@ -84,7 +84,11 @@ for label, value in {**BAD_TYPES, "unknown": '"phong"'}.items():
     CASES.append(("model.attenuation", label, value, False))
 for label, value in {**BAD_TYPES, "unknown": '"uniform"'}.items():
     CASES.append(("noise.kind", label, value, False))
-for label, value in {"number": "3", "bool": "true", "list": "[1]"}.items():
+for label, value in {"number": "3", "bool": "true", "list": "[1]",
+                     # a name labels reports and printed lines: one line of printable text (a file's
+                     # C0 controls, a NUL or a newline, are escaped as \xNN when it is read; these are not)
+                     "bidi_override": '"a\\u202eb"', "line_separator": '"a\\u2028b"',
+                     "next_line": '"a\\u0085b"'}.items():
     CASES.append(("name", label, value, False))
 for label, value in {"zero": "[0, 4]", "negative": "[-1, 4]", "huge": "[100000, 100000]",
                      "one": "[4]", "float": "[1.5, 2]", "text": '"4x4"'}.items():
@@ -252,4 +256,39 @@ def test_command_line_value(tmp_path, capsys, argv, words):
     error = capsys.readouterr().err.strip().splitlines()
     assert status == 2, argv
     assert len(error) == 1 and words in error[0], error
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("name", ["a\x00b", "two\nlines", "a\u202eb", "a\u2028b"])
+def test_a_scene_refuses_an_unprintable_name(name):
+    from analytic.errors import SceneError
+    from analytic.scene import Scene
+
+    with pytest.raises(SceneError) as caught:
+        Scene(name=name)
+    assert caught.value.key == "name" and "\n" not in str(caught.value)
+
+
+# ---------------------------------------------------------------- refusals that need the whole command
+
+def test_validate_refuses_an_spp_some_suite_scene_cannot_be_judged_at(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["validate", "--spp", "4096", "--fast", "--out", str(out)]) == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    # the scenes that cannot be judged, why, and the count that can
+    assert line.startswith("diffuse-imaging: error: --spp 4096") and "fine" in line and "far" in line
+    assert "--spp 65536" in line
+    assert not out.exists()
+
+
+def test_validate_names_the_scene_it_cannot_judge(tmp_path, capsys):
+    # 2,000 bins of 0.5 mm: at 4,096 samples no bin has a standard error under 0.1 of its value
+    spread = write_scene(tmp_path, GOOD.replace("period = 0.1\nstart = 0.0\ncount = 40",
+                                                "period = 0.0005\nstart = 1.9\ncount = 2000"), "spread.toml")
+    good = write_scene(tmp_path, GOOD, "good.toml")
+    out = tmp_path / "out"
+    assert main(["validate", str(good), str(spread), "--spp", "4096", "--fast", "--out", str(out)]) == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert line.startswith("diffuse-imaging: error: scene 'spread'") and str(spread) in line
+    assert "4,096 samples" in line and "render more samples" in line
     assert not out.exists()

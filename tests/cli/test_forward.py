@@ -82,3 +82,10 @@ def test_intensity_scales_the_model_exactly(tmp_path):
                      str(tmp_path / name), "--quiet"]) == 0
     unit, scaled = np.load(tmp_path / "unit" / "transient.npy"), np.load(tmp_path / "bright" / "transient.npy")
     np.testing.assert_allclose(scaled, 37.5 * unit, rtol=1e-15, atol=0)
+
+
+def test_a_scene_name_is_drawn_as_it_is(tmp_path):
+    # "$...$" would be matplotlib's mathtext (this one an error), 日本 is not in its font (a warning)
+    path = write_scene(tmp_path, "name = 'a$\\frac$b 日本'\n" + GOOD)      # a TOML literal string
+    assert main(["forward", str(path), "--out", str(tmp_path / "out"), "--quiet"]) == 0
+    assert (tmp_path / "out" / "transient.png").stat().st_size > 0

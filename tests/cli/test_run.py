@@ -39,6 +39,19 @@ def test_run_report_links_only_files_that_exist(run_folder):
     assert "discrepancy rule" in report                    # which data and which rule, in words
 
 
+def test_run_puts_its_figures_beside_its_report(run_folder):
+    # one scene: no folder named after it (its name would otherwise decide where files go)
+    assert {path.name for path in run_folder.iterdir()} == {
+        "report.md", "metrics.json", "model", "render", "transients.png", "z_map.png", "convergence.png",
+        "reconstructions.png"}
+    report = (run_folder / "report.md").read_text()
+    # the chosen λ of both reconstructions is in the report, beside what each column means
+    recon = json.loads((run_folder / "metrics.json").read_text())["reconstruction"]
+    for data in ("model", "render"):
+        assert f"{recon[data]['lambda']:.3g}" in report
+    assert "- **eq. (1): error / shape error**:" in report
+
+
 def test_the_metadata_schema_is_the_same_for_every_command(run_folder, tmp_path):
     assert main(["forward", "--out", str(tmp_path / "forward"), "--quiet"]) == 0
     assert main(["render", "--spp", "4096", "--out", str(tmp_path / "render"), "--quiet"]) == 0

@@ -1,9 +1,14 @@
-"""Figures: axes that need no offset text, whatever the window's position and the data's scale."""
+"""Figures: axes that need no offset text, whatever the window's position and the data's scale; figures that
+say what they show, draw a user's text as it is, and keep log axes and tick labels readable."""
+
+import math
+import types
 
 import numpy as np
 import pytest
 
 from analytic.scene import Sampling
+from validation import plots
 from validation.plots import _power_of_ten, _round_origin, plot_transients, plot_z_map
 
 
@@ -29,3 +34,148 @@ def test_a_far_tiny_transient_is_drawn(tmp_path):
                     errors={"render": np.full_like(y, 1e-16)})
     plot_z_map(tmp_path / "z.png", np.zeros((1, 50)), 4.0, sampling, "z")
     assert (tmp_path / "t.png").stat().st_size > 0 and (tmp_path / "z.png").stat().st_size > 0
+
+
+# ---------------------------------------------------------------- what the figures say
+
+
+@pytest.fixture
+def figures(monkeypatch):
+    """The figures the plotting functions would save, drawn, instead of PNG files."""
+    drawn = []
+
+    def keep(figure, path, dpi=110):
+        figure.canvas.draw()
+        drawn.append(figure)
+        return path
+
+    monkeypatch.setattr(plots, "save_figure", keep)
+    return drawn
+
+
+def _texts(figure) -> str:
+    return " ".join(text.get_text() for text in figure.findobj(lambda artist: hasattr(artist, "get_text")))
+
+
+def _shown_tick_labels(axis, which: str):
+    """(tick label, its extent) of every labelled tick inside the view of one axis."""
+    ruler = axis.xaxis if which == "x" else axis.yaxis
+    low, high = sorted(ruler.get_view_interval())
+    renderer = axis.figure.canvas.get_renderer()
+    shown = []
+    for tick in ruler.get_major_ticks() + ruler.get_minor_ticks():
+        label = tick.label1
+        if label.get_visible() and label.get_text() and low <= tick.get_loc() <= high:
+            shown.append((label.get_text(), label.get_window_extent(renderer)))
+    return shown
+
+
+def _assert_labels_apart(axis, which: str):
+    shown = sorted(_shown_tick_labels(axis, which), key=lambda item: item[1].x0 if which == "x" else item[1].y0)
+    for (text, box), (next_text, next_box) in zip(shown, shown[1:]):
+        gap = next_box.x0 - box.x1 if which == "x" else next_box.y0 - box.y1
+        assert gap > 0, f"tick labels {text!r} and {next_text!r} overlap"
+
+
+def _transients(sensors: int):
+    sampling = Sampling(bin_width_opl=0.1, start_opl=1.9, count=12)
+    model = np.outer(np.linspace(1.0, 2.0, sensors), np.r_[0.0, 0.0, 5.0, 4.0, 3.0, 2.0, 1.0, 0.5, 0.0, 0, 0, 0])
+    stderr = 0.001 * model
+    render = model + 2.0 * stderr
+    return sampling, model, render, stderr
+
+
+def test_transients_say_which_sensors_they_show_and_draw_the_real_z_limit(figures):
+    sampling, model, render, stderr = _transients(16)
+    plots.plot_transients("t.png", sampling, {"model": model, "render": render}, errors={"render": stderr},
+                          z_limit=4.61, title="scene")
+    (figure,) = figures
+    text = _texts(figure)
+    assert "8 of 16" in text and "4.61" in text
+    # the error bars (0.1 % of the peak) hide under the points: the legend says so
+    assert "within the points" in text
+    strips = [axis for axis in figure.axes if axis.get_ylabel() == "z" or axis.get_ylim()[0] < 0]
+    levels = {round(abs(line.get_ydata()[0]), 2) for axis in strips for line in axis.get_lines()
+              if len(set(line.get_ydata())) == 1}
+    assert 4.61 in levels and 3.0 not in levels
+    sizes = {label.get_fontsize() for axis in figure.axes for label in axis.get_yticklabels()}
+    assert min(sizes) >= 7
+
+
+def test_titles_show_a_scene_name_as_it_is(figures):
+    sampling, model, render, stderr = _transients(1)
+    # "$...$" would be mathtext (and this one an error); CJK is not in DejaVu Sans (a glyph warning)
+    plots.plot_transients("t.png", sampling, {"model": model, "render": render}, title="a$\\frac$b 日本")
+    plots.plot_z_map("z.png", np.zeros((1, 12)), 4.0, sampling, "a$\\frac$b 日本")
+    assert "a$\\frac$b" in _texts(figures[0]) and "a$\\frac$b" in _texts(figures[1])
+
+
+def test_log_axes_leave_out_errors_of_exactly_zero(figures):
+    rows = [{"samples": 2**k, "relative_l2": 0.0} for k in (12, 14, 16)]
+    plots.plot_convergence("c.png", "exact", rows, None, [{"tolerance": 1e-2, "over_stderr": 0.0}])
+    assert "nothing above 0" in _texts(figures[0])
+
+
+def _reconstruction(lambdas, residual_norms, seminorms, rule="gcv"):
+    lambdas = np.asarray(lambdas, float)
+    return types.SimpleNamespace(rule=rule, lambdas=lambdas, criterion=np.linspace(1.0, 2.0, lambdas.size),
+                                 residual_norms=np.asarray(residual_norms, float),
+                                 seminorms=np.asarray(seminorms, float), lam=float(lambdas[2]),
+                                 residual_norm=float(residual_norms[2]), seminorm=float(seminorms[2]))
+
+
+def test_criterion_tick_labels_on_a_short_log_span_do_not_run_together(figures):
+    # a λ grid and an L-curve spanning less than a decade: matplotlib would label every minor tick
+    plots.plot_criterion("c.png", _reconstruction(np.geomspace(1.0, 2.0, 8), np.linspace(0.105, 0.12, 8),
+                                                  np.linspace(2.0, 1.5, 8)))
+    for axis in figures[0].axes:
+        for which in ("x", "y"):
+            _assert_labels_apart(axis, which)
+        assert len(_shown_tick_labels(axis, "x")) >= 2
+
+
+def test_criterion_over_the_whole_float_range_is_drawn(figures):
+    # λ from 1e-300 to 1e300 and a seminorm of 0: margins and ticks must stay finite
+    lambdas = np.geomspace(1e-300, 1e300, 12)
+    plots.plot_criterion("c.png", _reconstruction(lambdas, np.geomspace(1e-5, 1e26, 12),
+                                                  np.r_[np.geomspace(2.0, 1e-200, 11), 0.0]))
+    for axis in figures[0].axes:
+        for which in ("x", "y"):
+            low, high = (axis.get_xlim() if which == "x" else axis.get_ylim())
+            assert math.isfinite(low) and math.isfinite(high)
+            assert _shown_tick_labels(axis, which)
+
+
+@pytest.fixture(scope="module")
+def check_result():
+    from analytic.scene import Scene
+    from analytic.system import forward
+    from validation.check import check_transient
+
+    scene = Scene(pixels=6, source=(0.5, 0.5, 1.0), sensors=[(0.2, 0.7, 1.0), (0.6, 0.3, 0.8), (0.5, 0.5, 0.5)],
+                  sampling=Sampling(bin_width_opl=0.1, start_opl=1.0, count=30))
+    model = forward(scene)
+    stderr = np.where(model > 0, 0.01 * np.abs(model).max(), 0.0)
+    noise = np.random.default_rng(5).standard_normal(model.shape)
+    return scene, check_transient(scene, model + stderr * noise, stderr=stderr)
+
+
+def test_check_transients_title_legend_and_time_axes(figures, check_result):
+    scene, result = check_result
+    plots.plot_check_transients("c.png", result)
+    (figure,) = figures
+    renderer = figure.canvas.get_renderer()
+    title = figure._suptitle.get_window_extent(renderer)
+    (legend,) = figure.legends
+    assert not title.overlaps(legend.get_window_extent(renderer))
+    assert any(axis.get_xlabel() == "ns" for axis in figure.findobj(lambda a: hasattr(a, "get_xlabel")))
+
+
+def test_check_z_is_drawn_against_path_length(figures, check_result):
+    scene, result = check_result
+    plots.plot_check_z("z.png", result)
+    edges = scene.sampling.edges
+    for axis in figures[0].axes[:2]:
+        low, high = axis.get_xlim()
+        assert edges[0] - 0.1 <= low < high <= edges[-1] + 0.1       # metres of path, not a bin index
+    assert "limit ±" in _texts(figures[0])

@@ -198,6 +198,29 @@ def test_bad_sweep_files_name_the_key(tmp_path, capsys, text, key):
     assert not (tmp_path / "out").exists()
 
 
+def _may_have_cuda() -> bool:
+    """A CUDA driver is installed (asked without importing Dr.Jit, which must pick its LLVM first)."""
+    import ctypes.util
+
+    return ctypes.util.find_library("cuda") is not None or os.path.exists("/proc/driver/nvidia/version")
+
+
+@pytest.mark.skipif(_may_have_cuda(), reason="this machine may have a CUDA device: the variant is legal here")
+def test_a_cuda_variant_without_a_gpu_is_refused_before_any_cluster_or_file(tmp_path):
+    import subprocess
+    import sys
+
+    path = write_sweep(tmp_path, text='scene = "base.toml"\nsamples = 4096\nvariant = "cuda_ad_mono"\n')
+    out = tmp_path / "out"
+    # in a process of its own: asking for a CUDA variant imports Dr.Jit without choosing its LLVM
+    done = subprocess.run([sys.executable, "-m", "validation.cli", "sweep", str(path), "--out", str(out)],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 2, done.stderr
+    (line,) = done.stderr.strip().splitlines()
+    assert line.startswith("diffuse-imaging: error: variant cuda_ad_mono") and "CUDA" in line
+    assert not out.exists()
+
+
 def test_the_sweep_renders_what_render_renders():
     """The sweep's chunks differ from render()'s (which starts small for an early checkpoint):
     the same samples, summed in another order, to float64 rounding."""

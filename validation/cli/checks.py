@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from .common import add_quiet, check_samples_type, load_scene_argument, seed_type, show_progress
+from .common import UsageError, add_quiet, check_samples_type, load_scene_argument, seed_type, show_progress
 from .reconstruct import add_lambda_options
 
 __all__ = ["add_commands", "command_validate", "command_run"]
@@ -13,38 +13,85 @@ __all__ = ["add_commands", "command_validate", "command_run"]
 DEFAULT_SAMPLES = 2**22
 
 
+def _named(error, label: str):
+    """The same user error, its one line now starting with ``label`` (which scene it is about)."""
+    error.args = (f"{label}: {error.args[0] if error.args else error}", *error.args[1:])
+    return error
+
+
+def _suite_samples(requested: int | None) -> list:
+    """The built-in suite with each scene's samples: its own, or ``--spp`` when every scene can use it.
+
+    Raises
+    ------
+    UsageError
+        When ``--spp`` is below what some suite scene needs for any of its
+        bins to be judged (:data:`validation.suite.MINIMUM_SAMPLES`), naming
+        those scenes, before any work.
+    """
+    from validation.suite import MINIMUM_SAMPLES, validation_suite
+
+    suite = validation_suite()
+    if requested is None:
+        return suite
+    short = [(scene.name, MINIMUM_SAMPLES[scene.name]) for scene, _ in suite
+             if requested < MINIMUM_SAMPLES.get(scene.name, 0)]
+    if short:
+        needed = max(minimum for _, minimum in short)
+        names = [f"{name} (needs {minimum:,})" for name, minimum in short]
+        names = names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
+        raise UsageError(f"--spp {requested}: too few samples for the suite's scene{'s' * (len(short) > 1)} "
+                         f"{names}: their light is spread over so many bins that no bin's standard error "
+                         f"would be under 0.1 of its value, so nothing could be judged; give --spp {needed} "
+                         f"or more, or leave --spp out (the suite's own counts)")
+    return [(scene, requested) for scene, _ in suite]
+
+
 def command_validate(args) -> int:
     """Cross-check renders against the model on the given scenes (default: the built-in suite).
 
     Exit status 0 when every scene agrees, 1 when any disagrees (named on stderr).
+    A user error met while checking a scene (one that cannot be judged at
+    ``--spp``, say) names that scene. Each scene's figures are in a folder
+    named by :func:`validation.report.scene_folder_names`.
     """
+    from analytic.errors import UserError
     from analytic.io import output_folder, staged_writes
     from analytic.scene_file import load_scene
     from validation.corner import check_corner
     from validation.harness import check_scene
     from validation.report import write_report
-    from validation.suite import validation_suite
 
     if args.scene:
         suite = [(load_scene(path), args.spp or DEFAULT_SAMPLES) for path in args.scene]
+        labels = [f"scene {scene.name!r} ({path})" for (scene, _), path in zip(suite, args.scene)]
     else:
-        suite = [(scene, args.spp or spp) for scene, spp in validation_suite()]
+        suite = _suite_samples(args.spp)
+        labels = [f"suite scene {scene.name!r}" for scene, _ in suite]
     with output_folder(args.out) as out:
         checks = []
-        iterator = suite
+        iterator = list(zip(suite, labels))
         if show_progress(args):
             from tqdm import tqdm
-            iterator = tqdm(suite, desc="validate", unit="scene", leave=False)
-        for scene, spp in iterator:
-            # Reconstruction needs an array of sensors; a hard case's one or two cannot image.
-            checks.append(check_scene(scene, spp=spp, seed=args.seed, convergence=not args.fast,
-                                      reconstruction=scene.pixels <= 64 and scene.sensor_count >= 4))
+            iterator = tqdm(iterator, desc="validate", unit="scene", leave=False)
+        for (scene, spp), label in iterator:
+            try:
+                # Reconstruction needs an array of sensors; a hard case's one or two cannot image.
+                checks.append(check_scene(scene, spp=spp, seed=args.seed, convergence=not args.fast,
+                                          reconstruction=scene.pixels <= 64 and scene.sensor_count >= 4))
+            except UserError as error:
+                raise _named(error, f"{label} at {spp:,} samples") from None
         # the corner's three bounces against mitransient, an independent renderer, when it is installed
         import importlib.util
 
         independent = 2**20 if importlib.util.find_spec("mitransient") is not None else None
-        corner = None if args.scene else check_corner(spp=args.spp or DEFAULT_SAMPLES, seed=args.seed,
-                                                      mitransient_samples=independent)
+        corner = None
+        if not args.scene:
+            try:
+                corner = check_corner(spp=args.spp or DEFAULT_SAMPLES, seed=args.seed,
+                                      mitransient_samples=independent)
+            except UserError as error:
+                raise _named(error, "the corner") from None
         with staged_writes():
             metrics = write_report(out, checks, corner)
     failed = [check for check in checks if not check.agreement.agrees]
@@ -70,13 +117,13 @@ def command_validate(args) -> int:
 def command_run(args) -> int:
     """The whole pipeline on one scene: model, render, cross-check, reconstruct from both, report.
 
-    Exit status 0 when the render agrees with the model, 1 when not.
+    Exit status 0 when the render agrees with the model, 1 when not. Its
+    figures lie beside report.md in ``--out`` (one scene: no folder of its
+    own; :mod:`validation.report`).
     """
     from analytic.io import build_meta, output_folder, staged_writes, write_transient
-    from validation.harness import check_scene
+    from validation.harness import check_scene, data_driven_rule
     from validation.report import write_report
-
-    from validation.harness import data_driven_rule
 
     from .reconstruct import lambda_grid_of
 
@@ -108,7 +155,8 @@ def add_commands(subparsers) -> None:
     validate.add_argument("scene", nargs="*", help="scene TOML files (default: the built-in suite)")
     validate.add_argument("--out", required=True, help="output folder (report.md, metrics.json, plots)")
     validate.add_argument("--spp", type=check_samples_type,
-                          help=f"samples per render, at least 4,096 (default: the suite's, "
+                          help=f"samples per render, at least 4,096, and 65,536 for the built-in suite, "
+                               f"whose finest-binned scenes judge nothing below it (default: the suite's, "
                                f"{DEFAULT_SAMPLES:,} for a file)")
     validate.add_argument("--seed", type=seed_type, default=0, help="random seed in [0, 2^32) (default 0)")
     validate.add_argument("--fast", action="store_true", help="skip the convergence studies")

@@ -21,11 +21,13 @@ __all__ = ["add_commands", "command_sweep"]
 def command_sweep(args) -> int:
     """Run the sweep; exit status 0 when done (and every cross-checked item agrees), else 1."""
     from analytic.io import output_folder
-    from validation.sweep import load_sweep, run_sweep
+    from validation.sweep import check_variant, load_sweep, run_sweep
 
     if args.workers is not None and not 1 <= args.workers <= 1024:
         raise UsageError(f"--workers: must be in [1, 1024], got {args.workers}")
     sweep = load_sweep(args.sweep)   # SceneError (exit 2) before any output is written
+    if args.scheduler is None:
+        check_variant(sweep.variant)  # a variant this machine cannot run: one line, before any file or cluster
     with output_folder(args.out) as out:
         result = run_sweep(sweep, out, scheduler=args.scheduler, workers=args.workers,
                            progress=show_progress(args))

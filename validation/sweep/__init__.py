@@ -32,9 +32,9 @@ is what workers run, :mod:`.checkpoint` keeps each unfinished item's chunks,
 
 from .checkpoint import ITEM_FILE, STATE_FILE
 from .config import DEFAULT_SWEEP_CHUNK, Sweep, SweepItem, load_sweep, sweep_from_dict
-from .driver import SweepResult, run_sweep, sweep_client
+from .driver import SweepResult, check_variant, run_sweep, sweep_client
 from .tasks import model_transient, render_chunk
 
 __all__ = ["Sweep", "SweepItem", "SweepResult", "load_sweep", "sweep_from_dict", "render_chunk",
-           "model_transient", "run_sweep", "sweep_client", "STATE_FILE", "ITEM_FILE",
+           "model_transient", "run_sweep", "sweep_client", "check_variant", "STATE_FILE", "ITEM_FILE",
            "DEFAULT_SWEEP_CHUNK"]

@@ -24,7 +24,7 @@ from .config import Sweep
 from .index import finish_item, finished_row, write_index
 from .tasks import _identity, model_transient, render_chunk
 
-__all__ = ["SweepResult", "run_sweep", "sweep_client", "CONNECT_SECONDS"]
+__all__ = ["SweepResult", "run_sweep", "sweep_client", "check_variant", "CONNECT_SECONDS"]
 
 #: How long to wait for a scheduler given by address.
 CONNECT_SECONDS = 10.0
@@ -116,6 +116,41 @@ def _connected(client_class, scheduler: str):
         yield client
 
 
+def check_variant(variant: str | None) -> str:
+    """The Mitsuba variant a local cluster's workers will render with, or a one-line refusal.
+
+    A local cluster's workers run on this machine, so a variant it cannot
+    run (a CUDA variant without a GPU, one this Mitsuba build lacks, a CPU
+    variant with only libLLVM <= 15) is refused here, before any cluster
+    starts or any file is written, instead of failing in every task.
+
+    Parameters
+    ----------
+    variant : str or None
+        The sweep's ``variant`` (None: the CPU default).
+
+    Returns
+    -------
+    str
+        The variant, now active in this process too.
+
+    Raises
+    ------
+    transient.backend.BackendError
+        A :class:`analytic.errors.ResourceError`, one line with the fix.
+    """
+    from transient.backend import select_variant
+
+    return select_variant(variant)
+
+
+def _check_variant_on_a_worker(client, variant: str | None) -> None:
+    """A cluster given by address runs elsewhere: ask one of its workers, before any file is written."""
+    from transient.backend import select_variant
+
+    client.submit(select_variant, variant, pure=False).result()
+
+
 def _prepare(sweep: Sweep, out_dir: Path) -> tuple[dict, dict, list]:
     """Finished items' rows, unfinished items' checkpointed states, and the names skipped."""
     from analytic.window import window_share
@@ -177,6 +212,9 @@ def run_sweep(sweep: Sweep, out_dir: str | Path, *, client=None, scheduler: str 
     SceneError
         When ``out_dir`` holds an item of another sweep (other scene, seed,
         sample count or chunking).
+    transient.backend.BackendError
+        When the workers cannot run the sweep's variant (:func:`check_variant`),
+        before anything is written.
     """
     out_dir = Path(out_dir)
     if client is not None and (scheduler is not None or workers is not None):
@@ -184,9 +222,14 @@ def run_sweep(sweep: Sweep, out_dir: str | Path, *, client=None, scheduler: str 
     # Prepared before any cluster starts: another sweep's folder is refused at once.
     prepared = _prepare(sweep, out_dir)
     if client is None:
+        if scheduler is None:
+            check_variant(sweep.variant)       # the local workers are this machine
         with sweep_client(scheduler, workers) as own:
+            if scheduler is not None:
+                _check_variant_on_a_worker(own, sweep.variant)
             return _run(sweep, out_dir, own, prepared, progress=progress, retries=retries,
                         on_chunk=on_chunk)
+    _check_variant_on_a_worker(client, sweep.variant)
     return _run(sweep, out_dir, client, prepared, progress=progress, retries=retries, on_chunk=on_chunk)
 
 

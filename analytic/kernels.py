@@ -25,8 +25,10 @@ import numpy as np
 from .isochrone import Frame, PixelBox, ellipse, first_arrival_point, path_length_at, segment_minimum
 from .kernel_cache import njit
 from .attenuation import attenuation_of_distances
-from .quadrature import (LINEAR, ROOT_BOTH, ROOT_END, ROOT_START, IsochronePiece, Workspace, adapt, integrate,
-                         isochrone_rule, make_workspace, piece_map, pixel_isochrone_integral, tensor_integrate)
+from .quadrature import (GAUSS_NODES, GAUSS_WEIGHTS, LINEAR, ROOT_BOTH, ROOT_END, ROOT_START, TENSOR_LEVELS,
+                         IsochronePiece, Workspace, adapt, integrate, isochrone_rule, make_workspace, piece_map,
+                         pixel_isochrone_integral, tensor_integrate)
+from .taylor import MAX_TERMS, cancels, entries_from_moments, kernel_taylor
 from .waveforms.pieces import ROUNDING, WaveformTerms, piece_of, piece_value
 
 __all__ = ["TimeAxis", "BinRun", "Scratch", "RouteOutcome", "make_scratch", "pixel_bins", "pair_entries",
@@ -76,12 +78,16 @@ class BinRun(NamedTuple):
 
 
 class Scratch(NamedTuple):
-    """One thread's scratch: the outer and inner workspaces, crossing angles and arcs."""
+    """One thread's scratch: the workspaces, crossing angles and arcs, and the Taylor kernels' arrays."""
 
     work: Workspace
     inner: Workspace
-    angles: np.ndarray     # float64[8]
-    arcs: np.ndarray       # float64[4, 2]
+    angles: np.ndarray         # float64[8]
+    arcs: np.ndarray           # float64[4, 2]
+    coefficients: np.ndarray   # float64[width, MAX_TERMS]: Taylor coefficients of the run's kernels
+    lower_edge: np.ndarray     # float64[MAX_TERMS + 1]: S's derivatives at a bin edge
+    upper_edge: np.ndarray
+    moments: Workspace         # the moments' quadrature (MAX_TERMS components)
 
 
 class RouteOutcome(NamedTuple):
@@ -107,6 +113,13 @@ class KernelProblem(NamedTuple):
     run: BinRun
 
 
+class MomentProblem(NamedTuple):
+    """Powers (τ - centre)^j, j < count, of the path length: the moments' weights (:mod:`analytic.taylor`)."""
+
+    centre: float
+    count: int
+
+
 class CutProblem(NamedTuple):
     """:func:`_cut_integrand`'s problem: one τ-piece of one (pair, pixel), inner φ-integrals adaptive."""
 
@@ -125,10 +138,13 @@ class CutProblem(NamedTuple):
 @njit(cache=True, error_model="numpy")
 def make_scratch(width):
     """A :class:`Scratch` for runs of up to ``width`` bins."""
-    return Scratch(make_workspace(width), make_workspace(1), np.empty(8), np.empty((4, 2)))
+    width = max(width, 1)
+    return Scratch(make_workspace(width), make_workspace(1), np.empty(8), np.empty((4, 2)),
+                   np.zeros((width, MAX_TERMS)), np.zeros(MAX_TERMS + 1), np.zeros(MAX_TERMS + 1),
+                   make_workspace(MAX_TERMS))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def bin_of(tau, axis):
     """floor((τ - start) / period) clamped to [-1, count] in floating point (no integer overflow)."""
     index = np.floor((tau - axis.start_opl) / axis.bin_width_opl)
@@ -139,7 +155,7 @@ def bin_of(tau, axis):
     return int(index)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def pixel_bins(low, high, axis, duration):
     """The :class:`BinRun` that light leaving a pixel at d in [low, high] reaches (``bins`` 0 if none).
 
@@ -158,7 +174,7 @@ def _edge(axis, n):
     return axis.start_opl + axis.bin_width_opl * n
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _kernel_cut(low, high, terms, axis, run):
     """Whether a breakpoint of some κ_n (t_n shifted back by a kink of the waveform) lies strictly inside (low, high)."""
     for n in range(run.first, run.first + run.bins + 1):
@@ -169,7 +185,7 @@ def _kernel_cut(low, high, terms, axis, run):
     return False
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _clear_of_feet(frame, box):
     """Whether the attenuation's peaks under both feet are far enough for the tensor rule."""
     side = FOOT_CLEARANCE * max(box.x1 - box.x0, box.y1 - box.y0)
@@ -221,19 +237,133 @@ def _smooth_integrand(problem, x, y, values, noise):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
+def _moment_weight(problem, tau, scale, values, noise):
+    """values[j] = scale (τ - centre)^j, j < count: the moments' weights (their rounding is negligible)."""
+    offset = tau - problem.centre
+    power = scale
+    for j in range(problem.count):
+        values[j] = power
+        noise[j] = 0.0
+        power *= offset
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _pixel_moments(frame, box, centre, count, rtol, moments):
+    """m_j = ∫_pixel a(x) (d(x) - centre)^j dx, j < count, by the tensor Gauss ladder; True when converged.
+
+    The rule and its judgement are :func:`analytic.quadrature.tensor_integrate`'s (rung n is
+    G_n x G_n, its error the next rung's difference or the previous rungs' trend, G_1 trusted
+    for an integrand analytic around the pixel), written for the few scalar moments of one
+    pixel: a generic vector of components would cost more than the arithmetic itself.
+    ``moments`` is a Workspace of at least ``count`` components; the result is in its
+    ``result`` and each moment's ∫ |...| in its ``magnitude``.
+    """
+    lower, upper, magnitude = moments.lower, moments.upper, moments.magnitude
+    previous, before, result = moments.previous, moments.before, moments.result
+    cx = 0.5 * (box.x0 + box.x1)
+    hx = 0.5 * (box.x1 - box.x0)
+    cy = 0.5 * (box.y0 + box.y1)
+    hy = 0.5 * (box.y1 - box.y0)
+    for order in range(1, TENSOR_LEVELS + 1):
+        target = lower if order == 1 else upper
+        for j in range(count):
+            target[j] = 0.0
+            magnitude[j] = 0.0
+        for jx in range(order):
+            x = cx + hx * GAUSS_NODES[order, jx]
+            wx = hx * GAUSS_WEIGHTS[order, jx]
+            source_x = (x - frame.source_x) ** 2 + frame.source_height ** 2
+            sensor_x = (x - frame.sensor_x) ** 2 + frame.sensor_height ** 2
+            for jy in range(order):
+                y = cy + hy * GAUSS_NODES[order, jy]
+                ds2 = source_x + (y - frame.source_y) ** 2
+                dk2 = sensor_x + (y - frame.sensor_y) ** 2
+                value = wx * hy * GAUSS_WEIGHTS[order, jy] * attenuation_of_distances(frame, x, y, ds2, dk2)
+                offset = math.sqrt(ds2) + math.sqrt(dk2) - centre
+                for j in range(count):
+                    target[j] += value
+                    magnitude[j] += abs(value)
+                    value *= offset
+        if order == 1:
+            continue
+        rung = order - 1            # is G_rung (in lower) within the tolerance, by G_{rung+1} (in upper)?
+        accepted = True
+        for j in range(count):
+            delta = abs(lower[j] - upper[j])
+            estimate = delta
+            if rung >= 2:
+                estimate = max(delta, previous[j] * min(1.0, previous[j] / before[j]) if before[j] > 0.0
+                               else previous[j])
+            if not estimate <= max(rtol, ROUNDING) * magnitude[j]:
+                accepted = False
+                break
+        if accepted:
+            for j in range(count):
+                result[j] = lower[j]
+            return True
+        for j in range(count):
+            before[j] = magnitude[j] if rung == 1 else previous[j]
+            previous[j] = abs(lower[j] - upper[j])
+            lower[j] = upper[j]
+    return False
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _smooth_by_moments(frame, box, low, high, terms, axis, run, rtol, out, scratch):
+    """The smooth route through the pixel's moments (:mod:`analytic.taylor`); False when it does not apply.
+
+    It does not apply when a kernel needs more than MAX_TERMS Taylor terms over the pixel's range,
+    when the moments' tensor rule does not converge, or when an entry's terms cancel.
+    """
+    centre = 0.5 * (low + high)
+    half = 0.5 * (high - low)
+    count = kernel_taylor(terms, axis, run, centre, half, rtol, scratch.coefficients, scratch.lower_edge,
+                          scratch.upper_edge)
+    if count == 0:
+        return False
+    if not _pixel_moments(frame, box, centre, count, rtol, scratch.moments):
+        return False
+    return _bin_moments(scratch, count, run.bins, half, out)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _bin_moments(scratch, count, bins, half, out):
+    """Add Σ_j c_{n,j} m_j to out[:bins], unless an entry's terms cancel (then False and nothing added).
+
+    The response is never negative, so M_j = ∫ |τ - c|^j G <= half^j m_0 bounds each moment's magnitude.
+    """
+    moments = scratch.moments.result
+    magnitudes = scratch.moments.floor      # free here: the quadrature is over
+    power = 1.0
+    for j in range(count):
+        magnitudes[j] = power * abs(moments[0])
+        power *= half
+    if cancels(scratch.coefficients, count, bins, moments, magnitudes):
+        return False
+    entries_from_moments(scratch.coefficients, count, bins, moments, out)
+    return True
+
+
+@njit(cache=True, error_model="numpy", inline="always")
 def _kernel_weight(problem, tau, scale, values, noise):
     """scale κ_n(τ) for the piece's bins (the time weight of a cut piece), and its rounding."""
     _kernels(problem, tau, scale, values, noise)
 
 
-@njit(cache=True, error_model="numpy")
-def _cut_integrand(problem, v, values, noise):
-    """κ_n(τ) G(τ) dτ/dv at τ = piece_map(v), for the piece's bins."""
+@njit(cache=True, error_model="numpy", inline="always")
+def _cut_response(problem, v):
+    """(τ, G(τ) dτ/dv) at τ = piece_map(v): the pixel's response on its isochrone, φ-integrals adaptive."""
     tau, slope = piece_map(problem.kind, problem.tau_a, problem.span, v)
     curve = ellipse(problem.frame, tau)
     response = pixel_isochrone_integral(problem.frame, curve, problem.box, problem.inner_rtol, problem.angles,
                                         problem.arcs, problem.inner)
-    weight = response * slope
+    return tau, response * slope
+
+
+@njit(cache=True, error_model="numpy")
+def _cut_integrand(problem, v, values, noise):
+    """κ_n(τ) G(τ) dτ/dv at τ = piece_map(v), for the piece's bins."""
+    tau, weight = _cut_response(problem, v)
     if weight == 0.0:
         for i in range(problem.kernel.run.bins):
             values[i] = 0.0
@@ -243,6 +373,13 @@ def _cut_integrand(problem, v, values, noise):
 
 
 @njit(cache=True, error_model="numpy")
+def _cut_moments_integrand(problem, v, values, noise):
+    """(τ - centre)^j G(τ) dτ/dv at τ = piece_map(v), j < count: the piece's moments."""
+    tau, weight = _cut_response(problem, v)
+    _moment_weight(problem.kernel, tau, weight, values, noise)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
 def _pixel_breakpoints(frame, box, low, high, terms, axis, run):
     """Sorted τ in [low, high] where the cut integrand stops being smooth, and which are roots.
 
@@ -309,21 +446,21 @@ def _pixel_breakpoints(frame, box, low, high, terms, axis, run):
     return kept_points[:kept], kept_flags[:kept]
 
 
-@njit(cache=True, error_model="numpy")
-def _cut_entries(frame, box, low, high, terms, axis, run, rtol, smooth_arcs, out, scratch):
+@njit(cache=True, error_model="numpy", inline="always")
+def _cut_entries(frame, box, low, high, terms, axis, run, rtol, smooth_arcs, taylor, out, scratch):
     """Add the pair's entries to out[:run.bins] by the cut (τ, φ) quadrature.
 
     ``smooth_arcs``: the integrand is smooth along every arc (the pixel is
     clear of the feet and of x*), so each τ-piece first tries the tensor
     rule in (τ, φ); otherwise, or when that fails, the inner φ-integrals
-    are adaptive too.
+    are adaptive too. ``taylor``: each τ-piece first tries its moments
+    (:func:`_piece_by_moments`); False integrates the kernels directly.
     """
     duration = terms.duration
     work = scratch.work
     low = max(low, _edge(axis, 0) - duration)
     high = min(high, _edge(axis, run.first + run.bins))
     breakpoints, root = _pixel_breakpoints(frame, box, low, high, terms, axis, run)
-    inner_rtol = rtol * _INNER_FACTOR
     for piece in range(len(breakpoints) - 1):
         tau_a = breakpoints[piece]
         tau_b = breakpoints[piece + 1]
@@ -341,6 +478,9 @@ def _cut_entries(frame, box, low, high, terms, axis, run, rtol, smooth_arcs, out
                 else ROOT_END if root[piece + 1] else LINEAR)
         # dτ/dv <= 2 span: a v-piece this narrow spans under _TAU_RESOLUTION of τ
         resolution = _TAU_RESOLUTION * max(abs(tau_a), abs(tau_b)) / (2.0 * span)
+        if taylor and _piece_by_moments(frame, box, terms, axis, piece_run, kind, tau_a, span, rtol, smooth_arcs,
+                                        resolution, target, scratch):
+            continue
         kernel = KernelProblem(terms, axis, piece_run)
         if smooth_arcs:
             trial = work.result
@@ -354,12 +494,49 @@ def _cut_entries(frame, box, low, high, terms, axis, run, rtol, smooth_arcs, out
                     target[i] += trial[i]
                 continue
             work.failures[0] -= failed     # not failures: the adaptive route takes the piece over
-        problem = CutProblem(frame, box, kernel, kind, tau_a, span, inner_rtol, scratch.angles, scratch.arcs,
-                             scratch.inner)
+        problem = CutProblem(frame, box, kernel, kind, tau_a, span, rtol * _INNER_FACTOR, scratch.angles,
+                             scratch.arcs, scratch.inner)
         integrate(_cut_integrand, problem, 0.0, 1.0, rtol, piece_run.bins, target, work, resolution)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
+def _piece_by_moments(frame, box, terms, axis, run, kind, tau_a, span, rtol, smooth_arcs, resolution, target,
+                      scratch):
+    """A τ-piece's entries through its moments (:mod:`analytic.taylor`), added to target; False if not.
+
+    The moments m_j = ∫ (τ - c)^j G(τ) dτ over the piece, by the (τ, φ) tensor rule where the arcs
+    are smooth, else by adaptive φ-integrals inside adaptive τ-integrals; False (nothing added) when
+    a kernel needs more Taylor terms than allowed over the piece, the tensor rule fails or an
+    entry's terms cancel, and the caller integrates the kernels directly.
+    """
+    centre = tau_a + 0.5 * span
+    half = 0.5 * span
+    count = kernel_taylor(terms, axis, run, centre, half, rtol, scratch.coefficients, scratch.lower_edge,
+                          scratch.upper_edge)
+    if count == 0:
+        return False
+    moments = scratch.moments
+    result = moments.result
+    powers = MomentProblem(centre, count)
+    if smooth_arcs:
+        for j in range(count):
+            result[j] = 0.0
+        failed = adapt(isochrone_rule, _moment_weight, IsochronePiece(powers, frame, box, kind, tau_a, span,
+                                                                      scratch.angles, scratch.arcs),
+                       0.0, 1.0, rtol, count, result, moments, resolution, _TENSOR_PIECES)
+        if failed:
+            moments.failures[0] -= failed   # not failures: the adaptive route takes the piece over
+            smooth_arcs = False
+    if not smooth_arcs:
+        for j in range(count):
+            result[j] = 0.0
+        integrate(_cut_moments_integrand, CutProblem(frame, box, powers, kind, tau_a, span, rtol * _INNER_FACTOR,
+                                                     scratch.angles, scratch.arcs, scratch.inner),
+                  0.0, 1.0, rtol, count, result, moments, resolution)
+    return _bin_moments(scratch, count, run.bins, half, target)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
 def _smooth_arcs(frame, box, clear):
     """Whether the arcs inside the pixel are smooth enough for the (τ, φ) tensor rule.
 
@@ -374,7 +551,7 @@ def _smooth_arcs(frame, box, clear):
     return clear and dx * dx + dy * dy >= side * side
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def pair_entries(frame, box, low, high, terms, axis, run, rtol, out, scratch):
     """out[i] = A[(k, first + i), p] for one (pair, pixel); True if the smooth route served.
 
@@ -403,16 +580,21 @@ def pair_entries(frame, box, low, high, terms, axis, run, rtol, out, scratch):
         out[i] = 0.0
     clear = _clear_of_feet(frame, box)
     if clear and not _kernel_cut(low, high, terms, axis, run):
+        if _smooth_by_moments(frame, box, low, high, terms, axis, run, rtol, out, scratch):
+            return True
         if tensor_integrate(_smooth_integrand, SmoothProblem(frame, KernelProblem(terms, axis, run)), box, rtol,
                             run.bins, out, scratch.work):
             return True
-    _cut_entries(frame, box, low, high, terms, axis, run, rtol, _smooth_arcs(frame, box, clear), out, scratch)
+    _cut_entries(frame, box, low, high, terms, axis, run, rtol, _smooth_arcs(frame, box, clear), True, out, scratch)
     return False
 
 
 @njit(cache=True, error_model="numpy")
-def pair_by_method(frame, box, low, high, terms, axis, run, rtol, method, out, scratch):
+def pair_by_method(frame, box, low, high, terms, axis, run, rtol, method, taylor, out, scratch):
     """One (pair, pixel)'s entries by one route (``AUTO``, ``SMOOTH``, ``ISOCHRONE`` or ``ADAPTIVE``).
+
+    ``taylor`` (except for ``AUTO``): through the moments and the kernels' Taylor coefficients
+    (:mod:`analytic.taylor`), or False: with the kernels at every quadrature node.
 
     Returns
     -------
@@ -429,9 +611,12 @@ def pair_by_method(frame, box, low, high, terms, axis, run, rtol, method, out, s
     elif method == SMOOTH:
         if _kernel_cut(low, high, terms, axis, run) or not _clear_of_feet(frame, box):
             return RouteOutcome(False, False, 0)
-        if not tensor_integrate(_smooth_integrand, SmoothProblem(frame, KernelProblem(terms, axis, run)), box,
-                                rtol, run.bins, out, scratch.work):
+        if taylor:
+            if not _smooth_by_moments(frame, box, low, high, terms, axis, run, rtol, out, scratch):
+                return RouteOutcome(True, False, 0)
+        elif not tensor_integrate(_smooth_integrand, SmoothProblem(frame, KernelProblem(terms, axis, run)), box,
+                                  rtol, run.bins, out, scratch.work):
             return RouteOutcome(True, False, 0)
     else:
-        _cut_entries(frame, box, low, high, terms, axis, run, rtol, method == ISOCHRONE, out, scratch)
-    return RouteOutcome(True, True, scratch.work.failures[0] + scratch.inner.failures[0])
+        _cut_entries(frame, box, low, high, terms, axis, run, rtol, method == ISOCHRONE, taylor, out, scratch)
+    return RouteOutcome(True, True, scratch.work.failures[0] + scratch.inner.failures[0] + scratch.moments.failures[0])

@@ -132,7 +132,7 @@ def _gauss(integrand, problem, lo, hi, order, size, work, out):
             work.rounding[i] += weight * work.noise[i]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _judge(work, size, rtol, rung, first):
     """With G_rung in work.lower and G_{rung+1} in work.upper: is G_rung within the tolerance?
 
@@ -308,27 +308,30 @@ def tensor_integrate(integrand, problem, box, rtol, size, total, work):
     hx = 0.5 * (box.x1 - box.x0)
     cy = 0.5 * (box.y0 + box.y1)
     hy = 0.5 * (box.y1 - box.y0)
+    # the workspace's arrays held in locals: each attribute read of a record of arrays costs a reference count
+    values, noise, magnitude, rounding, floor = work.values, work.noise, work.magnitude, work.rounding, work.floor
     for i in range(size):
-        work.floor[i] = 0.0
+        floor[i] = 0.0
     for order in range(1, TENSOR_LEVELS + 1):
         target = work.lower if order == 1 else work.upper
         for i in range(size):
             target[i] = 0.0
-            work.magnitude[i] = 0.0
-            work.rounding[i] = 0.0
+            magnitude[i] = 0.0
+            rounding[i] = 0.0
         for jx in range(order):
             x = cx + hx * GAUSS_NODES[order, jx]
             wx = hx * GAUSS_WEIGHTS[order, jx]
             for jy in range(order):
-                integrand(problem, x, cy + hy * GAUSS_NODES[order, jy], work.values, work.noise)
+                integrand(problem, x, cy + hy * GAUSS_NODES[order, jy], values, noise)
                 weight = wx * hy * GAUSS_WEIGHTS[order, jy]
                 for i in range(size):
-                    target[i] += weight * work.values[i]
-                    work.magnitude[i] += weight * abs(work.values[i])
-                    work.rounding[i] += weight * work.noise[i]
+                    target[i] += weight * values[i]
+                    magnitude[i] += weight * abs(values[i])
+                    rounding[i] += weight * noise[i]
         if order > 1 and _judge(work, size, rtol, order - 1, 1):
+            lower = work.lower
             for i in range(size):
-                total[i] += work.lower[i]
+                total[i] += lower[i]
             return True
     return False
 

@@ -135,29 +135,42 @@ def _count(pairs, mode, grid, axis, duration, per_pixel, widest):
 
 @njit(parallel=True, cache=True, error_model="numpy")
 def _fill(pairs, mode, grid, axis, terms, rtol, width, begin, end, indptr, rows, data, failures, smooth):
-    """Entries of columns begin ... end - 1 into their CSC slots (rows, data)."""
+    """Entries of columns begin ... end - 1 into their CSC slots (rows, data), in blocks dealt to the threads."""
     blocks = failures.shape[0]
     for block in prange(blocks):
-        scratch = make_scratch(width)
-        served = 0
-        for p in range(begin + block, end, blocks):
-            box = pixel_box(grid, p)
-            offset = indptr[p]
-            for k in range(pairs.shape[0]):
-                frame = pair_frame(pairs[k], mode)
-                pair_axis = _pair_axis(axis, pairs[k])
-                low, high = rectangle_range(frame, box)
-                run = pixel_bins(low, high, pair_axis, terms.duration)
-                if run.bins == 0:
-                    continue
-                for i in range(run.bins):
-                    rows[offset + i] = k * axis.count + run.first + i
-                if _pair_entries(frame, box, low, high, terms, pair_axis, run, rtol,
-                                 data[offset:offset + run.bins], scratch):
-                    served += 1
-                offset += run.bins
-        failures[block] += scratch.work.failures[0] + scratch.inner.failures[0]
+        failed, served = _fill_block(pairs, mode, grid, axis, terms, rtol, width, begin + block, end, blocks,
+                                     indptr, rows, data)
+        failures[block] += failed
         smooth[block] += served
+
+
+@njit(cache=True, error_model="numpy")
+def _fill_block(pairs, mode, grid, axis, terms, rtol, width, first, end, stride, indptr, rows, data):
+    """Columns first, first + stride, ... < end; returns (quadrature pieces failed, pairs the smooth route served).
+
+    One sequential function per block, so that the per-pair kernels inline into it (a real call per
+    pair would pay a reference count on each of the scratch's arrays; inlined into the parallel loop
+    itself they would be at the mercy of its transformations).
+    """
+    scratch = make_scratch(width)
+    served = 0
+    for p in range(first, end, stride):
+        box = pixel_box(grid, p)
+        offset = indptr[p]
+        for k in range(pairs.shape[0]):
+            frame = pair_frame(pairs[k], mode)
+            pair_axis = _pair_axis(axis, pairs[k])
+            low, high = rectangle_range(frame, box)
+            run = pixel_bins(low, high, pair_axis, terms.duration)
+            if run.bins == 0:
+                continue
+            for i in range(run.bins):
+                rows[offset + i] = k * axis.count + run.first + i
+            if _pair_entries(frame, box, low, high, terms, pair_axis, run, rtol, data[offset:offset + run.bins],
+                             scratch):
+                served += 1
+            offset += run.bins
+    return scratch.work.failures[0] + scratch.inner.failures[0] + scratch.moments.failures[0], served
 
 
 class _Problem(NamedTuple):
@@ -380,7 +393,7 @@ def _threads() -> int:
 
 
 def pair_entries(scene: Scene, sensor: int, pixel: int, *, method: str = "auto",
-                 tolerance: float | None = None) -> tuple[int, np.ndarray]:
+                 tolerance: float | None = None, taylor: bool = True) -> tuple[int, np.ndarray]:
     """The non-zero run of column ``pixel`` for one sensor, by a chosen quadrature route.
 
     For tests and diagnosis: each fast route can be checked against the
@@ -401,6 +414,11 @@ def pair_entries(scene: Scene, sensor: int, pixel: int, *, method: str = "auto",
         quadrature with adaptive φ-integrals inside adaptive τ-integrals.
     tolerance : float, optional
         As for :func:`system_matrix`.
+    taylor : bool
+        For the three named routes: through the pixel's (or τ-piece's)
+        moments and the kernels' Taylor coefficients (:mod:`analytic.taylor`,
+        what "auto" does), or with every kernel at every quadrature node
+        (False), so that the two can be held to each other.
 
     Returns
     -------
@@ -430,7 +448,7 @@ def pair_entries(scene: Scene, sensor: int, pixel: int, *, method: str = "auto",
     run = pixel_bins(low, high, problem.axis, terms.duration)
     out = np.zeros(run.bins)
     outcome = pair_by_method(frame, box, low, high, terms, problem.axis, run, SAFETY * tolerance,
-                             METHODS.index(method), out, make_scratch(max(run.bins, 1)))
+                             METHODS.index(method), bool(taylor), out, make_scratch(max(run.bins, 1)))
     if not outcome.applies:
         raise ValueError(f"the smooth rule does not apply to pixel {pixel}, sensor {sensor}: a kernel "
                          f"breakpoint crosses it or a foot is near")

@@ -49,6 +49,7 @@ import numpy as np
 from ..kernel_cache import njit
 
 __all__ = ["WaveformTerms", "make_terms", "POLYNOMIAL", "EXPONENTIALS", "piece_of", "piece_value",
+           "piece_derivatives", "piece_derivative_bound",
            "cumulative_scalar", "kernel_scalar", "cumulative_array", "derivative_array", "kernel_array",
            "ROUNDING"]
 
@@ -81,6 +82,12 @@ class WaveformTerms(NamedTuple):
         See the module docstring.
     duration : float
         Support [0, duration] of s, metres: S is constant beyond it.
+    degree : int
+        The highest degree of the pieces' forms when they are all
+        polynomials (0: S is constant between kinks, as for the impulse;
+        1: linear, as for the square), -1 when some piece is not a
+        polynomial. A kernel is then exactly its Taylor polynomial of that
+        degree between kinks (:mod:`analytic.taylor`).
     """
 
     starts: np.ndarray
@@ -91,6 +98,7 @@ class WaveformTerms(NamedTuple):
     offsets: np.ndarray
     coefficients: np.ndarray
     duration: float
+    degree: int
 
 
 def _frozen(values, dtype=np.float64) -> np.ndarray:
@@ -120,18 +128,22 @@ def make_terms(pieces, duration: float) -> WaveformTerms:
         if piece[3] == EXPONENTIALS and len(piece[5]) % 4:
             raise ValueError("EXPONENTIALS pieces take four coefficients per term")
     sizes = [len(p[5]) for p in pieces]
+    polynomial = all(p[3] == POLYNOMIAL for p in pieces)
+    degree = max((size - 1 for size in sizes), default=0) if polynomial else -1
     return WaveformTerms(_frozen(starts), _frozen([bool(p[1]) for p in pieces], np.bool_),
                          _frozen([p[2] for p in pieces]), _frozen([p[3] for p in pieces], np.int64),
                          _frozen([p[4] for p in pieces]), _frozen(np.concatenate([[0], np.cumsum(sizes)]), np.int64),
                          _frozen(np.concatenate([np.asarray(p[5], dtype=np.float64) for p in pieces])
                                  if pieces else []),
-                         float(duration))
+                         float(duration), int(max(degree, 0) if polynomial else -1))
 
 
 # -- compiled evaluators -------------------------------------------------------------
+# The small ones are inlined: a real call that passes the record (eight arrays) pays a reference count
+# on each array, more than the evaluation itself.
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def piece_of(terms, u):
     """Index of the piece holding u, or -1 where S = 0 (u <= b_0, or u NaN)."""
     starts = terms.starts
@@ -147,7 +159,7 @@ def piece_of(terms, u):
     return low
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def piece_value(terms, piece, u):
     """(F_i(u), a bound on the size of its terms) for piece i, metres."""
     first = terms.offsets[piece]
@@ -174,6 +186,66 @@ def piece_value(terms, piece, u):
             size += envelope * (abs(coefficients[j + 2]) + abs(coefficients[j + 3]))
         value += term
     return value, size
+
+
+@njit(cache=True, error_model="numpy")
+def piece_derivatives(terms, piece, u, count, out):
+    """out[j] = d^j F_i / du^j at u for j = 1 ... count - 1 (out[0] is left alone), metres^(1-j).
+
+    POLYNOMIAL: Σ_m c_m m!/(m-j)! x^(m-j); EXPONENTIALS: each term is
+    Re[(b - i c) e^{z x}] with z = a + iω, so its j-th derivative is
+    Re[(b - i c) z^j e^{z x}].
+    """
+    first = terms.offsets[piece]
+    last = terms.offsets[piece + 1]
+    x = u - terms.origins[piece]
+    coefficients = terms.coefficients
+    for j in range(1, count):
+        out[j] = 0.0
+    if terms.families[piece] == 0:          # POLYNOMIAL
+        for j in range(1, count):
+            value = 0.0
+            for m in range(last - 1 - first, j - 1, -1):     # Horner on the j-th derivative's coefficients
+                factor = 1.0
+                for q in range(m - j + 1, m + 1):
+                    factor *= q
+                value = value * x + coefficients[first + m] * factor
+            out[j] = value
+        return
+    for t in range(first, last, 4):          # EXPONENTIALS
+        z = complex(coefficients[t], coefficients[t + 1])
+        term = complex(coefficients[t + 2], -coefficients[t + 3]) * np.exp(z * x)
+        for j in range(1, count):
+            term *= z
+            out[j] += term.real
+
+
+@njit(cache=True, error_model="numpy")
+def piece_derivative_bound(terms, piece, low, high, order):
+    """A bound on |d^order F_i / du^order| over u in [low, high], metres^(1-order).
+
+    POLYNOMIAL: Σ_m |c_m| m!/(m-order)! max|x|^(m-order); EXPONENTIALS:
+    Σ e^{a x} (|b| + |c|) |a + iω|^order at the end where e^{a x} is largest.
+    """
+    first = terms.offsets[piece]
+    last = terms.offsets[piece + 1]
+    origin = terms.origins[piece]
+    coefficients = terms.coefficients
+    bound = 0.0
+    if terms.families[piece] == 0:
+        reach = max(abs(low - origin), abs(high - origin))
+        for m in range(order, last - first):
+            factor = 1.0
+            for q in range(m - order + 1, m + 1):
+                factor *= q
+            bound += abs(coefficients[first + m]) * factor * reach ** (m - order)
+        return bound
+    for t in range(first, last, 4):
+        a = coefficients[t]
+        envelope = math.exp(a * ((high if a > 0.0 else low) - origin))
+        size = abs(coefficients[t + 2]) + abs(coefficients[t + 3])
+        bound += envelope * size * math.hypot(a, coefficients[t + 1]) ** order
+    return bound
 
 
 @njit(cache=True, error_model="numpy")

@@ -21,13 +21,11 @@ import math
 
 import numpy as np
 
+from .geometry import ATTENUATIONS
 from .kernel_cache import njit
 
 __all__ = ["attenuation", "attenuation_formula", "attenuation_at", "attenuation_of_distances",
            "attenuation_code", "ATTENUATIONS", "LAMBERTIAN", "PAPER"]
-
-#: The scene's ``[model] attenuation`` values.
-ATTENUATIONS = ("lambertian", "paper")
 
 #: Integer codes of the attenuation kinds for compiled code (``Frame.mode``).
 LAMBERTIAN, PAPER = 0, 1

@@ -30,10 +30,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .attenuation import ATTENUATIONS
 from .errors import SceneError
 
-__all__ = ["Rectangle", "PointPairs", "PAIR_DTYPE", "pair_table", "plane_geometry"]
+__all__ = ["Rectangle", "PointPairs", "PAIR_DTYPE", "ATTENUATIONS", "pair_table", "plane_geometry"]
+
+#: The attenuation kinds a pair may carry (the scene's ``[model] attenuation``; :mod:`analytic.attenuation`).
+ATTENUATIONS = ("lambertian", "paper")
 
 #: One pair in the rectangle's frame, as the compiled kernels read it (metres): the two points'
 #: coordinates and heights, the path length added to every path of the pair, and for each end

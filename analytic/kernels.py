@@ -156,12 +156,12 @@ def bin_of(tau, axis):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def pixel_bins(low, high, axis, duration):
+def pixel_bins(low, high, axis, lead, duration):
     """The :class:`BinRun` that light leaving a pixel at d in [low, high] reaches (``bins`` 0 if none).
 
-    Light leaving at path length τ lands in [τ, τ + duration].
+    Light leaving at path length τ lands in [τ + lead, τ + duration] (the waveform's support).
     """
-    first = max(0, bin_of(low, axis))
+    first = max(0, bin_of(low + lead, axis))
     last = min(axis.count - 1, bin_of(high + duration, axis))
     if last < first:
         return BinRun(0, 0)
@@ -457,9 +457,10 @@ def _cut_entries(frame, box, low, high, terms, axis, run, rtol, smooth_arcs, tay
     (:func:`_piece_by_moments`); False integrates the kernels directly.
     """
     duration = terms.duration
+    lead = terms.lead
     work = scratch.work
     low = max(low, _edge(axis, 0) - duration)
-    high = min(high, _edge(axis, run.first + run.bins))
+    high = min(high, _edge(axis, run.first + run.bins) - lead)
     breakpoints, root = _pixel_breakpoints(frame, box, low, high, terms, axis, run)
     for piece in range(len(breakpoints) - 1):
         tau_a = breakpoints[piece]
@@ -468,7 +469,7 @@ def _cut_entries(frame, box, low, high, terms, axis, run, rtol, smooth_arcs, tay
         if not span > 0.0:
             continue
         # bins whose kernel can be non-zero on the piece (one spare on each side for rounding)
-        lo_bin = max(run.first, bin_of(tau_a, axis) - 1)
+        lo_bin = max(run.first, bin_of(tau_a + lead, axis) - 1)
         hi_bin = min(run.first + run.bins - 1, bin_of(tau_b + duration, axis) + 1)
         if hi_bin < lo_bin:
             continue

@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from .errors import SceneError
+from .geometry import ATTENUATIONS, plane_geometry
 from .reflectance import builtin_reflectance
 from .resources import require_memory
 
@@ -39,7 +40,6 @@ __all__ = ["SceneError", "Illumination", "Sampling", "Noise", "Scene", "default_
            "DEFAULT_ARRAY"]
 
 WAVEFORMS = ("impulse", "square", "butterworth")
-ATTENUATIONS = ("lambertian", "paper")
 NOISE_KINDS = ("gaussian", "poisson")
 
 #: Largest |length| or |coordinate| accepted, metres.
@@ -437,6 +437,10 @@ class Scene:
     def replace(self, **changes) -> "Scene":
         """A copy with some fields changed (validated again)."""
         return replace(self, **changes)
+
+    def geometry(self):
+        """The plane as the model's rectangle and point pairs (:func:`analytic.geometry.plane_geometry`)."""
+        return plane_geometry(self)
 
 
 def sensor_grid(shape: tuple[int, int], extent: float, center) -> np.ndarray:

@@ -117,7 +117,7 @@ def _pair_axis(axis, pair):
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _count(pairs, mode, grid, axis, duration, per_pixel, widest):
+def _count(pairs, mode, grid, axis, lead, duration, per_pixel, widest):
     """per_pixel[p] = non-zeros of column p; widest[p] = most bins of one of its pairs."""
     for p in prange(grid.pixels * grid.pixels):
         box = pixel_box(grid, p)
@@ -126,7 +126,7 @@ def _count(pairs, mode, grid, axis, duration, per_pixel, widest):
         for k in range(pairs.shape[0]):
             frame = pair_frame(pairs[k], mode)
             low, high = rectangle_range(frame, box)
-            bins = pixel_bins(low, high, _pair_axis(axis, pairs[k]), duration).bins
+            bins = pixel_bins(low, high, _pair_axis(axis, pairs[k]), lead, duration).bins
             total += bins
             most = max(most, bins)
         per_pixel[p] = total
@@ -161,7 +161,7 @@ def _fill_block(pairs, mode, grid, axis, terms, rtol, width, first, end, stride,
             frame = pair_frame(pairs[k], mode)
             pair_axis = _pair_axis(axis, pairs[k])
             low, high = rectangle_range(frame, box)
-            run = pixel_bins(low, high, pair_axis, terms.duration)
+            run = pixel_bins(low, high, pair_axis, terms.lead, terms.duration)
             if run.bins == 0:
                 continue
             for i in range(run.bins):
@@ -222,7 +222,8 @@ def _count_columns(problem: _Problem, memory_limit: int | None):
     columns = problem.grid.pixels ** 2
     per_pixel = np.empty(columns, dtype=np.int64)
     widest = np.empty(columns, dtype=np.int32)
-    _count(problem.pairs, problem.mode, problem.grid, problem.axis, problem.waveform.duration, per_pixel, widest)
+    _count(problem.pairs, problem.mode, problem.grid, problem.axis, problem.waveform.lead,
+           problem.waveform.duration, per_pixel, widest)
     nnz = int(per_pixel.sum())
     needed = _matrix_bytes(nnz, columns, len(problem.pairs) * problem.axis.count)
     if needed > limit:
@@ -259,7 +260,7 @@ def count_entries(scene: Scene, *, memory_limit: int | None = None) -> np.ndarra
         When A, or its index arrays alone, would not fit in ``memory_limit``
         (the message names the setting to reduce).
     """
-    rectangle, pairs = plane_geometry(scene)
+    rectangle, pairs = scene.geometry()
     waveform = make_waveform(scene.illumination, scene.sampling.bin_width_opl)
     return _count_columns(_problem(rectangle, pairs, scene.sampling, waveform), memory_limit)[0]
 
@@ -308,8 +309,7 @@ def system_matrix(scene: Scene, *, tolerance: float | None = None, memory_limit:
     bin n, with g_k(t) = ∫ f a_k δ(t - d_k) dx (DESIGN.md section 2).
     """
     tolerance = check_tolerance(scene.tolerance if tolerance is None else tolerance)
-    check_heights(scene.size, scene.source, scene.sensors)
-    rectangle, pairs = plane_geometry(scene)
+    rectangle, pairs = scene.geometry()
     return rectangle_matrix(rectangle, pairs, scene.sampling,
                             make_waveform(scene.illumination, scene.sampling.bin_width_opl),
                             tolerance=tolerance, memory_limit=memory_limit, progress=progress)
@@ -438,14 +438,14 @@ def pair_entries(scene: Scene, sensor: int, pixel: int, *, method: str = "auto",
     if not 0 <= sensor < scene.sensor_count or not 0 <= pixel < scene.pixels ** 2:
         raise ValueError(f"sensor {sensor} or pixel {pixel} out of range")
     tolerance = check_tolerance(scene.tolerance if tolerance is None else tolerance)
-    rectangle, pairs = plane_geometry(scene)
+    rectangle, pairs = scene.geometry()
     problem = _problem(rectangle, pairs, scene.sampling,
                        make_waveform(scene.illumination, scene.sampling.bin_width_opl))
     terms = problem.waveform.terms
     frame = _frame_of(problem.pairs, sensor, problem.mode)
     box = pixel_box(problem.grid, pixel)
     low, high = rectangle_range(frame, box)
-    run = pixel_bins(low, high, problem.axis, terms.duration)
+    run = pixel_bins(low, high, problem.axis, terms.lead, terms.duration)
     out = np.zeros(run.bins)
     outcome = pair_by_method(frame, box, low, high, terms, problem.axis, run, SAFETY * tolerance,
                              METHODS.index(method), bool(taylor), out, make_scratch(max(run.bins, 1)))

@@ -61,8 +61,9 @@ def covering_sampling(scene: Scene, bin_width_opl: float, *, margin: int = 0) ->
     from .waveforms import make_waveform
 
     low, high = response_range(scene)
-    longest = high + make_waveform(scene.illumination, bin_width_opl).duration
-    start = (math.floor(low / bin_width_opl) - margin) * bin_width_opl
+    waveform = make_waveform(scene.illumination, bin_width_opl)
+    longest = high + waveform.duration
+    start = (math.floor((low + waveform.lead) / bin_width_opl) - margin) * bin_width_opl
     count = int(math.floor((longest - start) / bin_width_opl)) + 1 + margin
     return Sampling(bin_width_opl=bin_width_opl, start_opl=start, count=count)
 
@@ -85,9 +86,9 @@ def window_share(scene: Scene) -> float:
     low, high = response_range(scene)
     waveform = make_waveform(scene.illumination, sampling.bin_width_opl)
     end = sampling.start_opl + sampling.count * sampling.bin_width_opl
-    if sampling.start_opl <= low and end >= high + waveform.duration:
+    if sampling.start_opl <= low + waveform.lead and end >= high + waveform.duration:
         return 1.0
-    if end <= low:
+    if end <= low + waveform.lead:
         return 0.0
     margin = 1e-6 * max(high - low, abs(high))
     paths = Sampling(bin_width_opl=(high - low) + 2 * margin, start_opl=low - margin, count=1)

@@ -7,7 +7,7 @@ traced into the plugins' kernels:
   S(u) and its differences, from the pieces of
   :class:`analytic.waveforms.WaveformTerms` that NumPy
   (``Waveform.cumulative``) and Numba (``cumulative_scalar``) evaluate too;
-- :func:`attenuation`: a_k(x) of DESIGN.md section 2 (``lambertian``) at plane
+- :func:`attenuation`: a_k(x) of docs/design.md section 2 (``lambertian``) at plane
   points, the twin of :func:`analytic.attenuation.attenuation`;
 - :func:`sample_stream`: the per-sample PCG32 stream of (seed, global sample
   index), chunk-invariant;
@@ -324,7 +324,7 @@ def deposit(histogram, row, weight, length, active, *, bins: int, start_opl: flo
     which the loop visits the taps from the first inside the window.
     Neighbouring taps share an edge, so S is evaluated taps + 1 times.
     """
-    first, _ = bin_index(length, start_opl, bin_width_opl, bins, floor=dr.floor)
+    first, _ = bin_index(length + terms.lead, start_opl, bin_width_opl, bins, floor=dr.floor)
     if taps == 1:
         # The impulse: κ_n is 1 in τ's own bin and 0 elsewhere.
         inside = active & (first >= 0.0) & (first < bins)

@@ -81,7 +81,12 @@ class WaveformTerms(NamedTuple):
     coefficients : float64[C]
         See the module docstring.
     duration : float
-        Support [0, duration] of s, metres: S is constant beyond it.
+        Where s ends, metres: S is constant beyond it (to 2^-60 of the area).
+    lead : float
+        Where s starts, metres (<= 0): S is 0 before it (to 2^-60 of the area);
+        0 for a causal pulse, negative for one centred at 0 (a Gaussian).
+        Light leaving the plane at path length τ reaches the sensors over
+        [τ + lead, τ + duration]: the bins visited.
     degree : int
         The highest degree of the pieces' forms when they are all
         polynomials (0: S is constant between kinks, as for the impulse;
@@ -98,6 +103,7 @@ class WaveformTerms(NamedTuple):
     offsets: np.ndarray
     coefficients: np.ndarray
     duration: float
+    lead: float
     degree: int
 
 
@@ -107,7 +113,7 @@ def _frozen(values, dtype=np.float64) -> np.ndarray:
     return array
 
 
-def make_terms(pieces, duration: float) -> WaveformTerms:
+def make_terms(pieces, duration: float, lead: float = 0.0) -> WaveformTerms:
     """The record of a list of pieces.
 
     Parameters
@@ -116,6 +122,8 @@ def make_terms(pieces, duration: float) -> WaveformTerms:
         In increasing order of start (metres); see :class:`WaveformTerms`.
     duration : float
         Where s ends, metres.
+    lead : float
+        Where s starts, metres (<= 0; default 0, a causal pulse).
 
     Returns
     -------
@@ -124,6 +132,8 @@ def make_terms(pieces, duration: float) -> WaveformTerms:
     starts = [float(p[0]) for p in pieces]
     if any(not b > a for a, b in zip(starts, starts[1:])):
         raise ValueError(f"piece starts must increase, got {starts}")
+    if not lead <= 0.0 <= duration or not math.isfinite(lead):
+        raise ValueError(f"the pulse must start at lead <= 0 (got {lead}) and end at duration >= 0 (got {duration})")
     for piece in pieces:
         if piece[3] == EXPONENTIALS and len(piece[5]) % 4:
             raise ValueError("EXPONENTIALS pieces take four coefficients per term")
@@ -135,7 +145,7 @@ def make_terms(pieces, duration: float) -> WaveformTerms:
                          _frozen([p[4] for p in pieces]), _frozen(np.concatenate([[0], np.cumsum(sizes)]), np.int64),
                          _frozen(np.concatenate([np.asarray(p[5], dtype=np.float64) for p in pieces])
                                  if pieces else []),
-                         float(duration), int(max(degree, 0) if polynomial else -1))
+                         float(duration), float(lead), int(max(degree, 0) if polynomial else -1))
 
 
 # -- compiled evaluators -------------------------------------------------------------

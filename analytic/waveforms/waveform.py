@@ -42,8 +42,13 @@ class Waveform:
 
     @property
     def duration(self) -> float:
-        """Support [0, duration] of s, metres of path length (0 for the impulse): S is constant beyond."""
+        """Where s ends, metres of path length (0 for the impulse): S is constant beyond."""
         return self.terms.duration
+
+    @property
+    def lead(self) -> float:
+        """Where s starts, metres of path length (<= 0; 0 for a causal pulse, negative for a centred one)."""
+        return self.terms.lead
 
     @property
     def breakpoints(self) -> tuple:
@@ -65,9 +70,10 @@ class Waveform:
         if self.name == "impulse":
             raise ValueError("the impulse has no pointwise intensity; use cumulative()")
         t = np.asarray(t, dtype=np.float64)
-        inside = (t >= 0) & (t <= self.duration)
-        # at a piece's start the piece before it holds t (pieces are (b_i, b_{i+1}]); at 0, the first piece
-        value = derivative_array(self.terms, np.where(t == 0.0, np.nextafter(0.0, 1.0), t))
+        inside = (t >= self.lead) & (t <= self.duration)
+        # at a piece's start the piece before it holds t (pieces are (b_i, b_{i+1}]); at the first start, the first
+        first = self.terms.starts[0]
+        value = derivative_array(self.terms, np.where(t == first, np.nextafter(first, np.inf), t))
         return np.where(inside, value, 0.0)
 
     @property
@@ -107,9 +113,9 @@ class Waveform:
         Returns
         -------
         int
-            ceil(duration / T) + 1 (1 for the impulse), computed exactly in
-            rational arithmetic (no overflow, no rounding), capped at
-            ``count`` when given.
+            ceil((duration - lead) / T) + 1 (1 for the impulse), computed
+            exactly in rational arithmetic (no overflow, no rounding),
+            capped at ``count`` when given.
         """
         if (isinstance(period, bool) or not isinstance(period, (int, float, np.integer, np.floating))
                 or not math.isfinite(period) or not period > 0):
@@ -117,5 +123,6 @@ class Waveform:
         if count is not None and (isinstance(count, bool) or not isinstance(count, (int, np.integer))
                                   or count < 1):
             raise ValueError(f"count must be a whole number >= 1, got {count!r}")
-        touched = math.ceil(Fraction(self.duration) / Fraction(period)) + 1 if self.duration > 0 else 1
+        span = Fraction(self.duration) - Fraction(self.lead)
+        touched = math.ceil(span / Fraction(period)) + 1 if span > 0 else 1
         return touched if count is None else min(touched, int(count))

@@ -428,3 +428,26 @@ def test_butterworth_kernels_are_accurate_far_in_the_tail(order, cutoff, duratio
     live = np.abs(expected) > 1e-300
     assert np.max(np.abs(expected)) / np.min(np.abs(expected[live])) > 1e11     # the tail is reached
     np.testing.assert_allclose(kernel[live], expected[live], rtol=1e-12, atol=0)
+
+
+def test_a_pulse_that_starts_before_zero_is_the_causal_one_moved():
+    """A square centred at 0 (lead -w/2) gives the causal square's y with every bin edge moved by w/2."""
+    from analytic.scene import default_scene
+    from analytic.system import rectangle_matrix
+    from analytic.waveforms import Waveform, make_terms
+    from analytic.waveforms.pieces import POLYNOMIAL
+
+    width = 0.07
+    centred = Waveform("centred square", make_terms([(-width / 2, True, 0.0, POLYNOMIAL, -width / 2, [0.0, 1.0]),
+                                                     (width / 2, True, width, POLYNOMIAL, 0.0, [])],
+                                                    duration=width / 2, lead=-width / 2), "centred square")
+    causal = make_waveform(Illumination(waveform="square", width=width), PERIOD)
+    scene = default_scene(pixels=6, noise=None)
+    moved = scene.sampling
+    shifted = Sampling(bin_width_opl=moved.bin_width_opl, start_opl=moved.start_opl + width / 2, count=moved.count)
+    rectangle, pairs = scene.geometry()
+    a = rectangle_matrix(rectangle, pairs, moved, centred).toarray()
+    b = rectangle_matrix(rectangle, pairs, shifted, causal).toarray()
+    assert centred.bins_touched(PERIOD) == causal.bins_touched(PERIOD)
+    np.testing.assert_allclose(a, b, rtol=0, atol=2e-6 * np.abs(b).max())
+    assert np.abs(a).max() > 0

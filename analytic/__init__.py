@@ -8,52 +8,29 @@ A user writes ``import analytic`` and then, for example::
     result = analytic.reconstruct(A, analytic.add_noise(y, scene.noise), scene.pixels,
                                   rule="discrepancy", sigma=scene.noise.sigma)
 
-Names are loaded on first use, so that ``import analytic`` stays cheap and
-the command line starts fast; ``__all__`` lists the public API.
-Nothing here imports Mitsuba, matplotlib or Dask.
+Names are loaded on first use (``lazy_loader``, as in every package of this
+project), so that ``import analytic`` stays cheap (no Numba) and the
+command line starts fast; ``__all__`` lists the public API. Nothing here
+imports Mitsuba, matplotlib or Dask. The files a command writes and reads
+live in :mod:`analytic.files`, which the model itself never imports.
 """
 
-from __future__ import annotations
+import lazy_loader
 
-import importlib
-
-# public name -> submodule that defines it
-_EXPORTS = {
-    "UserError": "errors", "SceneError": "errors", "ImageError": "errors", "DataError": "errors",
-    "ResourceError": "errors",
-    "Scene": "scene", "Illumination": "scene", "Sampling": "scene", "Noise": "scene",
-    "default_scene": "scene", "sensor_grid": "scene",
-    "load_scene": "scene_file", "scene_from_dict": "scene_file", "scene_to_tables": "scene_file",
-    "read_toml": "scene_file",
-    "builtin_reflectance": "reflectance", "read_reflectance": "reflectance",
-    "Waveform": "waveforms", "make_waveform": "waveforms",
-    "bin_index": "binning",
-    "attenuation": "attenuation",
-    "add_noise": "noise",
-    "system_matrix": "system", "forward": "system", "count_entries": "system",
-    "QuadratureWarning": "system",
-    "impulse_response": "response", "binned_contour_model": "response",
-    "response_range": "window", "covering_sampling": "window", "window_share": "window",
-    "WindowWarning": "window",
-    "build_meta": "io", "write_transient": "io", "read_transient": "io",
-    "reconstruct": "inversion", "reconstruct_rules": "inversion", "reconstruct_tv": "inversion",
-    "Reconstruction": "inversion", "image_metrics": "inversion", "flat_image_psnr": "inversion",
-    "lambda_grid": "inversion", "RULES": "inversion", "RankDeficiencyWarning": "inversion",
-    "RegularizationWarning": "inversion",
-    "singular_values": "conditioning", "conditioning_summary": "conditioning",
-}
-
-__all__ = sorted(_EXPORTS)
-
-
-def __getattr__(name: str):
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module 'analytic' has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{module}", __name__), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__():
-    return sorted(set(globals()) | set(__all__))
+__getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
+    "errors": ["UserError", "SceneError", "ImageError", "DataError", "ResourceError"],
+    "scene": ["Scene", "Illumination", "Sampling", "Noise", "default_scene", "sensor_grid"],
+    "scene_file": ["load_scene", "scene_from_dict", "scene_to_tables", "read_toml"],
+    "reflectance": ["builtin_reflectance", "read_reflectance"],
+    "waveforms": ["Waveform", "make_waveform"],
+    "binning": ["bin_index"],
+    "attenuation": ["attenuation"],
+    "noise": ["add_noise"],
+    "system": ["system_matrix", "forward", "count_entries", "QuadratureWarning"],
+    "response": ["impulse_response", "binned_contour_model"],
+    "window": ["response_range", "covering_sampling", "window_share", "WindowWarning"],
+    "files": ["build_meta", "write_transient", "read_transient"],
+    "inversion": ["reconstruct", "reconstruct_rules", "reconstruct_tv", "Reconstruction", "image_metrics",
+                  "flat_image_psnr", "lambda_grid", "RULES", "RankDeficiencyWarning", "RegularizationWarning"],
+    "conditioning": ["singular_values", "conditioning_summary"],
+})

@@ -32,7 +32,7 @@ _PACKAGE = Path(__file__).resolve().parent
 
 @functools.lru_cache(maxsize=None)
 def _imports(path: Path, stamp: tuple[int, int]) -> tuple[Path, ...]:
-    """Modules of the package that ``path`` imports (``from .x import``, ``from analytic.x import``)."""
+    """Modules of the package that ``path`` imports (``from .<module> import``, ``from analytic.<module> import``)."""
     del stamp   # part of the memo's key: a file edited while the process runs is parsed again
     found = []
     for node in ast.walk(ast.parse(path.read_bytes(), str(path))):

@@ -1,7 +1,7 @@
 """Reflectance images: the built-in test pattern and PNG / EXR loading.
 
 An image is an ``M x M`` float64 array of linear reflectance values in [0, 1],
-oriented as DESIGN.md section 1 says: ``image[r, c]`` is the pixel seen by a
+oriented as docs/design.md section 1 says: ``image[r, c]`` is the pixel seen by a
 camera above the plane, row ``r`` counted from the top (largest y).
 """
 

@@ -3,7 +3,7 @@
     g_k(t) = ∫ f a_k δ(t - d_k) dx = ∮_{d_k = t} f a_k / |∇d_k| ds     (coarea formula)
 
 The paper's eq. (3) writes the same contour integral with unit speed and no
-1/|∇d| (DESIGN.md section 3.1); ``coarea=False`` evaluates that form, so the
+1/|∇d| (docs/design.md section 3.1); ``coarea=False`` evaluates that form, so the
 cost of the omission can be measured. |∇d| = |(x - p_s)/d_s + (x - p_k)/d_k|
 (projected on the plane) varies along the ellipse, from small near the
 first-arrival point to about 2 far from it.
@@ -136,7 +136,7 @@ def binned_contour_model(scene: Scene, *, coarea: bool = True, pieces: int = 8, 
 
     Notes
     -----
-    y_k[n] = ∫_{t_n}^{t_{n+1}} g_k(t) dt for s = δ (DESIGN.md section 2);
+    y_k[n] = ∫_{t_n}^{t_{n+1}} g_k(t) dt for s = δ (docs/design.md section 2);
     g_k is zero before the first arrival, where it contributes nothing.
     """
     if scene.illumination.waveform != "impulse":

@@ -1,6 +1,6 @@
-"""Scene files: TOML <-> :class:`analytic.scene.Scene` (DESIGN.md section 5).
+"""Scene files: TOML <-> :class:`analytic.scene.Scene` (docs/design.md section 5).
 
-Missing tables and keys take the defaults DESIGN.md section 5 lists; an
+Missing tables and keys take the defaults docs/design.md section 5 lists; an
 unknown key is an error, so a typo never falls back to a default. Every bad
 value is a :class:`~analytic.errors.SceneError` naming its key.
 """
@@ -114,12 +114,12 @@ def _sensors(table: dict) -> Any:
 
 
 def scene_from_dict(data: dict, base_dir: str | Path = ".", *, name: str = "scene") -> Scene:
-    """Build a scene from the TOML tables of DESIGN.md section 5.
+    """Build a scene from the TOML tables of docs/design.md section 5.
 
     Parameters
     ----------
     data : dict
-        Parsed TOML. Missing tables and keys take the defaults of DESIGN.md
+        Parsed TOML. Missing tables and keys take the defaults of docs/design.md
         section 5; unknown ones are errors. ``plane.reflectance`` may also be
         an ``(M, M)`` array (as :func:`scene_to_tables` gives).
     base_dir : str or Path

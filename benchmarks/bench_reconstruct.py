@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from analytic.noise import add_noise
-from analytic.io import save_json
+from analytic.files import save_json
 from analytic.inversion import RULES, RankDeficiencyWarning, image_metrics, reconstruct_rules, reconstruct_tv
 from analytic.scene import default_scene
 from analytic.system import system_matrix

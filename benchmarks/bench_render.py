@@ -95,7 +95,7 @@ def main(argv=None) -> int:
     parser.add_argument("--deposit", action="store_true", help="time the bare deposit strategies instead")
     args = parser.parse_args(argv)
     if args.deposit:
-        from analytic.io import save_json
+        from analytic.files import save_json
 
         rows = deposit_strategies(args.variant, 2**22, repeats=7)
         save_json(f"{args.out}/deposit.json", rows)

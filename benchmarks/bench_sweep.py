@@ -35,7 +35,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from analytic.io import save_json
+from analytic.files import save_json
 from validation.sweep import run_sweep, sweep_client, sweep_from_dict
 
 

@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from analytic.io import save_json
+from analytic.files import save_json
 from analytic.scene import Sampling, Scene, default_scene
 from analytic.system import QuadratureWarning, forward
 from transient.backend import select_variant

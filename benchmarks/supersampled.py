@@ -37,7 +37,7 @@ def sensor_positions(sensors: dict) -> np.ndarray:
 
 def supersampled(size: float, pixels: int, source, sensors, start_opl: float, bin_width_opl: float,
                  count: int, factor: int, intensity: float = 1.0) -> scipy.sparse.csr_array:
-    """A from factor² midpoint samples per pixel: row k N + n, column r M + c (DESIGN.md section 2).
+    """A from factor² midpoint samples per pixel: row k N + n, column r M + c (docs/design.md section 2).
 
     Each sample x of a pixel adds I a_k(x) (Δ/factor)² to the bin of its path
     length d_k(x); a_k = h_s h_k / (π d_s³ d_k³), I the source's intensity (W/sr).

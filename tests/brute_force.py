@@ -1,7 +1,7 @@
 """A crude, independent reference for a scene's transient: midpoint samples of the plane, binned.
 
 Shares nothing with ``analytic`` but the scene's fields: the attenuation is
-written out from DESIGN.md section 2, the pulse's energy and cumulative come
+written out from docs/design.md section 2, the pulse's energy and cumulative come
 from :mod:`waveform_reference`. Accurate to about 1 % of a sensor's total:
 good enough to catch a wrong number at an extreme input, never a substitute
 for the quadrature's own accuracy tests.

@@ -1,4 +1,4 @@
-"""Shared by the renderer's tests: the exact model and the agreement test of DESIGN.md section 6.
+"""Shared by the renderer's tests: the exact model and the agreement test of docs/design.md section 6.
 
 Agreement is judged per bin (validation.compare): the render's standard
 error comes from its 32 independent replicas, so each z is Student's t
@@ -27,7 +27,7 @@ def model(scene: Scene) -> np.ndarray:
 
 
 def agreement(mean, stderr, reference, dof, replicas=None):
-    """(χ²/dof, max |z|, bins judged, passes) by validation.compare (DESIGN.md section 6).
+    """(χ²/dof, max |z|, bins judged, passes) by validation.compare (docs/design.md section 6).
 
     ``replicas``: the render's ``(R, K, N)`` replica means, for limits that hold with correlated bins.
     """

@@ -1,4 +1,4 @@
-"""Scene-file text shared by the tests: DESIGN.md section 5's example, small."""
+"""Scene-file text shared by the tests: docs/design.md section 5's example, small."""
 
 import textwrap
 

@@ -27,7 +27,7 @@ _DIGITS = 40
 
 
 class ButterworthReference:
-    """The truncated, unit-peak Butterworth pulse of DESIGN.md section 2, in mpmath.
+    """The truncated, unit-peak Butterworth pulse of docs/design.md section 2, in mpmath.
 
     Parameters
     ----------
@@ -140,7 +140,7 @@ def _butterworth(order: int, cutoff: float, duration: float) -> ButterworthRefer
 def reference_cumulative(waveform: str, u, *, period: float, width: float | None = None,
                          cutoff: float | None = None, duration: float | None = None,
                          order: int | None = None) -> np.ndarray:
-    """S(u) of a scene's illumination from its definition (DESIGN.md sections 2 and 5).
+    """S(u) of a scene's illumination from its definition (docs/design.md sections 2 and 5).
 
     Parameters
     ----------

@@ -8,33 +8,22 @@ registers the plugins: ``sensor`` (``omni_point``), ``plane``
 deposit) and ``spherical_rectangle`` (solid-angle sampling);
 ``mitsuba_scene`` builds every Mitsuba scene dictionary; ``chunks`` cuts a
 render into replicas and chunks and folds their sums; ``render`` runs the
-chunked, checkpointed Monte Carlo render.
+chunked, checkpointed Monte Carlo render and ``render_state`` keeps and
+checks its saved state.
 
 Importing this package does not import Mitsuba or Dr.Jit: that happens in
 :func:`select_variant`, after the libLLVM has been chosen.
 """
 
-import importlib
+import lazy_loader
 
-# public name -> submodule that defines it (loaded on first use, so that
-# importing one module of this package does not import the others)
-_EXPORTS = {"BackendError": "backend", "select_variant": "backend", "ReplicaLayout": "chunks",
-            "ChunkPlan": "chunks", "ReplicaAccumulator": "chunks", "RenderResult": "render",
-            "RenderStateError": "render", "render": "render", "render_loaded": "render", "resume": "render",
-            "read_saved_render": "render", "SavedRender": "render", "RenderInterrupted": "render",
-            "export_scene": "export", "emitter_intensity": "intensity"}
-
-__all__ = sorted(_EXPORTS)
-
-
-def __getattr__(name: str):
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module 'transient' has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{module}", __name__), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__():
-    return sorted(set(globals()) | set(__all__))
+# Loaded on first use (lazy_loader, as in every package of this project), so that importing one
+# module of this package does not import the others.
+__getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
+    "backend": ["BackendError", "select_variant"],
+    "chunks": ["ReplicaLayout", "ChunkPlan", "ReplicaAccumulator"],
+    "render": ["RenderResult", "render", "render_loaded", "resume", "RenderInterrupted"],
+    "render_state": ["RenderStateError", "read_saved_render", "SavedRender"],
+    "export": ["export_scene"],
+    "intensity": ["emitter_intensity"],
+})

@@ -5,7 +5,7 @@ A render of S samples is R independent **replicas** of n samples each
 (see :mod:`transient.plane`), randomised independently of the others, so
 the R replica means are independent and identically distributed. The
 estimate is their mean; its standard error comes from their spread, with
-R - 1 degrees of freedom (DESIGN.md sections 4 and 6).
+R - 1 degrees of freedom (docs/design.md sections 4 and 6).
 
 The samples are numbered globally, replica r holding [r n, (r + 1) n), and
 drawn in **chunks** (one kernel launch each) of consecutive global indices;

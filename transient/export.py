@@ -4,7 +4,7 @@
 
 - ``reflectance.exr``: the reflectance image as one float32 channel ``Y``,
   flipped top to bottom (a bitmap's row 0 lies at v = 0, the plane's
-  y = 0 edge; the image's row 0 is its top, DESIGN.md section 1), read by
+  y = 0 edge; the image's row 0 is its top, docs/design.md section 1), read by
   a ``bitmap`` texture with ``filter_type = nearest`` and ``raw = true``
   (no colour conversion), exactly as :func:`transient.mitsuba_scene.scene_dict`
   builds it in memory;
@@ -44,7 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
-from analytic.io import float32_problem, save_exr, save_text, staged_writes
+from analytic.files import float32_problem, save_exr, save_text, staged_writes
 from analytic.scene import Scene, SceneError
 
 from .intensity import emitter_intensity
@@ -59,7 +59,7 @@ RADIUS = 1e-3
 #: Default samples per irradiancemeter for mitransient (``$spp`` in the XML).
 SPP = 2**20
 
-# Plugin names of this package (transient/integrator.py, transient/sensor.py); kept
+# Plugin names of this package (transient/plane.py, transient/sensor.py); kept
 # here as strings so that exporting never imports Mitsuba.
 _INTEGRATOR = "transient_opl"
 _SENSOR = "omni_point"
@@ -312,7 +312,7 @@ def export_scene(scene: Scene, out_dir: str | Path, format: str, *, radius: floa
         (``illumination.waveform``): its point emitter emits a Dirac pulse;
         a reflectance or an intensity that float32 (the texture's EXR,
         Mitsuba's float variants) cannot hold
-        (:func:`analytic.io.float32_problem`).
+        (:func:`analytic.files.float32_problem`).
 
     Notes
     -----

@@ -1,4 +1,4 @@
-"""The ``transient_opl`` integrator: the single-plane scene of DESIGN.md, one bounce, binned by path length.
+"""The ``transient_opl`` integrator: the single-plane scene of docs/design.md, one bounce, binned by path length.
 
 The scene is one Lambertian rectangle, one point emitter above it and omni
 point sensors. Every path is source -> plane point x -> sensor k: one
@@ -10,7 +10,7 @@ that serves every sensor: it adds
 
 to the bins its path length d_s + d_k reaches, each with the illumination's
 kernel κ_n(d_s + d_k) (so any waveform renders directly), with either
-attenuation of DESIGN.md section 2 (the ``attenuation`` property):
+attenuation of docs/design.md section 2 (the ``attenuation`` property):
 
     lambertian   a_k = cos θ_s cos θ_k / (π d_s² d_k²)   (physical transport, the default)
     paper        a_k = cos θ_s / (d_s² d_k²)             (eq. 1: π / cos θ_k more per sample)
@@ -300,7 +300,7 @@ class TransientPlaneIntegrator(mi.SamplingIntegrator):
      * - attenuation
        - |string|
        - ``lambertian`` (physical: cos θ_s cos θ_k / (π d_s² d_k²)) or
-         ``paper`` (eq. 1 of the paper: cos θ_s / (d_s² d_k²)), DESIGN.md
+         ``paper`` (eq. 1 of the paper: cos θ_s / (d_s² d_k²)), docs/design.md
          section 2 (Default: ``lambertian``).
      * - strategy
        - |string|

@@ -7,38 +7,22 @@ A user writes, for example::
     agreement = validation.compare_transients(result.mean, result.stderr, analytic.forward(scene))
     validation.assert_transients_agree(result.mean, result.stderr, analytic.forward(scene))
 
-Names are loaded on first use (the command line starts fast); ``__all__``
-lists the public API. The command line is :mod:`validation.cli`.
+Names are loaded on first use (``lazy_loader``, as in every package of this
+project: the command line starts fast); ``__all__`` lists the public API.
+The command line is :mod:`validation.cli`; ``check`` (:mod:`validation.check`)
+and the figures (:mod:`validation.plots`) are packages of their own.
 """
 
-from __future__ import annotations
+import lazy_loader
 
-import importlib
-
-# public name -> submodule that defines it
-_EXPORTS = {
-    "Agreement": "compare", "compare_transients": "compare", "assert_transients_agree": "compare",
-    "SceneCheck": "harness", "check_scene": "harness", "data_driven_rule": "harness",
-    "reconstruct_from_noisy_data": "harness",
-    "hard_cases": "suite", "validation_suite": "suite",
-    "check_corner": "corner",
-    "write_report": "report",
-    "reproduce": "paper",
-    "load_sweep": "sweep", "run_sweep": "sweep",
-    "speed_against_error": "bench",
-}
-
-__all__ = sorted(_EXPORTS)
-
-
-def __getattr__(name: str):
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module 'validation' has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{module}", __name__), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__():
-    return sorted(set(globals()) | set(__all__))
+__getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
+    "compare": ["Agreement", "compare_transients", "assert_transients_agree"],
+    "harness": ["SceneCheck", "check_scene", "data_driven_rule", "reconstruct_from_noisy_data"],
+    "suite": ["hard_cases", "validation_suite"],
+    "corner": ["check_corner"],
+    "check": ["check_transient", "CheckResult", "read_data"],
+    "report": ["write_report"],
+    "paper": ["reproduce"],
+    "sweep": ["load_sweep", "run_sweep"],
+    "bench": ["speed_against_error"],
+})

@@ -42,9 +42,9 @@ from pathlib import Path
 
 import numpy as np
 
-from analytic.io import atomic_write, save_json
+from analytic.files import atomic_write, save_json
 from analytic.scene import Sampling, Scene, default_scene, sensor_grid
-from validation.plots import plot_speed_against_error
+from validation.plots import save_figure, speed_against_error_figure
 
 __all__ = ["plane_scene", "throughput_scene", "MitransientRuns", "run_mitransient", "device_name", "cpu_model",
            "speed_against_error", "TARGETS"]
@@ -394,7 +394,7 @@ def speed_against_error(out: str | Path, *, powers=range(16, 27, 2), variant: st
     markdown = _markdown(report)
     atomic_write(out / "bench.md", lambda temporary: Path(temporary).write_text(markdown + "\n"))
     save_json(out / "metrics.json", report)
-    plot_speed_against_error(out / "bench.png", report)
+    save_figure(speed_against_error_figure(report), out / "bench.png")
     return dict(report, markdown=markdown)
 
 

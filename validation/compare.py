@@ -1,4 +1,4 @@
-"""Is a rendered transient consistent with a modelled one? (DESIGN.md section 6)
+"""Is a rendered transient consistent with a modelled one? (docs/design.md section 6)
 
 Per bin, t = (y_render - y_model) / se_render. If the model is right and
 the render unbiased, t follows Student's t with ν degrees of freedom when

@@ -5,7 +5,7 @@ For a scene, :func:`check_scene`
 1. assembles A and y = A f (the exact `lambertian` model);
 2. renders y with the Monte Carlo renderer at ``spp`` samples and judges
    the difference with :func:`validation.compare.compare_transients`
-   (DESIGN.md section 6), its limits from the render's replicas (valid
+   (docs/design.md section 6), its limits from the render's replicas (valid
    whatever the correlation between bins);
 3. shows that the model's own quadrature error is far below the render's
    noise: y at looser tolerances against y at 1e-7, over each judged bin's

@@ -3,7 +3,7 @@
 Set-up (paper Section VI): the default scene's plane (L = 1 m, M = 50, the
 built-in reflectance), the source 1 m above its centre, a 4 x 4 sensor array
 of extent W centred on the source at the same height, bins of width T
-covering every path (:func:`analytic.conditioning.covering_sampling`),
+covering every path (:func:`analytic.window.covering_sampling`),
 Gaussian noise σ = 0.1 per sample, λ by the oracle rule (the ℓ2-error
 minimiser, as the paper uses). Illuminations: "impulsive" = unit-amplitude
 square of width T/5 (the paper's stand-in for [1]'s short pulse); "low-pass"
@@ -13,7 +13,7 @@ square of width T/5 (the paper's stand-in for [1]'s short pulse); "low-pass"
 
 The paper does not state the scale of its y, so the source's peak radiant
 intensity I (the scene key ``[source] intensity``) is a free choice: every
-case runs at I = 1 W/sr (DESIGN.md's unit) and at 10⁴ W/sr (the built-in
+case runs at I = 1 W/sr (the unit of docs/design.md section 1) and at 10⁴ W/sr (the built-in
 scene's), the data being A_I f + σ ε with A_I the system matrix of the scene
 at that intensity, and the report gives both. Nothing is tuned per claim: every claim is checked on every
 case and reported as found.
@@ -29,12 +29,12 @@ import numpy as np
 
 from analytic.conditioning import conditioning_summary, scene_for, singular_values
 from analytic.inversion import flat_image_psnr, image_metrics, reconstruct
-from analytic.io import save_json, staged_writes
+from analytic.files import save_json, staged_writes
 from analytic.noise import add_noise
 from analytic.scene import Illumination, Noise, default_scene
 from analytic.system import system_matrix
 from analytic.waveforms import make_waveform
-from validation.plots import plot_conditioning, plot_panels
+from validation.plots import conditioning_figure, panels_figure, save_figure
 from validation.report import write_markdown
 
 __all__ = ["PAPER_DEVICE", "device_figures", "run_cases", "poisson_cases", "check_claims", "reproduce"]
@@ -66,7 +66,7 @@ def device_figures(*, period: float = 0.1, unit_m: float = 1.0) -> dict:
 
     Notes
     -----
-    The paper's three figures cannot all hold in one unit (DESIGN.md §3.4):
+    The paper's three figures cannot all hold in one unit (docs/design.md section 3, item 4):
     750 MHz at T = 0.1 needs u = c / (750 MHz · 0.1) ≈ 4.0 m, but its
     15 m scene needs u = 15 m. Its energy also depends on how σ = 0.1 maps to
     a detector's noise, which the paper does not state; the energy is
@@ -423,17 +423,17 @@ def reproduce(out, *, quick: bool = False, progress: bool = True) -> dict:
         for attenuation in settings["attenuations"]:
             for intensity in settings["intensities"]:
                 name = f"panels_{attenuation}_I{intensity:g}.png"
-                plot_panels(out / name, rows, attenuation=attenuation, intensity=intensity,
-                            illuminations=tuple(ILLUMINATIONS), truth=truth)
+                save_figure(panels_figure(rows, attenuation=attenuation, intensity=intensity,
+                                          illuminations=tuple(ILLUMINATIONS), truth=truth), out / name)
                 figures.append((f"Reconstructions, {attenuation} attenuation, source {intensity:g} W/sr", name))
                 table = [{"extent": r["extent"], "period": r["period"], "sigma": r["sigma"],
                           "singular_values": r["singular_values"], "effective_rank": r["effective_rank"]}
                          for r in rows if r["attenuation"] == attenuation and r["intensity"] == intensity
                          and r["illumination"] == "impulsive"]
                 name = f"conditioning_{attenuation}_I{intensity:g}.png"
-                plot_conditioning(out / name, table,
-                                  title=f"A of the impulsive cases, {attenuation} attenuation, "
-                                        f"source {intensity:g} W/sr")
+                save_figure(conditioning_figure(table, title=f"A of the impulsive cases, {attenuation} "
+                                                             f"attenuation, source {intensity:g} W/sr"),
+                            out / name)
                 figures.append((f"Singular values of A, {attenuation} attenuation, source {intensity:g} W/sr",
                                 name))
         text = _report(rows, claims, devices, seconds,

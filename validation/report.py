@@ -23,9 +23,10 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from analytic.io import save_json, save_text
+from analytic.files import save_json, save_text
 from analytic.window import FULL_SHARE
-from validation.plots import (plot_convergence, plot_reconstructions, plot_transients, plot_z_map)
+from validation.plots import (convergence_figure, reconstructions_figure, save_figure, transients_figure,
+                              z_map_figure)
 
 __all__ = ["write_report", "write_markdown", "scene_folder_names", "FIGURE_FILES", "RESERVED_NAMES",
            "MAX_FOLDER_NAME"]
@@ -179,18 +180,19 @@ def _draw_scene(check, folder: Path, link: str, heading: str) -> list[str]:
     """One scene's figures in ``folder`` (linked as ``link`` + file name) and its report section."""
     sampling = check.scene.sampling
     agreement = check.agreement
-    plot_transients(folder / "transients.png", sampling, {"model": check.model, "render": check.render},
-                    errors={"render": check.stderr}, z_limit=agreement.z_threshold,
-                    title=f"{check.name}: the model (steps) against the render (points)")
-    plot_z_map(folder / "z_map.png", agreement.z, agreement.z_threshold, sampling,
-               f"{check.name}: z over sensors x bins")
+    save_figure(transients_figure(sampling, {"model": check.model, "render": check.render},
+                                  errors={"render": check.stderr}, z_limit=agreement.z_threshold,
+                                  title=f"{check.name}: the model (steps) against the render (points)"),
+                folder / "transients.png")
+    save_figure(z_map_figure(agreement.z, agreement.z_threshold, sampling, f"{check.name}: z over sensors x bins"),
+                folder / "z_map.png")
     lines = ["", heading, "", agreement.summary(), "",
              "Transients of up to 8 sensors (named in the figure) with z below each; the z map shows "
              "every sensor.", "",
              f"![transients]({link}transients.png)", "", f"![z map]({link}z_map.png)"]
     if check.render_convergence:
-        plot_convergence(folder / "convergence.png", check.name, check.render_convergence,
-                         check.metrics.get("render_slope"), check.model_convergence)
+        save_figure(convergence_figure(check.name, check.render_convergence, check.metrics.get("render_slope"),
+                                       check.model_convergence), folder / "convergence.png")
         lines += ["", f"![convergence]({link}convergence.png)"]
     recon = check.reconstructions
     if "model" in recon:
@@ -200,9 +202,9 @@ def _draw_scene(check, folder: Path, link: str, heading: str) -> list[str]:
                    f"PSNR {recon['render']['psnr']:.1f} dB, λ = {recon['render']['lambda']:.3g}"),
                   ("oracle λ (a bound)", recon["oracle"]["image"],
                    f"PSNR {recon['oracle']['psnr']:.1f} dB, λ = {recon['oracle']['lambda']:.3g}")]
-        plot_reconstructions(folder / "reconstructions.png",
-                             f"{check.name}: reconstructions (the best flat image scores {recon['flat_psnr']:.1f} dB)",
-                             check.scene.reflectance, panels)
+        save_figure(reconstructions_figure(
+            f"{check.name}: reconstructions (the best flat image scores {recon['flat_psnr']:.1f} dB)",
+            check.scene.reflectance, panels), folder / "reconstructions.png")
         lines += ["", recon["data"] + f" λ chosen: {recon['model']['lambda']:.3g} (model's data), "
                                       f"{recon['render']['lambda']:.3g} (render's data); the oracle's "
                                       f"{recon['oracle']['lambda']:.3g}.",
@@ -228,7 +230,7 @@ def write_report(out: Path, checks: list, corner: dict | None = None, *, false_a
         One scene (the ``run`` command): its figures at the top of ``out``
         beside report.md, and metrics.json also holds that scene's
         ``agreement``, ``window_share`` and ``reconstruction`` at its top
-        level (DESIGN.md section 5). Without it each scene's figures are in
+        level (docs/design.md section 5). Without it each scene's figures are in
         its folder (:func:`scene_folder_names`).
 
     Returns
@@ -266,12 +268,14 @@ def write_report(out: Path, checks: list, corner: dict | None = None, *, false_a
                   "![corner](corner/transients.png)"]
         metrics["corner"] = {key: value for key, value in corner.items() if key not in ("text", "arrays")}
         arrays = corner["arrays"]
-        plot_transients(out / "corner" / "transients.png", arrays["sampling"],
-                        {"one-bounce model": arrays["model"], "render, 1 bounce": arrays["one"],
-                         "render, 3 bounces": arrays["many"]},
-                        errors={"render, 1 bounce": arrays["one_se"], "render, 3 bounces": arrays["many_se"]},
-                        z_limit=corner["one_bounce"]["z_threshold"],
-                        title="corner: one-bounce model against renders")
+        save_figure(transients_figure(arrays["sampling"],
+                                      {"one-bounce model": arrays["model"], "render, 1 bounce": arrays["one"],
+                                       "render, 3 bounces": arrays["many"]},
+                                      errors={"render, 1 bounce": arrays["one_se"],
+                                              "render, 3 bounces": arrays["many_se"]},
+                                      z_limit=corner["one_bounce"]["z_threshold"],
+                                      title="corner: one-bounce model against renders"),
+                    out / "corner" / "transients.png")
     metrics["all_agree"] = all(check.agreement.agrees for check in checks) and (
         corner is None or (corner["one_bounce_agrees"] and corner["mitransient"].get("agrees") is not False))
     if headline:

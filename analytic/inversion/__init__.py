@@ -4,17 +4,17 @@ The paper's Laplacian-Tikhonov reconstruction (:mod:`.tikhonov`, its λ
 rules in :mod:`.rules`, the Laplacian in :mod:`.laplacian`), total
 variation beyond the paper (:mod:`.tv`), and the image metrics
 (:mod:`.metrics`). Each function takes (operator, data, regulariser, λ rule)
-and returns a :class:`Reconstruction`.
+and returns a :class:`Reconstruction`. Names are loaded on first use
+(``lazy_loader``, as in every package of this project).
 """
 
-from .laplacian import dct2, idct2, laplacian_eigenvalues, neumann_laplacian
-from .metrics import flat_image_psnr, image_metrics, structural_similarity
-from .result import RankDeficiencyWarning, Reconstruction, RegularizationWarning
-from .rules import DEFAULT_LAMBDA_COUNT, RULES, lambda_grid
-from .tikhonov import METHODS, reconstruct, reconstruct_rules
-from .tv import TV_RULES, reconstruct_tv, total_variation
+import lazy_loader
 
-__all__ = ["reconstruct", "reconstruct_rules", "reconstruct_tv", "Reconstruction", "RankDeficiencyWarning",
-           "RegularizationWarning", "RULES", "TV_RULES", "METHODS", "DEFAULT_LAMBDA_COUNT", "lambda_grid",
-           "image_metrics", "structural_similarity", "flat_image_psnr", "total_variation",
-           "neumann_laplacian", "laplacian_eigenvalues", "dct2", "idct2"]
+__getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
+    "tikhonov": ["reconstruct", "reconstruct_rules", "METHODS"],
+    "tv": ["reconstruct_tv", "TV_RULES", "total_variation"],
+    "result": ["Reconstruction", "RankDeficiencyWarning", "RegularizationWarning"],
+    "rules": ["RULES", "DEFAULT_LAMBDA_COUNT", "lambda_grid"],
+    "metrics": ["image_metrics", "structural_similarity", "flat_image_psnr"],
+    "laplacian": ["neumann_laplacian", "laplacian_eigenvalues", "dct2", "idct2"],
+})

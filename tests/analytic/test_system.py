@@ -2,7 +2,7 @@
 
 The reference (tests/reference.py) shares no code with the model: roots of
 d = const by bracketing along each line, SciPy's adaptive QUADPACK for the
-nested integrals, pixel boxes from DESIGN.md, κ_n from the mpmath
+nested integrals, pixel boxes from docs/design.md section 1, κ_n from the mpmath
 state-space pulse of tests/waveform_reference.py.
 """
 

@@ -108,7 +108,7 @@ def test_check_does_not_read_a_folder_another_command_is_writing(tmp_path, rng, 
     data.mkdir()
     paths = save_replicas(data, model_of(scene), rng)
     holder = subprocess.Popen(
-        [sys.executable, "-c", "import sys, time\nfrom analytic.io import output_folder\n"
+        [sys.executable, "-c", "import sys, time\nfrom analytic.files import output_folder\n"
                                "with output_folder(sys.argv[1]):\n    print('held', flush=True)\n"
                                "    time.sleep(120)\n", str(data)],
         stdout=subprocess.PIPE, text=True)

@@ -11,7 +11,7 @@ import pytest
 
 from analytic.window import WindowWarning
 from scene_files import write_scene
-from validation.cli import OWN_PACKAGES, _OneLineWarnings
+from validation.cli.program import OWN_PACKAGES, _OneLineWarnings
 
 FILES = {"transient.npy", "transient.exr", "transient.h5", "meta.json", "transient.png"}
 

@@ -8,7 +8,7 @@ import sys
 import numpy as np
 import pytest
 
-from analytic.io import read_transient
+from analytic.files import read_transient
 from scene_files import GOOD, write_scene
 from validation.cli import main
 

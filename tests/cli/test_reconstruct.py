@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from analytic.io import read_transient, save_npy
+from analytic.files import read_transient, save_npy
 from analytic.noise import add_noise
 from analytic.scene_file import load_scene
 from analytic.system import forward
@@ -115,10 +115,10 @@ def test_data_another_command_is_writing_are_not_read(tmp_path, noisy_data, caps
     inside = tmp_path / "p" / "model" / "transient.npy"
     inside.parent.mkdir(parents=True)
     save_npy(inside, np.load(data))
-    monkeypatch.setattr("analytic.io.LOCK_WAIT_SECONDS", 0.2)
+    monkeypatch.setattr("analytic.files.locks.LOCK_WAIT_SECONDS", 0.2)
     writer = subprocess.Popen([sys.executable, "-c", textwrap.dedent("""
         import sys
-        from analytic.io import output_folder
+        from analytic.files import output_folder
         with output_folder(sys.argv[1]):
             print("ready", flush=True)
             sys.stdin.readline()

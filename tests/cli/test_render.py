@@ -1,4 +1,4 @@
-"""The `render` command end to end: files of DESIGN.md section 5, resume, the LLVM trap."""
+"""The `render` command end to end: files of docs/design.md section 5, resume, the LLVM trap."""
 
 import glob
 import json

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from analytic.errors import ResourceError
-from analytic.io import save_exr, save_npy
+from analytic.files import save_exr, save_npy
 
 from scene_files import GOOD, write_scene
 from validation.cli import main
@@ -74,7 +74,7 @@ def test_a_second_command_on_a_busy_folder_names_the_first(tmp_path, capsys):
     out = tmp_path / "out"
     holder = subprocess.Popen([sys.executable, "-c", textwrap.dedent(f"""
         import sys, time
-        from analytic.io import output_folder
+        from analytic.files import output_folder
         with output_folder({str(out)!r}):
             print("holding", flush=True)
             time.sleep(60)

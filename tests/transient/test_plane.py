@@ -122,7 +122,7 @@ def test_single_pixel_lights_only_its_path_lengths():
     result = render(scene, spp=2**20, seed=5, progress=False)
 
     def bins_of(r, c):
-        # Path lengths over a fine grid of the pixel (DESIGN.md section 1 orientation),
+        # Path lengths over a fine grid of the pixel (docs/design.md section 1 orientation),
         # widened by the grid's own resolution: d is 2-Lipschitz in x.
         delta = 1.0 / pixels
         step = delta / 400

@@ -21,8 +21,8 @@ import numpy as np
 import pytest
 
 from analytic.scene import Sampling, Scene
-from transient.render import (PARTIAL_FOLDER, REPLICAS_FILE, SCENE_FILE, STATE_FILE, RenderInterrupted,
-                              RenderStateError, read_saved_render, render, resume, scene_fingerprint)
+from transient.render import PARTIAL_FOLDER, REPLICAS_FILE, RenderInterrupted, render, resume
+from transient.render_state import SCENE_FILE, STATE_FILE, RenderStateError, read_saved_render, scene_fingerprint
 
 
 @pytest.fixture(scope="module")
@@ -212,7 +212,7 @@ def _state(tmp_path):
 
 def _rewrite(tmp_path, state, *, reseal: bool):
     """Write a state back, with a checksum recomputed for its (altered) contents when ``reseal``."""
-    module = importlib.import_module("transient.render")
+    module = importlib.import_module("transient.render_state")
 
     if reseal:
         identity = json.loads(str(state["identity"]))

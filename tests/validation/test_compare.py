@@ -1,4 +1,4 @@
-"""The agreement test of DESIGN.md section 6 on synthetic data with known truth."""
+"""The agreement test of docs/design.md section 6 on synthetic data with known truth."""
 
 import numpy as np
 import pytest

@@ -9,13 +9,14 @@ import pytest
 
 from analytic.scene import Sampling
 from validation import plots
-from validation.plots import _power_of_ten, _round_origin, plot_transients, plot_z_map
+from validation.plots import save_figure, transients_figure, z_map_figure
+from validation.plots.axes import power_of_ten, round_origin
 
 
 @pytest.mark.parametrize("start, span, origin", [(1.9, 1.2, 0.0), (0.0, 4.0, 0.0), (800.0001, 0.0014, 800.0),
                                                  (-50.25, 0.01, None)])
 def test_a_window_far_from_zero_is_drawn_from_a_round_origin(start, span, origin):
-    found = _round_origin(np.array([start, start + span]))
+    found = round_origin(np.array([start, start + span]))
     if origin is not None:
         assert found == pytest.approx(origin, abs=1e-12)
     if origin != 0:
@@ -24,33 +25,25 @@ def test_a_window_far_from_zero_is_drawn_from_a_round_origin(start, span, origin
 
 @pytest.mark.parametrize("peak, power", [(409.0, 0), (0.04, 0), (1.2e-14, -14), (3e7, 7), (0.0, 0)])
 def test_y_outside_the_readable_range_gets_a_named_power_of_ten(peak, power):
-    assert _power_of_ten(np.array([0.0, peak])) == power
+    assert power_of_ten(np.array([0.0, peak])) == power
 
 
 def test_a_far_tiny_transient_is_drawn(tmp_path):
     sampling = Sampling(bin_width_opl=1e-6, start_opl=800.0001, count=50)
     y = 1e-14 * np.exp(-np.arange(50) / 10.0)[None, :]
-    plot_transients(tmp_path / "t.png", sampling, {"model": y, "render": y * 1.01},
-                    errors={"render": np.full_like(y, 1e-16)})
-    plot_z_map(tmp_path / "z.png", np.zeros((1, 50)), 4.0, sampling, "z")
+    save_figure(transients_figure(sampling, {"model": y, "render": y * 1.01},
+                                  errors={"render": np.full_like(y, 1e-16)}), tmp_path / "t.png")
+    save_figure(z_map_figure(np.zeros((1, 50)), 4.0, sampling, "z"), tmp_path / "z.png")
     assert (tmp_path / "t.png").stat().st_size > 0 and (tmp_path / "z.png").stat().st_size > 0
 
 
 # ---------------------------------------------------------------- what the figures say
 
 
-@pytest.fixture
-def figures(monkeypatch):
-    """The figures the plotting functions would save, drawn, instead of PNG files."""
-    drawn = []
-
-    def keep(figure, path, dpi=110):
-        figure.canvas.draw()
-        drawn.append(figure)
-        return path
-
-    monkeypatch.setattr(plots, "save_figure", keep)
-    return drawn
+def drawn(figure):
+    """The figure as its PNG would show it: drawn, so that text extents and ticks are final."""
+    figure.canvas.draw()
+    return figure
 
 
 def _texts(figure) -> str:
@@ -85,11 +78,10 @@ def _transients(sensors: int):
     return sampling, model, render, stderr
 
 
-def test_transients_say_which_sensors_they_show_and_draw_the_real_z_limit(figures):
+def test_transients_say_which_sensors_they_show_and_draw_the_real_z_limit():
     sampling, model, render, stderr = _transients(16)
-    plots.plot_transients("t.png", sampling, {"model": model, "render": render}, errors={"render": stderr},
-                          z_limit=4.61, title="scene")
-    (figure,) = figures
+    figure = drawn(plots.transients_figure(sampling, {"model": model, "render": render}, errors={"render": stderr},
+                                           z_limit=4.61, title="scene"))
     text = _texts(figure)
     assert "8 of 16" in text and "4.61" in text
     # the error bars (0.1 % of the peak) hide under the points: the legend says so
@@ -102,18 +94,18 @@ def test_transients_say_which_sensors_they_show_and_draw_the_real_z_limit(figure
     assert min(sizes) >= 7
 
 
-def test_titles_show_a_scene_name_as_it_is(figures):
+def test_titles_show_a_scene_name_as_it_is():
     sampling, model, render, stderr = _transients(1)
     # "$...$" would be mathtext (and this one an error); CJK is not in DejaVu Sans (a glyph warning)
-    plots.plot_transients("t.png", sampling, {"model": model, "render": render}, title="a$\\frac$b 日本")
-    plots.plot_z_map("z.png", np.zeros((1, 12)), 4.0, sampling, "a$\\frac$b 日本")
+    figures = [drawn(plots.transients_figure(sampling, {"model": model, "render": render}, title="a$\\frac$b 日本")),
+               drawn(plots.z_map_figure(np.zeros((1, 12)), 4.0, sampling, "a$\\frac$b 日本"))]
     assert "a$\\frac$b" in _texts(figures[0]) and "a$\\frac$b" in _texts(figures[1])
 
 
-def test_log_axes_leave_out_errors_of_exactly_zero(figures):
+def test_log_axes_leave_out_errors_of_exactly_zero():
     rows = [{"samples": 2**k, "relative_l2": 0.0} for k in (12, 14, 16)]
-    plots.plot_convergence("c.png", "exact", rows, None, [{"tolerance": 1e-2, "over_stderr": 0.0}])
-    assert "nothing above 0" in _texts(figures[0])
+    figure = drawn(plots.convergence_figure("exact", rows, None, [{"tolerance": 1e-2, "over_stderr": 0.0}]))
+    assert "nothing above 0" in _texts(figure)
 
 
 def _reconstruction(lambdas, residual_norms, seminorms, rule="gcv"):
@@ -124,22 +116,22 @@ def _reconstruction(lambdas, residual_norms, seminorms, rule="gcv"):
                                  residual_norm=float(residual_norms[2]), seminorm=float(seminorms[2]))
 
 
-def test_criterion_tick_labels_on_a_short_log_span_do_not_run_together(figures):
+def test_criterion_tick_labels_on_a_short_log_span_do_not_run_together():
     # a λ grid and an L-curve spanning less than a decade: matplotlib would label every minor tick
-    plots.plot_criterion("c.png", _reconstruction(np.geomspace(1.0, 2.0, 8), np.linspace(0.105, 0.12, 8),
-                                                  np.linspace(2.0, 1.5, 8)))
-    for axis in figures[0].axes:
+    figure = drawn(plots.criterion_figure(_reconstruction(np.geomspace(1.0, 2.0, 8), np.linspace(0.105, 0.12, 8),
+                                                          np.linspace(2.0, 1.5, 8))))
+    for axis in figure.axes:
         for which in ("x", "y"):
             _assert_labels_apart(axis, which)
         assert len(_shown_tick_labels(axis, "x")) >= 2
 
 
-def test_criterion_over_the_whole_float_range_is_drawn(figures):
+def test_criterion_over_the_whole_float_range_is_drawn():
     # λ from 1e-300 to 1e300 and a seminorm of 0: margins and ticks must stay finite
     lambdas = np.geomspace(1e-300, 1e300, 12)
-    plots.plot_criterion("c.png", _reconstruction(lambdas, np.geomspace(1e-5, 1e26, 12),
-                                                  np.r_[np.geomspace(2.0, 1e-200, 11), 0.0]))
-    for axis in figures[0].axes:
+    figure = drawn(plots.criterion_figure(_reconstruction(lambdas, np.geomspace(1e-5, 1e26, 12),
+                                                          np.r_[np.geomspace(2.0, 1e-200, 11), 0.0])))
+    for axis in figure.axes:
         for which in ("x", "y"):
             low, high = (axis.get_xlim() if which == "x" else axis.get_ylim())
             assert math.isfinite(low) and math.isfinite(high)
@@ -160,10 +152,9 @@ def check_result():
     return scene, check_transient(scene, model + stderr * noise, stderr=stderr)
 
 
-def test_check_transients_title_legend_and_time_axes(figures, check_result):
+def test_check_transients_title_legend_and_time_axes(check_result):
     scene, result = check_result
-    plots.plot_check_transients("c.png", result)
-    (figure,) = figures
+    figure = drawn(plots.check_transients_figure(result))
     renderer = figure.canvas.get_renderer()
     title = figure._suptitle.get_window_extent(renderer)
     (legend,) = figure.legends
@@ -171,11 +162,11 @@ def test_check_transients_title_legend_and_time_axes(figures, check_result):
     assert any(axis.get_xlabel() == "ns" for axis in figure.findobj(lambda a: hasattr(a, "get_xlabel")))
 
 
-def test_check_z_is_drawn_against_path_length(figures, check_result):
+def test_check_z_is_drawn_against_path_length(check_result):
     scene, result = check_result
-    plots.plot_check_z("z.png", result)
+    figure = drawn(plots.check_z_figure(result))
     edges = scene.sampling.edges
-    for axis in figures[0].axes[:2]:
+    for axis in figure.axes[:2]:
         low, high = axis.get_xlim()
         assert edges[0] - 0.1 <= low < high <= edges[-1] + 0.1       # metres of path, not a bin index
-    assert "limit ±" in _texts(figures[0])
+    assert "limit ±" in _texts(figure)

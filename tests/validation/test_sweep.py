@@ -23,7 +23,8 @@ from analytic.errors import ResourceError, SceneError
 from analytic.scene import default_scene
 from analytic.scene_file import scene_from_dict
 from transient.chunks import ChunkPlan, ReplicaAccumulator, ReplicaLayout
-from transient.render import render, scene_fingerprint
+from transient.render import render
+from transient.render_state import scene_fingerprint
 from validation.cli import main
 from validation.sweep import ITEM_FILE, STATE_FILE, load_sweep, run_sweep, sweep_client, sweep_from_dict
 from validation.sweep.config import default_scene_table

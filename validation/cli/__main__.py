@@ -2,6 +2,6 @@
 
 import sys
 
-from . import console
+from .program import console
 
 sys.exit(console())

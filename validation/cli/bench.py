@@ -9,7 +9,7 @@ __all__ = ["add_commands", "command_bench"]
 
 def command_bench(args) -> int:
     """Run the speed-against-error comparison; exit status 0."""
-    from analytic.io import output_folder
+    from analytic.files import output_folder
     from validation.bench import speed_against_error
 
     with output_folder(args.out) as out:

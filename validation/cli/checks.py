@@ -56,7 +56,7 @@ def command_validate(args) -> int:
     named by :func:`validation.report.scene_folder_names`.
     """
     from analytic.errors import UserError
-    from analytic.io import output_folder, staged_writes
+    from analytic.files import output_folder, staged_writes
     from analytic.scene_file import load_scene
     from validation.corner import check_corner
     from validation.harness import check_scene
@@ -121,7 +121,7 @@ def command_run(args) -> int:
     figures lie beside report.md in ``--out`` (one scene: no folder of its
     own; :mod:`validation.report`).
     """
-    from analytic.io import build_meta, output_folder, staged_writes, write_transient
+    from analytic.files import build_meta, output_folder, staged_writes, write_transient
     from validation.harness import check_scene, data_driven_rule
     from validation.report import write_report
 

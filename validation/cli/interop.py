@@ -21,7 +21,7 @@ def _read_inputs(args, scene):
     """
     import numpy as np
 
-    from analytic.io import reading_folder
+    from analytic.files import reading_folder
     from validation.check import read_data, read_stderr, replicas_beside, stderr_beside
 
     with contextlib.ExitStack() as locks:
@@ -70,7 +70,7 @@ def command_check(args) -> int:
     convention stated by ``--expect``/``--expect-scale``/``--expect-offset``
     when one is; 1 when not.
     """
-    from analytic.io import output_folder
+    from analytic.files import output_folder
     from validation.check import check_transient, write_check_report
 
     scene = load_scene_argument(args.scene)
@@ -92,7 +92,7 @@ def command_check(args) -> int:
 
 def command_export(args) -> int:
     """Write the scene as a Mitsuba 3 XML file for our plugins or for mitransient; exit status 0."""
-    from analytic.io import output_folder
+    from analytic.files import output_folder
     from transient.export import export_scene
 
     scene = load_scene_argument(args.scene)

@@ -12,7 +12,7 @@ __all__ = ["add_commands", "command_forward"]
 
 def command_forward(args) -> int:
     """Model the noiseless transient (and a noisy one when the scene asks); exit status 0."""
-    from analytic.io import build_meta, output_folder, staged_writes, write_transient
+    from analytic.files import build_meta, output_folder, staged_writes, write_transient
     from analytic.noise import add_noise
     from analytic.system import forward, system_matrix
     from analytic.window import warn_if_cut, window_share

@@ -63,12 +63,12 @@ def add_lambda_options(parser, *, default: str) -> None:
 def command_reconstruct(args) -> int:
     """Reconstruct the scene's image from a transient; write images, metrics, figures, report."""
     from analytic.errors import SceneError
-    from analytic.io import (PrecisionWarning, discard, float32_problem, output_folder, reading_folder,
+    from analytic.files import (PrecisionWarning, discard, float32_problem, output_folder, reading_folder,
                              save_exr, save_json, save_npy, save_png_image, staged_writes)
     from analytic.inversion import image_metrics, reconstruct
     from analytic.system import system_matrix
     from validation.harness import data_driven_rule
-    from validation.plots import plot_criterion, plot_reconstruction
+    from validation.plots import criterion_figure, reconstruction_figure, save_figure
     from validation.report import write_markdown
 
     scene = load_scene_argument(args.scene)
@@ -131,10 +131,10 @@ def command_reconstruct(args) -> int:
                 discard(out / "reconstruction.exr")      # an earlier run's: not this image
             save_png_image(out / "reconstruction.png", result.image)
             save_json(out / "metrics.json", report)
-            plot_criterion(out / "criterion.png", result, title=f"{scene.name}: {how}")
-            plot_reconstruction(out / "comparison.png", truth, result.image,
-                                title=f"{scene.name}: {how}, PSNR {metrics['psnr']:.2f} dB, "
-                                      f"SSIM {metrics['ssim']:.3f}")
+            save_figure(criterion_figure(result, title=f"{scene.name}: {how}"), out / "criterion.png")
+            save_figure(reconstruction_figure(truth, result.image,
+                                              title=f"{scene.name}: {how}, PSNR {metrics['psnr']:.2f} dB, "
+                                                    f"SSIM {metrics['ssim']:.3f}"), out / "comparison.png")
             write_markdown(out / "report.md", [
                 f"# Reconstruction of {scene.name}", "",
                 f"From `{args.data}` ({scene.sensor_count} sensors x {scene.sampling.count} bins), "
@@ -165,7 +165,7 @@ def _read_data(path: str, scene) -> np.ndarray:
 
 def command_reproduce(args) -> int:
     """The paper's Figs. 7 and 8 and Section VII's device figures; exit status 0."""
-    from analytic.io import output_folder
+    from analytic.files import output_folder
     from validation.paper import reproduce
 
     with output_folder(args.out) as out:

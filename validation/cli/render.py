@@ -22,9 +22,10 @@ def _interrupted_line(interrupted) -> str:
 
 def command_render(args) -> int:
     """Render (or resume rendering) into a folder; exit status 0 when done, 130 when interrupted."""
-    from analytic.io import output_folder
+    from analytic.files import output_folder
     from analytic.window import warn_if_cut, window_share
-    from transient.render import RenderInterrupted, read_saved_render, render, resume
+    from transient.render import RenderInterrupted, render, resume
+    from transient.render_state import read_saved_render
 
     from pathlib import Path
 

@@ -20,7 +20,7 @@ __all__ = ["add_commands", "command_sweep"]
 
 def command_sweep(args) -> int:
     """Run the sweep; exit status 0 when done (and every cross-checked item agrees), else 1."""
-    from analytic.io import output_folder
+    from analytic.files import output_folder
     from validation.sweep import check_variant, load_sweep, run_sweep
 
     if args.workers is not None and not 1 <= args.workers <= 1024:

@@ -3,11 +3,11 @@
 A sweep file names a base scene and a grid of scene keys to vary; every
 combination of the grid's values is one *item*, a scene built by overriding
 the base scene's TOML tables and validated by
-:func:`analytic.scene.scene_from_dict`, exactly as a scene file would be.
+:func:`analytic.scene_file.scene_from_dict`, exactly as a scene file would be.
 
 Each item's render is split into fixed chunks of the sample range,
 ``[first, first + count)``. Sample i's random numbers depend only on
-(seed, i) (:mod:`transient.integrator`), so the chunks are independent,
+(seed, i) (:func:`transient.common.sample_stream`), so the chunks are independent,
 deterministic tasks: any worker may compute any chunk, a chunk lost with its
 worker is simply computed again, and the driver adds the chunks' float64
 moments in chunk order. Each worker runs Dr.Jit with as many threads as the
@@ -27,14 +27,16 @@ and ``item.json``, written last, marks the item finished. ``index.json`` and
 The package: :mod:`.config` reads and validates sweep files, :mod:`.tasks`
 is what workers run, :mod:`.checkpoint` keeps each unfinished item's chunks,
 :mod:`.index` writes ``index.json``/``.csv`` and finished items' files, and
-:mod:`.driver` runs a sweep on a Dask cluster.
+:mod:`.driver` runs a sweep on a Dask cluster. Names are loaded on first use
+(``lazy_loader``, as in every package of this project), so that reading a
+sweep file does not import Dask.
 """
 
-from .checkpoint import ITEM_FILE, STATE_FILE
-from .config import DEFAULT_SWEEP_CHUNK, Sweep, SweepItem, load_sweep, sweep_from_dict
-from .driver import SweepResult, check_variant, run_sweep, sweep_client
-from .tasks import model_transient, render_chunk
+import lazy_loader
 
-__all__ = ["Sweep", "SweepItem", "SweepResult", "load_sweep", "sweep_from_dict", "render_chunk",
-           "model_transient", "run_sweep", "sweep_client", "check_variant", "STATE_FILE", "ITEM_FILE",
-           "DEFAULT_SWEEP_CHUNK"]
+__getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
+    "config": ["Sweep", "SweepItem", "load_sweep", "sweep_from_dict", "DEFAULT_SWEEP_CHUNK"],
+    "tasks": ["render_chunk", "model_transient"],
+    "driver": ["SweepResult", "run_sweep", "sweep_client", "check_variant"],
+    "checkpoint": ["STATE_FILE", "ITEM_FILE"],
+})

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from analytic.errors import ResourceError
-from analytic.io import atomic_write
+from analytic.files import atomic_write
 from transient.chunks import ChunkPlan, ReplicaAccumulator, ReplicaLayout
 
 from .config import Sweep, SweepItem

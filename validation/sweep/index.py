@@ -8,7 +8,7 @@ import json
 import time
 from pathlib import Path
 
-from analytic.io import save_json, save_text, write_transient
+from analytic.files import save_json, save_text, write_transient
 
 from .checkpoint import ITEM_FILE, ItemState, mismatch, state_identity
 from .config import Sweep, SweepItem
@@ -32,7 +32,7 @@ def finished_row(item: SweepItem, folder: Path, sweep: Sweep, fingerprint: str) 
 
 def finish_item(state: ItemState, sweep: Sweep, out_dir: Path) -> dict:
     """Merge, write the item's files and its ``item.json``; return its index row."""
-    from analytic.io import build_meta
+    from analytic.files import build_meta
     from validation.compare import compare_transients
 
     scene, item = state.item.scene, state.item

@@ -77,7 +77,7 @@ def render_chunk(scene: Scene, fingerprint: str, seed: int, layout, chunk,
     scene : Scene
         The item's scene.
     fingerprint : str
-        :func:`transient.render.scene_fingerprint` of ``scene``: the key of
+        :func:`transient.render_state.scene_fingerprint` of ``scene``: the key of
         the worker's cache of loaded Mitsuba scenes.
     seed : int
         Render seed; sample g depends on (seed, g) only.

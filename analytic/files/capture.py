@@ -3,7 +3,7 @@
 tal (y-tal, the NLOS toolkit) keeps a capture in one HDF5 file whose
 datasets are the attributes of ``tal.io.capture_data.NLOSCaptureData``; its
 reader refuses any other key. What we write, for a scene with K sensors and
-N bins (DESIGN.md section 5):
+N bins (docs/design.md section 5):
 
 =================================  ==================================================
 ``H``                              ``(N, K)`` float64 y_k[n], time first (``H_format`` T_Si)
@@ -40,7 +40,7 @@ The times are still measured from the source's emission (t = 0 when the
 pulse leaves p_s), the same ``start_opl`` as every other output. Checked:
 ``tal.reconstruct.bp`` (DIRECT_LIGHT camera) on our capture of a plane with
 one bright pixel focuses on that pixel with the flag False, and elsewhere
-with it True (tests/test_capture.py).
+with it True (tests/analytic/files/test_capture.py).
 """
 
 from __future__ import annotations
@@ -52,8 +52,10 @@ from typing import Any
 
 import numpy as np
 
-from .errors import DataError
-from .io import _json_default, atomic_write
+from analytic.errors import DataError
+
+from .atomic import atomic_write
+from .formats import json_default
 
 __all__ = ["Capture", "CaptureError", "write_capture", "read_capture", "H_FORMATS", "GRID_FORMATS",
            "VOLUME_FORMATS", "ACCOUNTS_FIRST_AND_LAST_BOUNCES"]
@@ -170,7 +172,7 @@ def write_capture(path: str | Path, transient, *, start_opl: float, bin_width_op
         raise ValueError(f"start_opl: must be finite, got {start_opl}")
     if not (np.isfinite(bin_width_opl) and bin_width_opl > 0):
         raise ValueError(f"bin_width_opl: must be finite and > 0, got {bin_width_opl}")
-    info = json.dumps(scene_info, sort_keys=True, default=_json_default)
+    info = json.dumps(scene_info, sort_keys=True, default=json_default)
     H = np.ascontiguousarray(transient.T)
 
     def write(temporary):

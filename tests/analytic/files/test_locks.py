@@ -1,4 +1,4 @@
-"""Folder locks and temporaries (analytic.io): one writer at a time without a window, readers kept
+"""Folder locks and temporaries (analytic.files.locks): one writer at a time without a window, readers kept
 apart from writers, the lock file gone on every way out, only our dead processes' temporaries removed.
 
 The references are the operating system's own: several processes racing for a folder, a marker file
@@ -20,18 +20,19 @@ import numpy as np
 import pytest
 
 from analytic.errors import ResourceError
-from analytic.io import (LOCK_FILE, TEMPORARY_PREFIX, output_folder, reading_folder, remove_temporaries,
-                         save_npy, staged_writes)
-from analytic import io as io_module
+from analytic.files import (LOCK_FILE, TEMPORARY_PREFIX, output_folder, reading_folder, remove_temporaries,
+                            save_npy, staged_writes)
+from analytic.files import atomic as atomic_module
+from analytic.files import locks as locks_module
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 
 # Each process enters the folder as often as it can; inside, it creates a marker exclusively: a
 # second holder at the same time finds the marker there.
 _HAMMER = textwrap.dedent(r"""
     import json, os, sys, time
     from analytic.errors import ResourceError
-    from analytic.io import output_folder
+    from analytic.files import output_folder
     folder, inside, seconds = sys.argv[1], sys.argv[2], float(sys.argv[3])
     held = overlaps = 0
     end = time.monotonic() + seconds
@@ -94,7 +95,7 @@ def _ended_process_id() -> int:
 
 
 def _temporary_name(pid: int, name: str, host: str | None = None) -> str:
-    return f"{TEMPORARY_PREFIX}{host or io_module._host_tag()}-{pid}-abcd1234-{name}"
+    return f"{TEMPORARY_PREFIX}{host or atomic_module._host_tag()}-{pid}-abcd1234-{name}"
 
 
 def test_the_lock_file_goes_on_every_way_out(tmp_path):
@@ -109,7 +110,7 @@ def test_the_lock_file_goes_on_every_way_out(tmp_path):
     assert not (folder / LOCK_FILE).exists()
     with pytest.raises(ResourceError, match="free some space"):
         with output_folder(folder):
-            io_module.atomic_write(folder / "b.npy", full_disk)
+            atomic_module.atomic_write(folder / "b.npy", full_disk)
     assert not (folder / LOCK_FILE).exists()
     with pytest.raises(KeyboardInterrupt):
         with output_folder(folder):
@@ -121,7 +122,7 @@ def test_a_lock_file_left_by_a_killed_command_is_no_obstacle(tmp_path):
     folder = tmp_path / "out"
     holder = _holder("""
         import sys
-        from analytic.io import output_folder
+        from analytic.files import output_folder
         with output_folder(sys.argv[1]):
             print("ready", flush=True)
             sys.stdin.readline()
@@ -165,7 +166,7 @@ def test_a_command_writing_a_parent_folder_leaves_a_nested_commands_files_alone(
         import sys
         import numpy as np
         from pathlib import Path
-        from analytic.io import output_folder, save_npy, staged_writes
+        from analytic.files import output_folder, save_npy, staged_writes
         with output_folder(sys.argv[1]) as out:
             with staged_writes():
                 save_npy(Path(out) / "model" / "transient.npy", np.arange(4.0))
@@ -186,7 +187,7 @@ def test_a_reader_waits_for_the_writer_then_refuses_naming_it(tmp_path):
     save_npy(folder / "model" / "transient.npy", np.zeros(2))
     writer = _holder("""
         import sys
-        from analytic.io import output_folder
+        from analytic.files import output_folder
         with output_folder(sys.argv[1]):
             print("ready", flush=True)
             sys.stdin.readline()
@@ -209,10 +210,10 @@ def test_a_writer_waits_for_readers_then_refuses(tmp_path, monkeypatch):
     folder = tmp_path / "p"
     folder.mkdir()
     save_npy(folder / "transient.npy", np.zeros(2))
-    monkeypatch.setattr(io_module, "LOCK_WAIT_SECONDS", 0.3)
+    monkeypatch.setattr(locks_module, "LOCK_WAIT_SECONDS", 0.3)
     reader = _holder("""
         import sys
-        from analytic.io import reading_folder
+        from analytic.files import reading_folder
         with reading_folder(sys.argv[1]):
             print("ready", flush=True)
             sys.stdin.readline()
@@ -249,7 +250,7 @@ _PAIR_WRITER = textwrap.dedent(r"""
     import numpy as np
     from pathlib import Path
     from analytic.errors import ResourceError
-    from analytic.io import output_folder, save_npy, staged_writes
+    from analytic.files import output_folder, save_npy, staged_writes
     folder, seconds = Path(sys.argv[1]), float(sys.argv[2])
     end, commits = time.monotonic() + seconds, 0
     while time.monotonic() < end:
@@ -301,3 +302,46 @@ def test_writing_a_folder_this_process_is_reading_is_a_bug_said_at_once(tmp_path
     assert not (tmp_path / LOCK_FILE).exists()
     with output_folder(tmp_path):          # once the reading is over
         pass
+
+
+def test_output_folder_is_locked_cleaned_and_undone_on_failure(tmp_path):
+    folder = tmp_path / "out"
+    with output_folder(folder):
+        assert (folder / LOCK_FILE).read_text() == str(os.getpid())
+        with pytest.raises(ResourceError, match=f"process {os.getpid()}"):
+            with output_folder(folder):
+                pass
+    assert not (folder / LOCK_FILE).exists()
+    killed = subprocess.Popen([sys.executable, "-c", "pass"])
+    killed.wait()
+    (folder / f"{TEMPORARY_PREFIX}{atomic_module._host_tag()}-{killed.pid}-abc123-transient.npy").write_bytes(
+        b"left by a killed run")
+    with output_folder(folder):
+        pass
+    assert list(folder.iterdir()) == []                   # the killed run's temporary is gone
+    fresh = tmp_path / "fresh"
+    with pytest.raises(RuntimeError):
+        with output_folder(fresh):
+            raise RuntimeError("failed before writing")
+    assert not fresh.exists()                             # a failed command leaves no folder behind
+
+
+def test_output_folder_refuses_files_in_the_way(tmp_path):
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(ResourceError, match="is a file"):
+        with output_folder(tmp_path / "file"):
+            pass
+    with pytest.raises(ResourceError, match="a parent of it is a file"):
+        with output_folder(tmp_path / "file" / "under"):
+            pass
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root writes into read-only folders anyway")
+def test_a_read_only_folder_is_one_line(tmp_path):
+    tmp_path.chmod(0o555)
+    try:
+        with pytest.raises(ResourceError, match="permission"):
+            with output_folder(tmp_path / "out"):
+                pass
+    finally:
+        tmp_path.chmod(0o755)

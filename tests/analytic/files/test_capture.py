@@ -1,4 +1,4 @@
-"""transient.h5 in tal's HDF5 capture layout (analytic.capture), read back by tal itself.
+"""transient.h5 in tal's HDF5 capture layout (analytic.files.capture), read back by tal itself.
 
 tal (y-tal) pins numpy < 2 and Pillow 10.3.0, so it lives in its own virtual
 environment, ``.venv-tal`` (``scripts/setup_interop.sh``); the tests that need
@@ -18,14 +18,14 @@ import h5py
 import numpy as np
 import pytest
 
-from analytic import capture as capture_module
-from analytic.capture import CaptureError, read_capture, write_capture
+from analytic.files import capture as capture_module
+from analytic.files import CaptureError, read_capture, write_capture
 from analytic.scene import Sampling, Scene, sensor_grid
 from analytic.system import forward
 from analytic.errors import DataError
 from validation.check import read_data
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 TAL_PYTHON = ROOT / ".venv-tal" / "bin" / "python"
 needs_tal = pytest.mark.skipif(not TAL_PYTHON.is_file(),
                                reason="tal's virtual environment .venv-tal is absent "
@@ -258,7 +258,7 @@ print(int(np.argmax(np.abs(np.asarray(image)))))
 
 @needs_tal
 def test_tal_backprojection_focuses_on_the_bright_pixel(tmp_path):
-    """Our path lengths are tal's d_2 + d_3 with the flag False (analytic.capture's docstring).
+    """Our path lengths are tal's d_2 + d_3 with the flag False (analytic.files.capture's docstring).
 
     A plane dark but for one pixel: tal's backprojection of our capture
     peaks on that pixel as written (flag False), and elsewhere when the

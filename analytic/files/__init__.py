@@ -1,0 +1,33 @@
+"""Files: atomic writes and folder locks, the file formats, a transient's files and metadata, tal's HDF5.
+
+A one-way corner of :mod:`analytic`: it reads the scene (and the waveform's
+name for the metadata), and nothing of the model imports it. Each module
+has one job:
+
+- :mod:`.atomic`: every file through a checked temporary, renamed into
+  place (:func:`atomic_write`, :func:`staged_writes`), abandoned
+  temporaries removed;
+- :mod:`.locks`: one writing command per folder (:func:`output_folder`),
+  readers kept out of a half-written one (:func:`reading_folder`);
+- :mod:`.formats`: one writer and one reader per format (``.npy``, JSON,
+  text, EXR, PNG);
+- :mod:`.capture`: tal's HDF5 capture layout (``transient.h5``);
+- :mod:`.transients`: the metadata schema (:func:`build_meta`) and a
+  transient's files (:func:`write_transient`, :func:`read_transient`).
+
+Names are loaded on first use (``lazy_loader``), as in every package of
+this project; ``__all__`` lists the public API.
+"""
+
+import lazy_loader
+
+__getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
+    "atomic": ["atomic_write", "staged_writes", "discard", "remove_temporaries", "TEMPORARY_PREFIX"],
+    "locks": ["output_folder", "reading_folder", "LOCK_FILE", "LOCK_WAIT_SECONDS"],
+    "formats": ["save_npy", "read_npy", "save_json", "save_text", "json_ready", "json_default", "save_exr",
+                "read_exr", "read_exr_channels", "save_png_image", "float32_problem", "PrecisionWarning"],
+    "capture": ["Capture", "CaptureError", "write_capture", "read_capture", "H_FORMATS", "GRID_FORMATS",
+                "VOLUME_FORMATS", "ACCOUNTS_FIRST_AND_LAST_BOUNCES"],
+    "transients": ["build_meta", "write_transient", "read_transient", "transient_format",
+                   "transient_in_folder", "UNITS", "TRANSIENT_FILES"],
+})

@@ -1,0 +1,52 @@
+"""validation.check.fit: a known scale and start offset recovered within standard errors that describe their
+spread; a wrong scene stays in disagreement after the fit."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from analytic.system import forward
+from check_cases import noisy_replicas, shifted, small_scene
+from validation.check import check_transient
+
+# Synthetic replicas are few (6) and independent from bin to bin: the limits' fallback to independent
+# bins, and its warning, are what tests/validation/test_compare.py tests; here they are expected.
+pytestmark = pytest.mark.filterwarnings("ignore::validation.compare.CorrelationWarning")
+
+
+def test_known_scale_and_offset_are_recovered(scene, model, rng):
+    scale, offset = 0.3, 0.012
+    data = noisy_replicas(scale * shifted(scene, offset), rng)
+    result = check_transient(scene, data, model=model)
+    assert not result.agrees and result.agrees_after_fit
+    assert result.judged_by == "replicas" and result.replicas == 6 and result.dof == 5
+    fit = result.fit
+    assert fit.stderr_from == "replicas" and fit.converged
+    assert abs(fit.scale - scale) < 3 * fit.scale_stderr
+    assert abs(fit.offset_opl - offset) < 3 * fit.offset_stderr
+    assert fit.offset_stderr < 0.05 * offset                      # the test has power
+    assert fit.scale_stderr < 0.01 * scale
+    assert "path lengths short" in result.diagnosis
+
+
+def test_the_fits_standard_errors_describe_its_spread(scene, model, rng):
+    """The jackknife standard errors that the thresholds above use are neither inflated nor too small:
+    over 100 independent data sets the fitted values scatter by about the stated error (the sample
+    standard deviation of 100 values is itself known to ~7 %; the bounds allow for that many times)."""
+    scales, offsets, scale_errors, offset_errors = [], [], [], []
+    for _ in range(100):
+        fit = check_transient(scene, noisy_replicas(0.3 * shifted(scene, 0.012), rng), model=model).fit
+        scales.append(fit.scale), offsets.append(fit.offset_opl)
+        scale_errors.append(fit.scale_stderr), offset_errors.append(fit.offset_stderr)
+    for values, errors in ((scales, scale_errors), (offsets, offset_errors)):
+        ratio = np.std(values, ddof=1) / np.mean(errors)
+        assert 0.5 < ratio < 1.5, ratio
+
+
+def test_a_wrong_scene_stays_in_disagreement_after_the_fit(scene, model, rng):
+    """Light from a sensor 5 cm away is no scale or offset of the right model's."""
+    moved = small_scene(sensors=[(0.85, 0.3, 1.0), (0.25, 0.7, 0.8)])
+    result = check_transient(scene, noisy_replicas(forward(moved), rng), model=model)
+    assert not result.agrees and not result.agrees_after_fit
+    assert "not a scale or time-offset convention" in result.diagnosis

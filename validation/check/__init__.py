@@ -1,0 +1,28 @@
+"""``check``: judge a transient from any tool against the exact model, and diagnose its conventions.
+
+One job per module:
+
+- :mod:`.readers`: the files users bring (our outputs, any ``(K, N)``
+  ``.npy``, tal's HDF5, mitransient's films), read with
+  :mod:`analytic.files`' readers and checked against the scene; our
+  render's own errors beside its output;
+- :mod:`.fit`: the best global scale and time offset (Gauss–Newton on the
+  exact model);
+- :mod:`.conventions`: a stated convention (``--expect``) and the known
+  ones a fit is diagnosed by;
+- :mod:`.verdict`: :func:`check_transient` and its :class:`CheckResult`;
+- :mod:`.report`: report.md, metrics.json and the figures.
+
+Names are loaded on first use (``lazy_loader``); ``__all__`` lists the
+public API.
+"""
+
+import lazy_loader
+
+__getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
+    "readers": ["read_data", "read_stderr", "stderr_beside", "replicas_beside"],
+    "fit": ["Fit", "ShiftedModel", "fit_scale_offset"],
+    "conventions": ["Convention", "irradiancemeter", "diagnose", "KNOWN_SCALES", "RAY_EPSILON_FLOAT32"],
+    "verdict": ["CheckResult", "check_transient", "FIT_BINS", "MAX_DATA", "MAX_RELATIVE_STDERR"],
+    "report": ["write_check_report"],
+})

@@ -1,0 +1,211 @@
+"""Conventions: what a renderer's sensor reads against the model, stated or recognised in a fitted scale and offset.
+
+A :class:`Convention` states that data read scale · y_model(start_opl +
+offset_opl) (``check --expect``): :func:`irradiancemeter` derives it for
+mitransient's irradiancemeter spheres. :func:`diagnose` names the known
+conventions (:data:`KNOWN_SCALES`, whole-bin offsets, short or long path
+lengths) that explain a fitted scale and offset.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from analytic.scene import Scene
+
+from .fit import Fit
+
+__all__ = ["Convention", "irradiancemeter", "diagnose", "KNOWN_SCALES", "RAY_EPSILON_FLOAT32"]
+
+# Relative accuracy of the model (the system matrix's default tolerance): a
+# fitted scale within it of 1, or an offset within it of a bin of 0, is none.
+_RESOLUTION = 1e-6
+
+#: Scale factors (data / model) that a known convention explains.
+KNOWN_SCALES = (
+    (1.0, "reads the fluence, as the model"),
+    (0.25, "reads 1/4 of the fluence (the mean irradiance over a sphere)"),
+    (4.0, "reads 4 times the fluence"),
+    (1.0 / math.pi, "reads 1/π of the fluence (an extra 1/π: BRDF or sensor normalisation)"),
+    (math.pi, "reads π times the fluence (a missing 1/π: BRDF or sensor normalisation)"),
+    (0.25 / math.pi, "reads radiance averaged over directions (fluence / 4π)"),
+    (4.0 * math.pi, "reads 4π times the fluence"),
+)
+
+#: Mitsuba's ``math::RayEpsilon`` in single-precision variants (1500 x 2⁻²⁴ m): an
+#: irradiancemeter starts its rays this far off its sphere (mitransient runs float32 variants).
+RAY_EPSILON_FLOAT32 = 1500 * 2.0**-24
+
+
+@dataclass(frozen=True)
+class Convention:
+    """What the data are stated to read: scale · y_model(start_opl + offset_opl).
+
+    Attributes
+    ----------
+    scale : float
+        Data / model, dimensionless (as :attr:`Fit.scale`).
+    offset_opl : float
+        Metres of path length added to the model's start_opl before the
+        comparison: positive when the data read path lengths short (as
+        :attr:`Fit.offset_opl`).
+    name : str
+        What states it, for reports.
+    """
+
+    scale: float
+    offset_opl: float
+    name: str
+
+    def __post_init__(self):
+        if not (math.isfinite(self.scale) and self.scale > 0):
+            raise ValueError(f"scale: the stated scale must be a finite number > 0, got {self.scale!r}")
+        if not math.isfinite(self.offset_opl):
+            raise ValueError(f"offset: the stated offset must be a finite number of metres, got {self.offset_opl!r}")
+
+    def as_dict(self) -> dict:
+        return {"name": self.name, "scale": self.scale, "offset_opl": self.offset_opl}
+
+
+def irradiancemeter(scene: Scene, radius: float, *, ray_epsilon: float = RAY_EPSILON_FLOAT32) -> Convention:
+    """What mitransient's irradiancemeter spheres read, against the model's point sensors.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene; each sensor is a sphere of ``radius`` centred on its
+        position (``diffuse-imaging export --format mitransient``).
+    radius : float
+        Sphere radius r, metres: 0 < r < every sensor's height, so that no
+        sphere reaches the plane (the export's bound).
+    ray_epsilon : float
+        Metres the meter moves each ray's origin off the sphere: Mitsuba's
+        ``math::RayEpsilon``, :data:`RAY_EPSILON_FLOAT32` in the
+        single-precision variants mitransient runs (1500 x 2⁻⁵³ m, i.e.
+        negligible, in double ones).
+
+    Returns
+    -------
+    Convention
+        scale 1/4, offset_opl 2r/3 + ε.
+
+    Raises
+    ------
+    ValueError
+        A radius outside (0, lowest sensor height), or a negative ``ray_epsilon``.
+
+    Notes
+    -----
+    Mitsuba's ``irradiancemeter`` (``src/sensors/irradiancemeter.cpp``)
+    starts each ray at a uniform point of its sphere, in a cosine-weighted
+    direction about the outward normal, with weight π, from the point moved
+    ε along the ray, and mitransient's ``transient_path`` bins the path
+    length from that origin. It reads the irradiance averaged over the
+    sphere, Ē = P / (4π r²), P the power the sphere intercepts.
+
+    *Scale: exactly 1/4, with no finite-sphere correction.* A Lambertian
+    element dA of the plane, of radiance B/π, sends the sphere
+    P = (B/π) dA Ω⊥, Ω⊥ the sphere's solid angle projected on dA's plane.
+    By Nusselt's analogue Ω⊥ is the area of the orthographic projection,
+    onto dA's plane, of the cap the sphere's cone cuts from the unit
+    hemisphere: a circle of radius sin α = r/d tilted by θ, which projects
+    to an ellipse of area π (r/d)² cos θ, exactly, whenever the whole cap
+    lies above dA's horizon (the sphere above the plane). d is the distance
+    from dA to the centre and θ the angle between the plane's normal and
+    the centre's direction. The same element adds (B/π) dA cos θ / d² to
+    the fluence rate Φ at the centre, which the model's point sensor reads,
+    so every element, hence every bin of every sensor, gives Ē = Φ / 4,
+    whatever r/d. (Light from an isotropic point source would give
+    Ē / Φ = 1 / (2 (1 + sqrt(1 - (r/d)²))) = (1/4)(1 + (r/d)²/4 + ...):
+    the Lambertian element's cosine is what removes the correction.)
+
+    *Offset: 2r/3 + ε.* The light from dA that the sphere intercepts fills
+    its cone with an intensity that varies across it only at first order in
+    r/d, and oddly; to first order it crosses the plane through the centre
+    perpendicular to the cone's axis uniformly within the disc of radius r,
+    at distance b from the axis, after meeting the sphere sqrt(r² - b²)
+    before that plane: path lengths short by 2r/3 on average, plus ε where
+    the meter's rays start, for every element, sensor and bin.
+
+    Neglected: O(r²/d) in the offset, the spread of the shortfall
+    (standard deviation r/sqrt(18)) within a bin of width T, a relative
+    O((r/T)²) effect, and the sphere's own shadow on the plane, O(r²)
+    relative: ~1e-6 of y for r = 1 mm, d ~ 1 m, T ~ 0.05 m.
+    """
+    lowest = float(np.min(scene.sensors[:, 2]))
+    radius = float(radius)
+    if not (math.isfinite(radius) and 0.0 < radius < lowest):
+        raise ValueError(f"radius: must lie in (0, {lowest:g}) m, below the lowest sensor's height (the spheres "
+                         f"must not reach the plane), got {radius:g}")
+    if not (math.isfinite(ray_epsilon) and ray_epsilon >= 0):
+        raise ValueError(f"ray_epsilon: must be a finite number of metres >= 0, got {ray_epsilon!r}")
+    return Convention(scale=0.25, offset_opl=2.0 * radius / 3.0 + float(ray_epsilon),
+                      name=f"irradiancemeter spheres of radius {radius:g} m")
+
+
+
+def _plus_minus(value: float, error: float, unit: str = "") -> str:
+    """'+1.55e-4 ± 0.10e-4 m': value and error to the error's precision, one exponent."""
+    if value == 0 and error == 0:
+        return f"+0 ± 0{unit}"
+    magnitude = max(abs(value), error)
+    exponent = int(math.floor(math.log10(magnitude)))
+    if -2 <= exponent <= 2:
+        exponent = 0
+    factor = 10.0**exponent
+    if error > 0:
+        # One significant digit of the error, two when it starts with 1 or 2.
+        leading = int(math.floor(math.log10(error / factor)))
+        digits = 2 if error / factor / 10.0**leading < 3 else 1
+        decimals = max(0, digits - 1 - leading)
+    else:
+        decimals = 4
+    suffix = f"e{exponent}" if exponent else ""
+    return f"{value / factor:+.{decimals}f}{suffix} ± {error / factor:.{decimals}f}{suffix}{unit}"
+
+
+def diagnose(fit: Fit, *, agrees: bool, agrees_after_fit: bool, bin_width_opl: float) -> str:
+    """One sentence naming the conventions that explain the fitted scale and offset.
+
+    Parameters
+    ----------
+    fit : Fit
+        The fitted scale and offset.
+    agrees, agrees_after_fit : bool
+        Verdicts as given and after the fit.
+    bin_width_opl : float
+        T, metres: an offset of whole bins is named as such.
+    """
+    scale_text = f"scale {_plus_minus(fit.scale, fit.scale_stderr)}".replace("scale +", "scale ")
+    offset_text = f"offset {_plus_minus(fit.offset_opl, fit.offset_stderr, ' m')}"
+    if agrees:
+        return f"agrees as given ({scale_text}, {offset_text})."
+    if not agrees_after_fit:
+        return (f"disagrees even after the best {scale_text} and {offset_text}: not a scale or "
+                f"time-offset convention (a different model, scene or a bug?).")
+    margin = max(3 * fit.scale_stderr, 0.01 * abs(fit.scale))
+    factor, meaning = min(KNOWN_SCALES, key=lambda item: abs(math.log(abs(fit.scale) / item[0])))
+    parts = []
+    # Differences under the model's own accuracy (_RESOLUTION) are no convention.
+    if abs(fit.scale - factor) <= margin and factor != 1.0:
+        parts.append(f"a sensor that {meaning}")
+    elif abs(fit.scale - 1.0) > max(3 * fit.scale_stderr, _RESOLUTION):
+        parts.append(f"y scaled by {fit.scale:.4g} (units or source intensity?)")
+    shifted = abs(fit.offset_opl) > max(3 * fit.offset_stderr, _RESOLUTION * bin_width_opl)
+    bins = fit.offset_opl / bin_width_opl
+    if shifted and round(bins) != 0 and abs(bins - round(bins)) * bin_width_opl <= max(
+            3 * fit.offset_stderr, 0.01 * bin_width_opl):
+        parts.append(f"a time axis off by {round(bins):+d} bin(s) (another start_opl convention?)")
+    elif shifted and fit.offset_opl > 0:
+        parts.append("path lengths short (paths that start on a sphere's surface, not its centre?)")
+    elif shifted:
+        parts.append("path lengths long (an extra leg or a late start?)")
+    explanation = " and ".join(parts) if parts else "within its errors of the model"
+    if factor == 0.25 and parts and parts[0].startswith("a sensor") and shifted and fit.offset_opl > 0:
+        explanation = ("a sensor that reads 1/4 of the fluence and path lengths short (an irradiancemeter? "
+                       "--expect irradiancemeter states that convention)")
+    return f"agrees after {scale_text} and {offset_text}: {explanation}."
+

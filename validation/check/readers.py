@@ -1,0 +1,314 @@
+"""Read the transients users bring to ``check`` (and ``reconstruct``), and our render's own errors beside them.
+
+One reader per format, shared with every command: the ``.npy``, EXR and tal
+HDF5 readers of :mod:`analytic.files`. On top of them this module checks a
+file against the scene it claims to come from: the time axis a file states
+(``meta.json`` beside it, the EXR header, the capture's ``t_start`` and
+``delta_t``), tal's source and sensor positions, the shape, and finite
+values; and it reads mitransient's films (a saved film tensor, or the
+frames ``mitransient.vis.save_frames`` writes). A bad file raises
+:class:`~analytic.errors.DataError` with one line.
+
+Our render's own errors are found beside its output:
+:func:`replicas_beside` (``replicas.npy``) and :func:`stderr_beside`.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+
+from analytic.errors import DataError
+from analytic.files import (CaptureError, TRANSIENT_FILES, read_capture, read_exr, read_exr_channels, read_npy,
+                            transient_format, transient_in_folder)
+from analytic.scene import Sampling, Scene
+
+__all__ = ["read_data", "read_stderr", "stderr_beside", "replicas_beside"]
+
+
+def _time_axis(name: str, start: float, width: float, sampling: Sampling) -> None:
+    """Refuse a file whose time axis differs from the scene's (float32 storage allowed)."""
+    slack = 1e-6 * sampling.bin_width_opl + 2.0**-23 * abs(sampling.start_opl)
+    if abs(start - sampling.start_opl) > slack or abs(width - sampling.bin_width_opl) > 2.0**-22 * width:
+        raise DataError(f"{name}: time axis start_opl = {start:.9g} m, bin_width_opl = {width:.9g} m "
+                        f"differs from the scene's {sampling.start_opl:.9g} m, {sampling.bin_width_opl:.9g} m; "
+                        f"check it against the scene it was rendered from")
+
+
+def _meta_time_axis(path: Path, sampling: Sampling) -> None:
+    """Check the time axis recorded in a ``meta.json`` beside our output, when there is one."""
+    meta_path = path.parent / "meta.json"
+    if not meta_path.is_file():
+        return
+    try:
+        meta = json.loads(meta_path.read_text())
+    except (OSError, json.JSONDecodeError):
+        return   # not ours: nothing to compare
+    width = meta.get("bin_width_opl")
+    if "start_opl" in meta and width is not None:
+        _time_axis(f"{path} (meta.json)", float(meta["start_opl"]), float(width), sampling)
+
+
+def _our_exr(path: Path, sampling: Sampling) -> np.ndarray:
+    data, header = read_exr(path)
+    if "start_opl" in header and "bin_width_opl" in header:
+        _time_axis(str(path), float(header["start_opl"]), float(header["bin_width_opl"]), sampling)
+    return data
+
+
+def _film_channels(name: str, array: np.ndarray) -> np.ndarray:
+    """Last axis of a mitransient film: one channel (mono variants) or three equal ones (RGB)."""
+    channels = array.shape[-1]
+    if channels == 1:
+        return array[..., 0]
+    if channels == 3:
+        spread = np.max(np.abs(array - array.mean(axis=-1, keepdims=True)))
+        if spread > 1e-5 * max(float(np.max(np.abs(array))), np.finfo(float).tiny):
+            raise DataError(f"{name}: the three colour channels differ; the scene is grey, "
+                            f"render it in a mono variant (llvm_ad_mono)")
+        return array.mean(axis=-1)
+    raise DataError(f"{name}: {channels} channels in the last axis; expected 1 (mono) or 3 (RGB) "
+                    f"as mitransient's developed film holds")
+
+
+def _film_tensor(name: str, array: np.ndarray, sensors: int) -> np.ndarray:
+    """mitransient's developed ``transient_hdr_film`` tensor(s) -> ``(K, N)``.
+
+    ``(height, width, bins, channels)`` for one sensor, or ``(K, height,
+    width, bins, channels)`` for the K sensors stacked; each film is 1 x 1
+    (an irradiancemeter's).
+    """
+    if array.ndim == 4:
+        array = array[None]
+    if array.shape[1:3] != (1, 1):
+        raise DataError(f"{name}: film of {array.shape[1]} x {array.shape[2]} pixels; one sensor is one "
+                        f"1 x 1 irradiancemeter film (shape (1, 1, bins, channels))")
+    if array.shape[0] != sensors:
+        raise DataError(f"{name}: {array.shape[0]} film(s) for the scene's {sensors} sensors; stack one "
+                        f"film per sensor, in the scene's order, as (K, 1, 1, bins, channels)")
+    return _film_channels(name, array[:, 0, 0])
+
+
+_FRAME = re.compile(r"^(\d+)\.exr$")
+
+
+def _frames(path: Path, frames: list[Path], sensors: int) -> np.ndarray:
+    """mitransient's ``vis.save_frames`` folder (``000.exr`` ... one image per bin) -> ``(1, N)``."""
+    if sensors != 1:
+        raise DataError(f"{path}: a folder of frames holds one sensor, the scene has {sensors}; "
+                        f"save the films with numpy instead (see validation.check.read_data)")
+    values = []
+    for frame in frames:
+        channels, _ = read_exr_channels(frame)
+        name = next((n for n in ("Y", "RGB") if n in channels), None)
+        if name is None:
+            raise DataError(f"{frame}: no Y or RGB channel (channels {sorted(channels)})")
+        image = channels[name]
+        image = image.reshape(image.shape[:2] + (-1,))
+        if image.shape[:2] != (1, 1):
+            raise DataError(f"{frame}: a {image.shape[0]} x {image.shape[1]} frame; one sensor is a "
+                            f"1 x 1 irradiancemeter film")
+        values.append(_film_channels(str(frame), image[0, 0][None])[0])
+    return np.array(values, dtype=np.float64)[None, :]
+
+
+def _capture(path: Path, scene: Scene) -> np.ndarray:
+    try:
+        capture = read_capture(path)
+    except CaptureError as error:
+        raise DataError(str(error)) from None
+    _time_axis(str(path), capture.start_opl, capture.bin_width_opl, scene.sampling)
+    tolerance = 1e-6 + 2.0**-22 * float(np.max(np.abs(scene.sensors)))
+    if capture.source is not None and np.max(np.abs(capture.source - scene.source)) > tolerance:
+        raise DataError(f"{path}: laser_xyz {capture.source.tolist()} is not the scene's source "
+                        f"{scene.source.tolist()}; check it against the scene it was rendered from")
+    transient = capture.transient
+    if capture.sensors is None or transient.shape[0] != scene.sensor_count:
+        return transient   # the shape check in read_data reports a count mismatch
+    # Sensors by position: a T_Sx_Sy grid may be flattened in another order than the scene's. Sensors
+    # that share a point are interchangeable: the k-th of the scene's there takes the k-th of the file's.
+    order = []
+    for k, position in enumerate(scene.sensors):
+        near = np.max(np.abs(capture.sensors - position), axis=1) <= tolerance
+        free = [j for j in np.flatnonzero(near) if j not in order]
+        if not free:
+            held = (f"only {int(near.sum())} sensor(s) of sensor_grid_xyz at the point of the scene's sensor {k} "
+                    f"{position.tolist()}, where the scene places "
+                    f"{int(np.sum(np.max(np.abs(scene.sensors - position), axis=1) <= tolerance))}" if near.any()
+                    else f"no sensor of sensor_grid_xyz at the scene's sensor {k} {position.tolist()}")
+            raise DataError(f"{path}: {held}; check it against the scene it was rendered from")
+        order.append(int(free[0]))
+    return transient[order]
+
+
+def read_data(path: str | Path, scene: Scene) -> np.ndarray:
+    """Read one transient of ``scene`` from any of the formats users produce.
+
+    Parameters
+    ----------
+    path : str or Path
+        One of:
+
+        - our output: ``transient.npy`` or ``transient.exr`` (channel Y,
+          width = bins, height = sensors), or the folder holding them; the
+          time axis in ``meta.json`` or the EXR header is checked;
+        - a ``(K, N)`` float ``.npy`` from any tool (sensors in the scene's
+          order, bins on the scene's time axis);
+        - tal's HDF5 capture (``.h5`` / ``.hdf5``, H in T_Si or T_Sx_Sy
+          layout): time axis and source checked, sensors matched to the
+          scene's by position;
+        - mitransient's developed film, as its users save it:
+          ``np.save(f, np.array(mi.render(scene, sensor=k)[1]))`` gives
+          ``(1, 1, N, C)`` for one sensor; the K sensors of an exported
+          scene stacked in the scene's order give ``(K, 1, 1, N, C)``;
+          C = 1 (mono variants) or 3 equal channels (RGB). Or, for a
+          one-sensor scene, the folder of ``000.exr``, ``001.exr``, ...
+          that ``mitransient.vis.save_frames`` writes. mitransient's files
+          carry no time axis: the film's ``start_opl`` and
+          ``bin_width_opl`` must be the scene's (the exported scene's are).
+    scene : Scene
+        The scene the data were rendered from.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(K, N)`` float64 y_k[n], sensors in the scene's order.
+
+    Raises
+    ------
+    DataError
+        No such file, unknown format, wrong shape, a time axis, source or sensor
+        positions other than the scene's, NaN or infinity.
+    """
+    path = Path(path)
+    sensors, bins = scene.sensor_count, scene.sampling.count
+    if not path.exists():
+        raise DataError(f"{path}: no such file or folder")
+    name = str(path)
+    kind = transient_format(path)
+    if path.is_dir():
+        ours = transient_in_folder(path)
+        if ours is not None:
+            return read_data(ours, scene)
+        frames = sorted((p for p in path.iterdir() if _FRAME.match(p.name)),
+                        key=lambda p: int(_FRAME.match(p.name).group(1)))
+        if not frames:
+            raise DataError(f"{path}: a folder with neither {' nor '.join(TRANSIENT_FILES)} nor 000.exr "
+                            f"frames; give the data file itself")
+        data = _frames(path, frames, sensors)
+    elif kind == "capture":
+        data = _capture(path, scene)
+    elif kind == "npy":
+        array = read_npy(path)
+        if array.ndim in (4, 5):
+            data = _film_tensor(name, array, sensors)
+        else:
+            _meta_time_axis(path, scene.sampling)
+            data = array
+    elif kind == "exr":
+        data = _our_exr(path, scene.sampling)
+        _meta_time_axis(path, scene.sampling)
+    else:
+        raise DataError(f"{path}: unknown format (expected .npy, .exr, .h5/.hdf5 or a folder of them)")
+    if data.shape != (sensors, bins):
+        if data.shape == (bins, sensors):
+            hint = "it looks transposed: save (sensors, bins)"
+        elif data.ndim == 3 and data.shape[1:] == (sensors, bins):
+            hint = (f"it looks like a stack of {data.shape[0]} replicas (a render's replicas.npy): give the "
+                    f"render's folder, or one file per replica")
+        else:
+            hint = f"save a ({sensors}, {bins}) array of the scene's sensors and bins"
+        raise DataError(f"{path}: shape {data.shape} does not match the scene's {sensors} sensors x "
+                        f"{bins} bins; {hint}")
+    if not np.all(np.isfinite(data)):
+        bad = int(np.sum(~np.isfinite(data)))
+        raise DataError(f"{path}: {bad} value(s) are NaN or infinite; re-render or drop the file")
+    return data
+
+
+def _our_render_folder(path: Path) -> Path | None:
+    """The folder of our render's output that ``path`` names (itself or its transient file), else None."""
+    if path.is_dir():
+        return path
+    return path.parent if path.name in TRANSIENT_FILES else None
+
+
+def stderr_beside(path: str | Path, scene: Scene) -> tuple[np.ndarray, int | None] | None:
+    """Our render's own standard error for its output (folder, ``transient.npy`` or ``.exr``).
+
+    Returns
+    -------
+    tuple or None
+        (``stderr.npy`` beside the data, the render's ``dof`` from
+        ``meta.json``, None when absent), or None when ``path`` is not one of
+        our render's outputs or has no ``stderr.npy``.
+    """
+    folder = _our_render_folder(Path(path))
+    if folder is None or not (folder / "stderr.npy").is_file():
+        return None
+    dof = None
+    try:
+        dof = json.loads((folder / "meta.json").read_text(encoding="utf-8")).get("dof")
+    except (OSError, ValueError, AttributeError):
+        pass
+    return read_stderr(folder / "stderr.npy", scene), dof if isinstance(dof, int) and dof >= 1 else None
+
+
+def replicas_beside(path: str | Path, scene: Scene, data: np.ndarray) -> np.ndarray | None:
+    """Our render's replicas for its output (folder, ``transient.npy`` or ``.exr``), when it wrote them.
+
+    Parameters
+    ----------
+    path : str or Path
+        What the user named as data.
+    scene : Scene
+        The scene.
+    data : numpy.ndarray
+        ``(K, N)`` the transient read from ``path``: the replicas must
+        average to it (float32 rounding allowed for the EXR).
+
+    Returns
+    -------
+    numpy.ndarray or None
+        ``(R, K, N)`` the ``replicas.npy`` beside the data (R >= 3: each a
+        complete estimate of y), or None when ``path`` is not our render's
+        output, there is no ``replicas.npy``, or it holds fewer than 3
+        (then ``stderr.npy`` serves).
+
+    Raises
+    ------
+    DataError
+        ``replicas.npy`` unreadable, of the wrong shape, not finite, or not
+        averaging to the transient beside it.
+    """
+    folder = _our_render_folder(Path(path))
+    if folder is None or not (folder / "replicas.npy").is_file():
+        return None
+    name = folder / "replicas.npy"
+    replicas = read_npy(name)
+    expected = (scene.sensor_count, scene.sampling.count)
+    if replicas.ndim != 3 or replicas.shape[1:] != expected:
+        raise DataError(f"{name}: shape {replicas.shape}, expected (R, {expected[0]}, {expected[1]}) replicas "
+                        f"of the scene's sensors x bins; re-render or remove it")
+    if not np.all(np.isfinite(replicas)):
+        raise DataError(f"{name}: NaN or infinite values; re-render or remove it")
+    if replicas.shape[0] < 3:
+        return None
+    mean = replicas.mean(axis=0)
+    if np.any(np.abs(mean - data) > 2.0**-22 * np.abs(data) + 1e-12 * float(np.max(np.abs(data)))):
+        raise DataError(f"{name}: the replicas do not average to the transient beside them (files of different "
+                        f"renders?); re-render, or remove replicas.npy to judge by stderr.npy")
+    return replicas
+
+
+def read_stderr(path: str | Path, scene: Scene) -> np.ndarray:
+    """Read a per-bin standard error (any :func:`read_data` format); it must be >= 0."""
+    error = read_data(path, scene)
+    if np.any(error < 0):
+        raise DataError(f"{path}: {int(np.sum(error < 0))} negative standard error(s); "
+                        f"give the standard error of each bin (>= 0)")
+    return error
+

@@ -27,6 +27,7 @@ import hashlib
 import os
 import re
 import socket
+import stat
 import tempfile
 from pathlib import Path
 from typing import Callable, Iterator
@@ -76,13 +77,18 @@ def _resource_failure(error: Exception, path: Path) -> ResourceError | None:
     Writers report a full disk in their own ways: ``OSError`` with an errno
     (h5py, Pillow), ``OSError`` without one for a short write (NumPy's "N
     requested and M written"), ``RuntimeError`` quoting the C library's
-    message (OpenEXR).
+    message (OpenEXR, h5py's flush), possibly as the context of a later one.
     """
     if isinstance(error, OSError) and error.errno is not None:
         return resource_error(error, path, "write")
-    text = str(error)
+    # h5py's close after a failed flush raises a second error that names no cause: the first one,
+    # which names errno 28, is in the chain
+    chain, link = [], error
+    while link is not None and len(chain) < 8:
+        chain.append(link)
+        link = link.__cause__ or link.__context__
     for code in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EACCES, errno.EIO):
-        if os.strerror(code) in text:
+        if any(os.strerror(code) in str(raised) for raised in chain):
             return resource_error(OSError(code, os.strerror(code)), path, "write")
     if isinstance(error, OSError):
         return ResourceError(f"{path}: cannot write ({error}): a short write, is the disk full?; "
@@ -293,19 +299,48 @@ def staged_writes() -> Iterator[None]:
     token = _staged.set([])
     try:
         yield
-        staged = _staged.get()
+    except BaseException:
+        _discard_temporaries(_staged.get())
         _staged.reset(token)
-        token = None
+        raise
+    staged = _staged.get()
+    _staged.reset(token)
+    done = 0
+    try:
+        # every target is checked before the first rename: one in the way would otherwise be
+        # found only by its own rename, after the files before it had been replaced
+        for _, path in staged:
+            _check_target(path)
         for temporary, path in staged:
+            done += 1            # _rename removes its own temporary when it fails
             if temporary is None:
                 _remove_final(path)
             else:
                 _rename(temporary, path)
     except BaseException:
-        if token is not None:
-            for temporary, _ in _staged.get():
-                if temporary is not None:
-                    temporary.unlink(missing_ok=True)
-            _staged.reset(token)
+        _discard_temporaries(staged[done:])
         raise
+
+
+def _discard_temporaries(staged) -> None:
+    """Remove the temporaries of staged writes that will not be renamed."""
+    for temporary, _ in staged:
+        if temporary is not None:
+            temporary.unlink(missing_ok=True)
+
+
+def _check_target(path: Path) -> None:
+    """Refuse a final name that a rename cannot replace: a folder, a device, a FIFO, a socket."""
+    try:
+        mode = os.lstat(path).st_mode
+    except FileNotFoundError:
+        return
+    except OSError as error:
+        raise resource_error(error, path, "write") from None
+    if stat.S_ISDIR(mode):
+        raise ResourceError(f"{path}: a folder is in the way of this output file; move it away or "
+                            f"choose another --out")
+    if not (stat.S_ISREG(mode) or stat.S_ISLNK(mode)):
+        raise ResourceError(f"{path}: something that is not a file is in the way of this output file; "
+                            f"move it away or choose another --out")
 

@@ -156,6 +156,12 @@ def _discard_pending(descriptor: int) -> None:
 
 def _run_guarded(run) -> int:
     """Run ``run()`` with guarded standard streams; its status, or 2 when stdout could not be written."""
+    # a descriptor closed at start-up (``>&-``) leaves the stream None: what the user closed they do not
+    # want to read, so it is discarded and the command still ends with its own status
+    if sys.stdout is None:
+        sys.stdout = open(os.devnull, "w", encoding="utf-8")
+    if sys.stderr is None:
+        sys.stderr = open(os.devnull, "w", encoding="utf-8")
     for stream in (sys.stdout, sys.stderr):
         _escape_unencodable(stream)
     stdout, stderr = sys.stdout, sys.stderr

@@ -13,7 +13,9 @@ mathtext, with characters the font lacks as U+FFFD.
 
 from __future__ import annotations
 
+import contextlib
 import functools
+import logging
 from pathlib import Path
 
 from analytic.files import atomic_write
@@ -25,6 +27,24 @@ __all__ = ["new_figure", "save_figure", "plain_text", "suptitle", "columns_for_l
 NANOSECONDS_PER_METRE = 1e9 / 299_792_458.0
 #: y's units for a source intensity in W/sr (docs/design.md section 1; the README explains them).
 Y_LABEL = "y_k[n] (W m⁻¹)"
+
+
+@contextlib.contextmanager
+def _quiet_first_import():
+    """matplotlib's first import without its notices about an unusable config folder.
+
+    With ``HOME`` or ``MPLCONFIGDIR`` unwritable it falls back to a temporary
+    folder (which works) and logs two lines through a logger with no handler,
+    so logging's last resort prints them on stderr: a page of advice about a
+    cache that changes no number. Only those imports are quietened.
+    """
+    logger = logging.getLogger("matplotlib")
+    level = logger.level
+    logger.setLevel(logging.ERROR)
+    try:
+        yield
+    finally:
+        logger.setLevel(level)
 
 
 def new_figure(width: float, height: float, layout: str | None = "constrained", dpi: int = 110):
@@ -39,8 +59,10 @@ def new_figure(width: float, height: float, layout: str | None = "constrained", 
     dpi : int
         Dots per inch of the PNG :func:`save_figure` writes.
     """
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+    with _quiet_first_import():
+        from matplotlib import font_manager  # noqa: F401 (the import that looks for the cache folder)
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
 
     figure = Figure(figsize=(width, height), layout=layout, dpi=dpi)
     FigureCanvasAgg(figure)
@@ -55,7 +77,8 @@ def save_figure(figure, path: str | Path) -> Path:
 @functools.lru_cache(maxsize=1)
 def _font_characters() -> frozenset:
     """Code points the default font can draw."""
-    from matplotlib import font_manager
+    with _quiet_first_import():
+        from matplotlib import font_manager
 
     font = font_manager.get_font(font_manager.findfont(font_manager.FontProperties()))
     return frozenset(font.get_charmap())

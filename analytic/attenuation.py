@@ -1,10 +1,10 @@
-"""Attenuation a_k(x) of DESIGN.md section 2, written once for NumPy, Numba and Dr.Jit.
+"""Attenuation a_k(x) of docs/design.md section 2, written once for NumPy, Numba and Dr.Jit.
 
 | name | a_k(x) |
 | lambertian | cos θ_s cos θ_k / (π d_s² d_k²) — physical transport, what Mitsuba renders |
 | paper | cos θ_s / (d_s² d_k²) — the paper's eq. (1), without Lambert's outgoing cos θ_k and the BRDF's 1/π |
 
-The two differ pointwise by exactly π / cos θ_k (DESIGN.md section 3.2).
+The two differ pointwise by exactly π / cos θ_k (docs/design.md section 3.2).
 With h the heights of the two ends above the rectangle, cos θ = h / d:
 :func:`attenuation_formula` writes a_k from the heights and squared
 distances with the array module's square root as its one argument, so the

@@ -21,7 +21,7 @@ its edges from its corner, heights along its normal.
 
 Pixel p = r M + c (image row r from the top) covers the u-fraction
 [c/M, (c+1)/M) and the v-fraction [1 - (r+1)/M, 1 - r/M): for the plane,
-x ∈ [cΔ, (c+1)Δ), y ∈ [L - (r+1)Δ, L - rΔ) (DESIGN.md section 1).
+x ∈ [cΔ, (c+1)Δ), y ∈ [L - (r+1)Δ, L - rΔ) (docs/design.md section 1).
 """
 
 from __future__ import annotations

@@ -20,7 +20,7 @@ near t_min and for planes far away.
 
 The map (τ, φ) -> x(τ, φ) = c + a cos φ e + b sin φ e⊥ covers the plane
 outside x* once; its Jacobian J(τ, φ) = |∂x/∂τ × ∂x/∂φ| equals
-|∂x/∂φ| / |∇d| (the coarea factor of DESIGN.md section 3.1), and stays finite
+|∂x/∂φ| / |∇d| (the coarea factor of docs/design.md section 3.1), and stays finite
 as τ -> t_min. Area integrals become ∫ dτ ∫ dφ (...) J.
 
 Everything here is scalar and compiled with Numba; a source-sensor pair is a
@@ -31,7 +31,7 @@ Heights
 -------
 The attenuation under a source (or sensor) at height h is a peak of width h:
 ∫ h / (r² + h²)^{3/2} dx = 2π however small h is, so as h -> 0 the response
-tends to a finite limit (2 ρ cos θ_k / d_k² from the foot, DESIGN.md section
+tends to a finite limit (2 ρ cos θ_k / d_k² from the foot, docs/design.md section
 2). Resolving the peak needs h to span many roundings of the plane
 coordinates and path lengths, which are as large as the scene:
 :data:`analytic.scene.MIN_HEIGHT_FRACTION` of the scene's extent is the

@@ -1,7 +1,7 @@
-"""The scene: frozen, validated dataclasses (DESIGN.md sections 1 and 5).
+"""The scene: frozen, validated dataclasses (docs/design.md sections 1 and 5).
 
 Every length is in metres and every time is an optical path length in metres
-(c = 1), as DESIGN.md section 1 fixes. A value is checked where the
+(c = 1), as docs/design.md section 1 fixes. A value is checked where the
 dataclass is built, so a bad one fails with a :class:`SceneError` naming its
 scene-file key before anything is computed or written; sizes that would not
 fit in memory fail with a :class:`ResourceError` before anything is
@@ -232,7 +232,7 @@ class Sampling:
     [start_opl + n bin_width_opl, start_opl + (n + 1) bin_width_opl).
 
     The scene file's keys are ``[sampling] period`` (T), ``start`` (t0) and
-    ``count`` (N), as DESIGN.md section 5 fixes; in code and in every output
+    ``count`` (N), as docs/design.md section 5 fixes; in code and in every output
     file the first two are named as mitransient names them.
 
     Parameters
@@ -485,7 +485,7 @@ def default_scene(**changes) -> Scene:
     with one empty bin at each end; physical (Lambertian) attenuation;
     Gaussian noise σ = 0.1 (the paper's).
 
-    Why 10⁴ W/sr: at 1 W/sr (DESIGN.md's unit) the signal peaks at 0.04 W/m
+    Why 10⁴ W/sr: at 1 W/sr (docs/design.md's unit) the signal peaks at 0.04 W/m
     against σ = 0.1 and no reconstruction beats a flat grey image; at 10⁴ W/sr
     it peaks at 409 W/m and a data-driven λ recovers the image about 5 dB better
     than the flat image (the README's table).

@@ -1,4 +1,4 @@
-"""The exact, sparse, time-binned system matrix A of DESIGN.md section 2.
+"""The exact, sparse, time-binned system matrix A of docs/design.md section 2.
 
     A[(k, n), p] = ∫_{pixel p} a_k(x) κ_n(d_k(x)) dx,   row k N + n, column r M + c.
 
@@ -306,7 +306,7 @@ def system_matrix(scene: Scene, *, tolerance: float | None = None, memory_limit:
     Notes
     -----
     y = A f with f = ``image.ravel()`` gives y_k[n] = ∫ (g_k * s)(t) dt over
-    bin n, with g_k(t) = ∫ f a_k δ(t - d_k) dx (DESIGN.md section 2).
+    bin n, with g_k(t) = ∫ f a_k δ(t - d_k) dx (docs/design.md section 2).
     """
     tolerance = check_tolerance(scene.tolerance if tolerance is None else tolerance)
     rectangle, pairs = scene.geometry()

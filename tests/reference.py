@@ -1,7 +1,7 @@
 """Independent high-precision references for the analytic model's tests.
 
 Nothing here shares code with ``analytic``: distances and attenuation are
-written out again, pixel boxes follow DESIGN.md section 1 directly,
+written out again, pixel boxes follow docs/design.md section 1 directly,
 isochrone crossings are found by bracketing root search on d along each
 line (not from the ellipse formulas), integrals use SciPy's adaptive
 QUADPACK instead of the model's Gauss ladders, and the waveforms' S(u) comes
@@ -78,7 +78,7 @@ def _butterworth_cumulative(order, cutoff, duration):
 
 
 def cumulative(illumination, period):
-    """S(u) of a scene's ``[illumination]`` (defaults resolved from ``period`` as DESIGN.md states), and its duration.
+    """S(u) of a scene's ``[illumination]`` (defaults resolved from ``period`` as docs/design.md states), and its duration.
 
     Returns
     -------
@@ -162,7 +162,7 @@ def _quiet(function):
 
 
 @_quiet
-def pixel_entry(box, source, sensor, kernel, breakpoints, kind="lambertian", epsrel=1e-10):
+def pixel_entry(box, source, sensor, kernel, breakpoints, kind="lambertian", epsrel=1e-10, weight=None):
     """∫_box a(x) kernel(d(x)) dx by nested adaptive quadrature.
 
     Parameters
@@ -175,6 +175,8 @@ def pixel_entry(box, source, sensor, kernel, breakpoints, kind="lambertian", eps
     breakpoints : sequence of float
         Path lengths where κ is not smooth.
     kind : {"lambertian", "paper"}
+    weight : callable, optional
+        ``weight(x, y)`` in place of the attenuation of ``kind`` (e.g. with a relay wall's cosines).
     """
     x0, x1, y0, y1 = box
 
@@ -188,7 +190,8 @@ def pixel_entry(box, source, sensor, kernel, breakpoints, kind="lambertian", eps
             if hi <= lo:
                 continue
             value, _ = integrate.quad(
-                lambda y: attenuation(x, y, source, sensor, kind) * kernel(distance_sum(x, y, source, sensor)),
+                lambda y: (attenuation(x, y, source, sensor, kind) if weight is None else weight(x, y))
+                * kernel(distance_sum(x, y, source, sensor)),
                 lo, hi, epsabs=0.0, epsrel=epsrel, limit=200)
             total += value
         return total

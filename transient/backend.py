@@ -273,7 +273,7 @@ _plugins_variant: str | None = None
 #: by :func:`select_variant`: each defines its class against the active
 #: variant's Mitsuba base classes and registers it at import, as Mitsuba's own
 #: Python integrators do.
-PLUGIN_MODULES = ("transient.sensor", "transient.plane", "transient.path")
+PLUGIN_MODULES = ("transient.sensor", "transient.plane", "transient.path", "transient.nlos")
 
 
 def _register_plugins() -> None:

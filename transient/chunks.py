@@ -40,7 +40,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["DEFAULT_REPLICAS", "MAX_REPLICA_SIZE", "MAX_SAMPLES", "ReplicaLayout", "Chunk", "ChunkPlan",
+__all__ = ["checked_chunk", "DEFAULT_REPLICAS", "MAX_REPLICA_SIZE", "MAX_SAMPLES", "ReplicaLayout", "Chunk", "ChunkPlan",
            "ReplicaAccumulator", "render_memory_bytes"]
 
 #: Replicas of a render unless asked otherwise. More replicas give a steadier
@@ -362,3 +362,21 @@ class ReplicaAccumulator:
         accumulator._replica_means[:completed] = arrays["replica_means"]
         accumulator._folded = _Folded(done, completed, arrays["partial"])
         return accumulator
+
+
+def checked_chunk(layout: ReplicaLayout, seed: int, first: int, count: int) -> tuple[int, int]:
+    """A chunk's (first, count) as ints, checked against its render: what every integrator's chunk takes.
+
+    Raises
+    ------
+    ValueError
+        A seed outside [0, 2^32), or a sample range that is empty, longer than 2^31 or outside the
+        render's R n samples.
+    """
+    if not 0 <= int(seed) < 2**32:
+        raise ValueError(f"seed must be in [0, 2^32), got {seed}")
+    first, count = int(first), int(count)
+    if not (1 <= count <= 2**31 and 0 <= first and first + count <= layout.samples):
+        raise ValueError(f"sample range [{first}, {first + count}) must be non-empty, at most 2^31 long "
+                         f"and inside the render's {layout.samples} samples")
+    return first, count

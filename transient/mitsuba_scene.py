@@ -6,7 +6,7 @@
   ``diffuse`` BSDF reads the reflectance image through a ``bitmap`` texture
   with nearest-neighbour lookup and no colour conversion (``raw``, float32
   data). A bitmap's row 0 lies at v = 0, the rectangle's -y edge, while the
-  image's row 0 is the top of the plane (y = L, DESIGN.md section 1), so the
+  image's row 0 is the top of the plane (y = L, docs/design.md section 1), so the
   image is flipped top to bottom.
 - :func:`corner_scene_dict`: floor and wall meeting at a corner, for the
   multi-bounce integrator ``transient_opl_path``.
@@ -26,6 +26,7 @@ import numpy as np
 from analytic.scene import Sampling, Scene
 from analytic.waveforms import make_waveform
 
+from .constants import RAY_EPSILON
 from .intensity import emitter_intensity
 
 __all__ = ["plane_to_world", "scene_dict", "load_scene", "corner_scene_dict", "wall_to_world",
@@ -36,11 +37,6 @@ __all__ = ["plane_to_world", "scene_dict", "load_scene", "corner_scene_dict", "w
 #: reading differs from the point value at its centre by a relative
 #: (4/3) r / d to first order (1.3e-4 at d = 1 m).
 METER_RADIUS = 1e-4
-
-#: Mitsuba's ``math::RayEpsilon`` for single-precision variants
-#: (``Epsilon<float> * 1500``, Epsilon = 2^-24): the irradiancemeter starts
-#: its rays this far off its shape. mitransient runs on float32 variants.
-RAY_EPSILON = 1500 * 2.0**-24
 
 _FILM = {"type": "hdrfilm", "width": 1, "height": 1, "pixel_format": "luminance"}
 
@@ -261,3 +257,60 @@ def mitransient_planes(scene: Scene | None = None, *, albedo: float | None = Non
     bsdf = {"type": "diffuse", "reflectance": float(albedo)}
     return [{"to_world": plane_to_world(size), "bsdf": dict(bsdf)},
             {"to_world": wall_to_world(size), "bsdf": dict(bsdf)}]
+
+
+def hidden_to_world(scene) -> "mi.ScalarTransform4d":
+    """Double-precision transform of the local rectangle [-1, 1]² onto a relay-wall scene's hidden rectangle.
+
+    Local x runs along u, local y along v, local +z (Mitsuba's normal) along u x v, the lit face.
+    """
+    rectangle = scene.rectangle()
+    centre = rectangle.corner + 0.5 * (rectangle.u + rectangle.v)
+    matrix = np.eye(4)
+    matrix[:3, 0], matrix[:3, 1], matrix[:3, 2], matrix[:3, 3] = (0.5 * rectangle.u, 0.5 * rectangle.v,
+                                                                   rectangle.normal, centre)
+    return mi.ScalarTransform4d(matrix)
+
+
+def relay_wall_scene_dict(scene, **estimator) -> dict:
+    """The Mitsuba scene dictionary of a relay-wall capture, for ``transient_opl_nlos``.
+
+    Parameters
+    ----------
+    scene : analytic.relay_wall.RelayWallScene
+        The wall, the hidden rectangle and its image, the laser, the sensor, the scan, sampling and
+        illumination.
+    **estimator
+        Further ``transient_opl_nlos`` parameters.
+
+    Returns
+    -------
+    dict
+        For ``mitsuba.load_dict``: integrator ``transient_opl_nlos`` (every geometric value in float64),
+        shape ``hidden`` (the image as a float32 texture) and one ``nlos_sensor`` stand-in sensor (the
+        integrator reads the scan itself; Mitsuba needs a sensor to load a scene).
+
+    Notes
+    -----
+    Every scene field is rendered except ``tolerance`` (the model's) and ``noise`` (added to the
+    model's y); the laser's intensity multiplies the per-unit-intensity estimate at the end
+    (:func:`transient.render.render`).
+    """
+    from .nlos import PLUGIN_NAME as INTEGRATOR
+
+    scan = scene.scan
+    integrator = {"type": INTEGRATOR, **_sampling_entries(scene.sampling), **_illumination_entries(scene),
+                  "hidden_to_world": hidden_to_world(scene), "wall_size_x": float(scene.wall_size[0]),
+                  "wall_size_y": float(scene.wall_size[1]), "wall_reflectance": float(scene.wall_reflectance),
+                  "laser_position": [float(v) for v in scene.laser_position],
+                  "sensor_position": [float(v) for v in scene.sensor_position], "scan_type": scan.type,
+                  "grid_width": int(scan.grid[0]), "grid_height": int(scan.grid[1]),
+                  "account_first_and_last_bounces": bool(scan.account_first_and_last_bounces), **estimator}
+    if scan.type == "single" and scan.laser_point is not None:
+        integrator["laser_point"] = [float(v) for v in scan.laser_point]
+    if scan.type == "exhaustive" and scan.laser_grid is not None:
+        integrator["laser_grid_width"], integrator["laser_grid_height"] = (int(g) for g in scan.laser_grid)
+    return {"type": "scene", "integrator": integrator,
+            "hidden": {"type": "rectangle", "id": "hidden", "to_world": hidden_to_world(scene),
+                       "bsdf": _bitmap_bsdf(scene.reflectance)},
+            **_sensors([scene.sensor_position])}

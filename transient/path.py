@@ -38,7 +38,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .chunks import ReplicaLayout
+from .chunks import ReplicaLayout, checked_chunk
 from .common import (deposit, is_diffuse, opaque_f64, opaque_u32, reduce_mode, replica_of, sample_stream,
                      time_axis_and_waveform)
 
@@ -137,12 +137,7 @@ class TransientPathIntegrator(mi.SamplingIntegrator):
         returns ``(replicas touched, K, N)`` float64, each replica's Σ c over
         the chunk's samples, c_k[n] one sample's contribution to y_k[n].
         """
-        if not 0 <= int(seed) < 2**32:
-            raise ValueError(f"seed must be in [0, 2^32), got {seed}")
-        first, count = int(first), int(count)
-        if not (1 <= count <= 2**31 and 0 <= first and first + count <= layout.samples):
-            raise ValueError(f"sample range [{first}, {first + count}) must be non-empty, at most 2^31 long "
-                             f"and inside the render's {layout.samples} samples")
+        first, count = checked_chunk(layout, seed, first, count)
         sensors = self._check_scene(scene)
         size = layout.size
         first_replica = first // size

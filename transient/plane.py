@@ -59,7 +59,7 @@ import numpy as np
 from analytic.attenuation import ATTENUATIONS, attenuation_code
 
 from . import spherical_rectangle
-from .chunks import ReplicaLayout
+from .chunks import ReplicaLayout, checked_chunk
 from .intensity import emitter_intensity
 from .common import attenuation, deposit, height_over_cube, is_diffuse, jittered_point, opaque_f64, \
     opaque_u32, reduce_mode, replica_of, sample_stream, time_axis_and_waveform
@@ -467,12 +467,7 @@ class TransientPlaneIntegrator(mi.SamplingIntegrator):
         size, technique blocks) reaches the kernel as an opaque value, so one
         compiled kernel serves every chunk of every render of the scene.
         """
-        if not 0 <= int(seed) < 2**32:
-            raise ValueError(f"seed must be in [0, 2^32), got {seed}")
-        first, count = int(first), int(count)
-        if not (1 <= count <= 2**31 and 0 <= first and first + count <= layout.samples):
-            raise ValueError(f"sample range [{first}, {first + count}) must be non-empty, at most 2^31 long "
-                             f"and inside the render's {layout.samples} samples")
+        first, count = checked_chunk(layout, seed, first, count)
         plane, _, sensors = self._scene_parts(scene)
         plan = self.techniques(sensors)
         size = layout.size

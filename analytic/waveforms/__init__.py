@@ -13,47 +13,17 @@ quadrature of the system matrix splits its integrals there.
 
 One module per waveform (:mod:`.impulse`, :mod:`.square`,
 :mod:`.butterworth`), each with ``PARAMETERS`` (its scene keys) and
-``build(illumination, period) -> Waveform``; :data:`BUILDERS` maps the
-scene's ``waveform`` name to it. A new waveform is one such module and
+``build(illumination, period) -> Waveform``; :data:`analytic.waveforms.builders.BUILDERS`
+maps the scene's ``waveform`` name to it. A new waveform is one such module and
 its tests.
 """
 
-from __future__ import annotations
+import lazy_loader
 
-from . import butterworth, impulse, square
-from .butterworth import CUTOFF_PERIOD_RANGE, CUTOFF_RANGE, MAX_ORDER, MIN_CUTOFF_DURATION
-from .pieces import (EXPONENTIALS, POLYNOMIAL, WaveformTerms, cumulative_scalar, kernel_scalar, make_terms,
-                     piece_of, piece_value)
-from .waveform import Waveform
-
-__all__ = ["Waveform", "WaveformTerms", "make_waveform", "make_terms", "cumulative_scalar", "kernel_scalar",
-           "piece_of", "piece_value", "POLYNOMIAL", "EXPONENTIALS", "BUILDERS", "MAX_ORDER", "CUTOFF_RANGE",
-           "CUTOFF_PERIOD_RANGE", "MIN_CUTOFF_DURATION"]
-
-#: The scene's ``[illumination] waveform`` -> the module that builds it.
-BUILDERS = {"impulse": impulse, "square": square, "butterworth": butterworth}
-
-
-def make_waveform(illumination, period: float) -> Waveform:
-    """The waveform of an illumination, with defaults resolved against the period.
-
-    Parameters
-    ----------
-    illumination : analytic.Illumination
-        The scene's ``[illumination]`` table.
-    period : float
-        Sampling period T, metres; sets the defaults (square width T/5,
-        Butterworth cutoff 1/(2T) cycles per metre, duration 3/cutoff,
-        order 3).
-
-    Returns
-    -------
-    Waveform
-
-    Raises
-    ------
-    SceneError
-        A parameter its waveform cannot deliver in float64 (each module
-        names its bounds).
-    """
-    return BUILDERS[illumination.waveform].build(illumination, period)
+__getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
+    "builders": ["make_waveform", "BUILDERS"],
+    "waveform": ["Waveform"],
+    "pieces": ["WaveformTerms", "make_terms", "cumulative_scalar", "kernel_scalar", "piece_of", "piece_value",
+               "POLYNOMIAL", "EXPONENTIALS"],
+    "butterworth": ["MAX_ORDER", "CUTOFF_RANGE", "CUTOFF_PERIOD_RANGE", "MIN_CUTOFF_DURATION"],
+})

@@ -1,0 +1,152 @@
+"""Captures through a relay wall: the third bounce against an independent quadrature of docs/design.md section 7.
+
+The reference writes the formula out again in world coordinates (its own
+frame of the hidden rectangle, its own cosines at the wall and on the hidden
+plane) and integrates it with tests/reference.py's nested QUADPACK, which
+shares nothing with the model.
+"""
+
+import math
+
+import numpy as np
+import pytest
+from reference import bin_kernel, pixel_entry
+
+from analytic.errors import SceneError
+from analytic.relay_wall import RelayWallScene, Scan, grid_points
+from analytic.scene import Illumination, Sampling
+from analytic.system import system_matrix
+from analytic.window import pairs_range
+
+TOLERANCE = 1e-6
+
+
+def _frame(scene):
+    """Orthonormal axes of the hidden rectangle and its corner, computed here (not by the model)."""
+    u, v = np.asarray(scene.u, float), np.asarray(scene.v, float)
+    x_axis, y_axis = u / np.linalg.norm(u), v / np.linalg.norm(v)
+    normal = np.cross(x_axis, y_axis)
+    corner = np.asarray(scene.center, float) - 0.5 * (u + v)
+    return corner, np.array([x_axis, y_axis, normal])
+
+
+def _reference_entry(scene, pair, pixel, n):
+    """A[(pair, n), pixel]: H(l, s)[n] of one hidden pixel of unit reflectance, by nested QUADPACK."""
+    corner, axes = _frame(scene)
+    lit, read = (np.asarray(a)[pair] for a in scene.pair_points)
+    local_l, local_s = (axes @ (point - corner) for point in (lit, read))
+    wall = np.array([0.0, 0.0, 1.0])
+
+    def weight(x, y):
+        world = corner + x * axes[0] + y * axes[1]
+        to_l, to_s = world - lit, world - read
+        d_l, d_s = np.linalg.norm(to_l), np.linalg.norm(to_s)
+        cos_x_l, cos_x_s = local_l[2] / d_l, local_s[2] / d_s            # at x, toward l and s
+        cos_l_x, cos_s_x = (wall @ to_l) / d_l, (wall @ to_s) / d_s       # at l and s, toward x
+        return cos_x_l * cos_x_s * cos_l_x * cos_s_x / (math.pi * d_l**2 * d_s**2)
+
+    to_laser = np.asarray(scene.laser_position) - lit
+    leg = (scene.intensity * (to_laser[2] / np.linalg.norm(to_laser)) / (to_laser @ to_laser)
+           * (scene.wall_reflectance / math.pi) ** 2)
+    offset = 0.0
+    if scene.scan.account_first_and_last_bounces:
+        offset = np.linalg.norm(to_laser) + np.linalg.norm(read - np.asarray(scene.sensor_position))
+    kernel, breakpoints = bin_kernel(scene.illumination, scene.sampling.start_opl - offset,
+                                     scene.sampling.bin_width_opl, n)
+    m = scene.pixels
+    r, c = divmod(pixel, m)
+    du, dv = np.linalg.norm(scene.u) / m, np.linalg.norm(scene.v) / m
+    box = (c * du, (c + 1) * du, (m - r - 1) * dv, (m - r) * dv)
+    value = pixel_entry(box, local_l, local_s, kernel, breakpoints, weight=weight)
+    return leg * value
+
+
+def _covering(scene, count=40):
+    """The scene with bins covering every pair's light (plus the pulse)."""
+    low, high = pairs_range(*scene.geometry())
+    period = (high - low) * 1.05 / (count - 2)
+    return scene.replace(sampling=Sampling(bin_width_opl=period, start_opl=low - period, count=count))
+
+
+POSES = {
+    "facing": dict(),
+    "tilted": dict(u=(0.8 * math.cos(0.5), 0.0, 0.8 * math.sin(0.5)), v=(0.0, -0.8, 0.0), center=(0.1, 0.2, 1.2)),
+    "grazing": dict(center=(1.6, 0.0, 0.6), u=(0.0, 0.0, 0.6), v=(0.0, 0.6, 0.0)),
+    "near the wall": dict(center=(0.2, -0.1, 0.04), u=(0.1, 0.0, 0.0), v=(0.0, -0.1, 0.0)),
+    "far": dict(center=(0.0, 0.0, 40.0), u=(3.0, 0.0, 0.0), v=(0.0, -3.0, 0.0)),
+    "tiny": dict(center=(0.3, 0.2, 0.8), u=(1e-3, 0.0, 0.0), v=(0.0, -1e-3, 0.0)),
+}
+
+
+def _scene(pose, scan=Scan(type="single", grid=(3, 2), laser_point=(0.5, -0.5, 0.0)), pixels=4, **changes):
+    image = np.arange(pixels * pixels, dtype=float).reshape(pixels, pixels) / (pixels * pixels)   # asymmetric
+    scene = RelayWallScene(pixels=pixels, reflectance=image, scan=scan, wall_reflectance=0.8, intensity=3.0,
+                           **POSES[pose], **changes)
+    return _covering(scene)
+
+
+def _check_entries(scene, rng, picks=3):
+    matrix = system_matrix(scene).tocsr()
+    row_max = abs(matrix).max(axis=1).toarray().ravel()
+    coo = matrix.tocoo()
+    chosen = [int(np.argmax(np.abs(coo.data)))] + list(rng.choice(coo.nnz, size=picks - 1, replace=False))
+    count = scene.sampling.count
+    for i in chosen:
+        row, pixel = int(coo.row[i]), int(coo.col[i])
+        pair, n = divmod(row, count)
+        reference = _reference_entry(scene, pair, pixel, n)
+        assert abs(coo.data[i] - reference) <= TOLERANCE * row_max[row], (pair, pixel, n, coo.data[i], reference)
+
+
+@pytest.mark.parametrize("pose", list(POSES))
+def test_single_scan_entries_match_the_reference(pose, rng):
+    _check_entries(_scene(pose), rng)
+
+
+def test_confocal_pairs_with_l_equal_s_match_the_reference(rng):
+    _check_entries(_scene("tilted", scan=Scan(type="confocal", grid=(2, 2))), rng)
+
+
+def test_exhaustive_pairs_with_both_legs_counted_match_the_reference(rng):
+    scan = Scan(type="exhaustive", grid=(2, 1), laser_grid=(1, 2), account_first_and_last_bounces=True)
+    _check_entries(_scene("facing", scan=scan, illumination=Illumination(waveform="butterworth", order=2)), rng)
+
+
+def test_pairs_follow_the_documented_order():
+    """Grid cell (row j, column i) at ((2i+1)/W - 1, (2j+1)/H - 1) x half sizes, row-major, laser-major."""
+    points = grid_points((3, 2), (2.0, 4.0))
+    np.testing.assert_allclose(points[1], [0.0, -1.0, 0.0])            # i = 1, j = 0
+    np.testing.assert_allclose(points[3], [-2 / 3, 1.0, 0.0])           # i = 0, j = 1
+    scene = RelayWallScene(wall_size=(2.0, 4.0), scan=Scan(type="exhaustive", grid=(3, 2), laser_grid=(2, 1)))
+    lit, read = scene.pair_points
+    assert scene.sensor_count == 12
+    np.testing.assert_allclose(lit[7], grid_points((2, 1), (2.0, 4.0))[1])   # laser 1 of the second block
+    np.testing.assert_allclose(read[7], points[1])
+
+
+def test_total_light_is_linear_in_the_laser_and_the_reflectances():
+    base = _scene("facing")
+    doubled = base.replace(intensity=2 * base.intensity, wall_reflectance=0.5 * base.wall_reflectance)
+    y, y2 = (system_matrix(s) @ s.reflectance.ravel() for s in (base, doubled))
+    np.testing.assert_allclose(y2, 0.5 * y, rtol=1e-14)
+
+
+@pytest.mark.parametrize("changes, key", [
+    (dict(center=(0.0, 0.0, 0.3), u=(0.0, 0.0, 1.0), v=(0.0, 1.0, 0.0)), "hidden.center"),   # crosses the wall
+    (dict(u=(1.0, 0.0, 0.0), v=(0.0, 1.0, 0.0)), "hidden.u"),                                # faces away
+    (dict(v=(0.5, -1.0, 0.0)), "hidden.v"),                                                  # not orthogonal
+    (dict(center=(0.0, 0.0, -1.0)), "hidden.center"),                                        # behind the wall
+    (dict(laser_position=(0.0, 0.0, 0.0)), "laser.position"),
+    (dict(scan=Scan(type="single", laser_point=(2.0, 0.0, 0.0))), "scan.laser_point"),
+])
+def test_impossible_captures_are_refused_in_one_line(changes, key):
+    with pytest.raises(SceneError) as caught:
+        RelayWallScene(**changes)
+    assert caught.value.key == key and "\n" not in str(caught.value)
+
+
+def test_scan_options_of_another_type_are_refused():
+    with pytest.raises(SceneError, match="scan.laser_grid"):
+        Scan(type="single", laser_grid=(2, 2))
+    with pytest.raises(SceneError, match="scan.laser_point"):
+        Scan(type="confocal", laser_point=(0.0, 0.0, 0.0))

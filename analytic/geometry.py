@@ -186,6 +186,14 @@ class PointPairs:
     def __len__(self) -> int:
         return len(self.sources)
 
+    def block(self, start: int, stop: int) -> "PointPairs":
+        """Pairs start ... stop - 1: their rows of A are exactly the whole set's (pairs are independent)."""
+        def part(value):
+            return None if value is None else value[start:stop]
+
+        return PointPairs(self.sources[start:stop], self.sensors[start:stop], part(self.offsets),
+                          part(self.source_normals), part(self.sensor_normals), part(self.scales), self.attenuation)
+
 
 def _cosine_form(rectangle: Rectangle, points: np.ndarray, normals: np.ndarray | None):
     """(flag, c0, cu, cv) per pair: n·(x - point) = c0 + cu x + cv y for x = corner + x û + y v̂."""

@@ -22,17 +22,19 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .bins import BinRun, KernelProblem, TimeAxis, bin_edge, bin_of, kernel_cut, kernel_values, pixel_bins
 from .isochrone import Frame, PixelBox, ellipse, first_arrival_point, path_length_at, segment_minimum
 from .kernel_cache import njit
 from .attenuation import attenuation_of_distances
 from .quadrature import (GAUSS_NODES, GAUSS_WEIGHTS, LINEAR, ROOT_BOTH, ROOT_END, ROOT_START, TENSOR_LEVELS,
                          IsochronePiece, Workspace, adapt, integrate, isochrone_rule, make_workspace, piece_map,
                          pixel_isochrone_integral, tensor_integrate)
+from .strips import strip_entries
 from .taylor import MAX_TERMS, cancels, entries_from_moments, kernel_taylor
-from .waveforms.pieces import ROUNDING, WaveformTerms, piece_of, piece_value
+from .waveforms.pieces import ROUNDING
 
 __all__ = ["TimeAxis", "BinRun", "Scratch", "RouteOutcome", "make_scratch", "pixel_bins", "pair_entries",
-           "pair_by_method", "bin_of", "FOOT_CLEARANCE", "SAFETY", "AUTO", "SMOOTH", "ISOCHRONE", "ADAPTIVE"]
+           "pair_by_method", "bin_of", "FOOT_CLEARANCE", "SAFETY", "AUTO", "SMOOTH", "ISOCHRONE", "ADAPTIVE", "STRIP"]
 
 #: A pixel is integrated as a smooth 2-D function only if every foot is at
 #: least this many pixel sides away, counting its height: sqrt(δ² + h²) >=
@@ -54,27 +56,7 @@ _TENSOR_PIECES = 64      # τ-pieces the (τ, φ) tensor rule may split into bef
 _TAU_RESOLUTION = 4e-12
 
 #: Routes of :func:`pair_by_method` (``analytic.system.METHODS`` names them).
-AUTO, SMOOTH, ISOCHRONE, ADAPTIVE = 0, 1, 2, 3
-
-
-class TimeAxis(NamedTuple):
-    """Bins n = 0 ... count - 1 covering [start_opl + n T, start_opl + (n + 1) T), metres of path length.
-
-    For a pair whose paths carry an added length (its ``offset``), the
-    pair's axis starts that much earlier, so that the pair's geometric
-    path d is binned as d + offset.
-    """
-
-    start_opl: float
-    bin_width_opl: float
-    count: int
-
-
-class BinRun(NamedTuple):
-    """The bins a (pair, pixel) reaches: ``first`` ... ``first + bins - 1`` (``bins`` 0: none)."""
-
-    first: int
-    bins: int
+AUTO, SMOOTH, ISOCHRONE, ADAPTIVE, STRIP = 0, 1, 2, 3, 4
 
 
 class Scratch(NamedTuple):
@@ -103,14 +85,6 @@ class SmoothProblem(NamedTuple):
 
     frame: Frame
     kernel: "KernelProblem"
-
-
-class KernelProblem(NamedTuple):
-    """The time kernels κ_n of a run of bins (:func:`_kernels`)."""
-
-    terms: WaveformTerms
-    axis: TimeAxis
-    run: BinRun
 
 
 class MomentProblem(NamedTuple):
@@ -145,47 +119,6 @@ def make_scratch(width):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def bin_of(tau, axis):
-    """floor((τ - start) / period) clamped to [-1, count] in floating point (no integer overflow)."""
-    index = np.floor((tau - axis.start_opl) / axis.bin_width_opl)
-    if not index >= -1.0:       # also NaN
-        return -1
-    if index > axis.count:
-        return axis.count
-    return int(index)
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def pixel_bins(low, high, axis, lead, duration):
-    """The :class:`BinRun` that light leaving a pixel at d in [low, high] reaches (``bins`` 0 if none).
-
-    Light leaving at path length τ lands in [τ + lead, τ + duration] (the waveform's support).
-    """
-    first = max(0, bin_of(low + lead, axis))
-    last = min(axis.count - 1, bin_of(high + duration, axis))
-    if last < first:
-        return BinRun(0, 0)
-    return BinRun(first, last - first + 1)
-
-
-@njit(cache=True, error_model="numpy")
-def _edge(axis, n):
-    """t_n, the lower edge of bin n, metres (as Sampling.edges computes it)."""
-    return axis.start_opl + axis.bin_width_opl * n
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _kernel_cut(low, high, terms, axis, run):
-    """Whether a breakpoint of some κ_n (t_n shifted back by a kink of the waveform) lies strictly inside (low, high)."""
-    for n in range(run.first, run.first + run.bins + 1):
-        edge = _edge(axis, n)
-        for i in range(terms.starts.size):
-            if terms.kinks[i] and low < edge - terms.starts[i] < high:
-                return True
-    return False
-
-
-@njit(cache=True, error_model="numpy", inline="always")
 def _clear_of_feet(frame, box):
     """Whether the attenuation's peaks under both feet are far enough for the tensor rule."""
     side = FOOT_CLEARANCE * max(box.x1 - box.x0, box.y1 - box.y0)
@@ -199,40 +132,12 @@ def _clear_of_feet(frame, box):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _kernels(problem, tau, scale, values, noise):
-    """values[i] = scale κ_{first + i}(τ), i < bins, and noise[i] a bound on its rounding.
-
-    κ_n = S(t_{n+1} - τ) - S(t_n - τ), taken piece by piece
-    (:func:`analytic.waveforms.kernel_scalar`): within one piece the
-    constants cancel exactly, so a kernel far in a pulse's tail keeps its
-    own relative accuracy; the rounding bound counts each term's size.
-    """
-    terms = problem.terms
-    axis = problem.axis
-    first = problem.run.first
-    lower_u = _edge(axis, first) - tau
-    lower_piece = piece_of(terms, lower_u)
-    lower_value, lower_size = (0.0, 0.0) if lower_piece < 0 else piece_value(terms, lower_piece, lower_u)
-    lower_constant = 0.0 if lower_piece < 0 else terms.constants[lower_piece]
-    size = abs(scale) * ROUNDING
-    for i in range(problem.run.bins):
-        upper_u = _edge(axis, first + i + 1) - tau
-        upper_piece = piece_of(terms, upper_u)
-        upper_value, upper_size = (0.0, 0.0) if upper_piece < 0 else piece_value(terms, upper_piece, upper_u)
-        upper_constant = 0.0 if upper_piece < 0 else terms.constants[upper_piece]
-        constant = upper_constant - lower_constant
-        values[i] = scale * (constant + (upper_value - lower_value))
-        noise[i] = size * (abs(constant) + upper_size + lower_size)
-        lower_value, lower_size, lower_constant = upper_value, upper_size, upper_constant
-
-
-@njit(cache=True, error_model="numpy", inline="always")
 def _smooth_integrand(problem, x, y, values, noise):
     """a_k(x) κ_n(d(x)) for the pair's bins: the integrand of a smooth pixel."""
     frame = problem.frame
     ds2 = (x - frame.source_x) ** 2 + (y - frame.source_y) ** 2 + frame.source_height ** 2
     dk2 = (x - frame.sensor_x) ** 2 + (y - frame.sensor_y) ** 2 + frame.sensor_height ** 2
-    _kernels(problem.kernel, math.sqrt(ds2) + math.sqrt(dk2), attenuation_of_distances(frame, x, y, ds2, dk2),
+    kernel_values(problem.kernel, math.sqrt(ds2) + math.sqrt(dk2), attenuation_of_distances(frame, x, y, ds2, dk2),
              values, noise)
 
 
@@ -347,7 +252,7 @@ def _bin_moments(scratch, count, bins, half, out):
 @njit(cache=True, error_model="numpy", inline="always")
 def _kernel_weight(problem, tau, scale, values, noise):
     """scale κ_n(τ) for the piece's bins (the time weight of a cut piece), and its rounding."""
-    _kernels(problem, tau, scale, values, noise)
+    kernel_values(problem, tau, scale, values, noise)
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -369,7 +274,7 @@ def _cut_integrand(problem, v, values, noise):
             values[i] = 0.0
             noise[i] = 0.0
         return
-    _kernels(problem.kernel, tau, weight, values, noise)
+    kernel_values(problem.kernel, tau, weight, values, noise)
 
 
 @njit(cache=True, error_model="numpy")
@@ -424,7 +329,7 @@ def _pixel_breakpoints(frame, box, low, high, terms, axis, run):
             flags[used] = True
             used += 1
     for n in range(run.first, run.first + run.bins + 1):
-        edge = _edge(axis, n)
+        edge = bin_edge(axis, n)
         for i in range(terms.starts.size):
             if terms.kinks[i]:
                 points[used] = edge - terms.starts[i]
@@ -459,8 +364,8 @@ def _cut_entries(frame, box, low, high, terms, axis, run, rtol, smooth_arcs, tay
     duration = terms.duration
     lead = terms.lead
     work = scratch.work
-    low = max(low, _edge(axis, 0) - duration)
-    high = min(high, _edge(axis, run.first + run.bins) - lead)
+    low = max(low, bin_edge(axis, 0) - duration)
+    high = min(high, bin_edge(axis, run.first + run.bins) - lead)
     breakpoints, root = _pixel_breakpoints(frame, box, low, high, terms, axis, run)
     for piece in range(len(breakpoints) - 1):
         tau_a = breakpoints[piece]
@@ -580,13 +485,16 @@ def pair_entries(frame, box, low, high, terms, axis, run, rtol, out, scratch):
     for i in range(run.bins):
         out[i] = 0.0
     clear = _clear_of_feet(frame, box)
-    if clear and not _kernel_cut(low, high, terms, axis, run):
+    if clear and not kernel_cut(low, high, terms, axis, run):
         if _smooth_by_moments(frame, box, low, high, terms, axis, run, rtol, out, scratch):
             return True
         if tensor_integrate(_smooth_integrand, SmoothProblem(frame, KernelProblem(terms, axis, run)), box, rtol,
                             run.bins, out, scratch.work):
             return True
-    _cut_entries(frame, box, low, high, terms, axis, run, rtol, _smooth_arcs(frame, box, clear), True, out, scratch)
+    smooth_arcs = _smooth_arcs(frame, box, clear)
+    if smooth_arcs and strip_entries(frame, box, low, high, terms, axis, run, rtol, out, scratch.work):
+        return False
+    _cut_entries(frame, box, low, high, terms, axis, run, rtol, smooth_arcs, True, out, scratch)
     return False
 
 
@@ -610,13 +518,18 @@ def pair_by_method(frame, box, low, high, terms, axis, run, rtol, method, taylor
     if method == AUTO:
         pair_entries(frame, box, low, high, terms, axis, run, rtol, out, scratch)
     elif method == SMOOTH:
-        if _kernel_cut(low, high, terms, axis, run) or not _clear_of_feet(frame, box):
+        if kernel_cut(low, high, terms, axis, run) or not _clear_of_feet(frame, box):
             return RouteOutcome(False, False, 0)
         if taylor:
             if not _smooth_by_moments(frame, box, low, high, terms, axis, run, rtol, out, scratch):
                 return RouteOutcome(True, False, 0)
         elif not tensor_integrate(_smooth_integrand, SmoothProblem(frame, KernelProblem(terms, axis, run)), box,
                                   rtol, run.bins, out, scratch.work):
+            return RouteOutcome(True, False, 0)
+    elif method == STRIP:
+        if not _smooth_arcs(frame, box, _clear_of_feet(frame, box)):
+            return RouteOutcome(False, False, 0)
+        if not strip_entries(frame, box, low, high, terms, axis, run, rtol, out, scratch.work):
             return RouteOutcome(True, False, 0)
     else:
         _cut_entries(frame, box, low, high, terms, axis, run, rtol, method == ISOCHRONE, taylor, out, scratch)

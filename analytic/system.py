@@ -13,7 +13,7 @@ How it is computed
 κ_n(τ) = S(t_{n+1} - τ) - S(t_n - τ) is smooth in τ except at the bin edges
 t_n shifted by the waveform's breakpoints (its pieces' kinks). For each
 (pixel, pair), with [d_lo, d_hi] the exact range of d over the pixel, one of
-three routes:
+four routes:
 
 - *Smooth pixels* (no breakpoint inside (d_lo, d_hi), and the pixel clear of
   the peaks of a under the source's and sensor's feet, see
@@ -21,6 +21,10 @@ three routes:
   integrated by the tensor Gauss ladder
   (:func:`analytic.quadrature.tensor_integrate`) with its error check; most
   pairs take this route, more of them at larger M.
+- *Cut pixels by strips* (clear of the feet and of x*): the slabs between
+  the kinks' isochrones, each a region with conic sides whose limits are
+  closed-form (:mod:`analytic.strips`), by G_4 x G_4 judged by G_3 x G_3;
+  when that rule does not meet the tolerance, the next route.
 - *Cut pixels*: in isochrone coordinates (τ, φ) (see :mod:`analytic.isochrone`)
   the entry is ∫ κ_n(τ) G(τ) dτ with G(τ) = ∫_{isochrone ∩ pixel} a J dφ.
   G is smooth except where an isochrone passes a pixel corner, touches an
@@ -85,7 +89,7 @@ __all__ = ["system_matrix", "rectangle_matrix", "forward", "count_entries", "che
 _BLOCKS_PER_THREAD = 16  # parallel jobs per thread; pixels are dealt to them in strides
 
 #: Quadrature routes of :func:`pair_entries`, in the order of analytic.kernels' route codes.
-METHODS = ("auto", "smooth", "isochrone", "adaptive")
+METHODS = ("auto", "smooth", "isochrone", "adaptive", "strip")
 
 
 class QuadratureWarning(RuntimeWarning):
@@ -406,12 +410,14 @@ def pair_entries(scene: Scene, sensor: int, pixel: int, *, method: str = "auto",
         Sensor index k.
     pixel : int
         Column p = r M + c.
-    method : {"auto", "smooth", "isochrone", "adaptive"}
+    method : {"auto", "smooth", "isochrone", "adaptive", "strip"}
         "auto": what :func:`system_matrix` does. "smooth": the tensor rule
         on the whole pixel (only where no kernel breakpoint crosses it and
         it is clear of the feet). "isochrone": the cut quadrature with the
         tensor rule in (τ, φ) on each τ-piece. "adaptive": the cut
         quadrature with adaptive φ-integrals inside adaptive τ-integrals.
+        "strip": the cut pixel as slabs between isochrones with closed-form
+        limits (:mod:`analytic.strips`; clear of the feet and of x* only).
     tolerance : float, optional
         As for :func:`system_matrix`.
     taylor : bool
@@ -450,10 +456,11 @@ def pair_entries(scene: Scene, sensor: int, pixel: int, *, method: str = "auto",
     outcome = pair_by_method(frame, box, low, high, terms, problem.axis, run, SAFETY * tolerance,
                              METHODS.index(method), bool(taylor), out, make_scratch(max(run.bins, 1)))
     if not outcome.applies:
-        raise ValueError(f"the smooth rule does not apply to pixel {pixel}, sensor {sensor}: a kernel "
-                         f"breakpoint crosses it or a foot is near")
+        raise ValueError(f"the {method} rule does not apply to pixel {pixel}, sensor {sensor}: "
+                         + ("x* or a foot is near" if method == "strip" else
+                            "a kernel breakpoint crosses it or a foot is near"))
     if not outcome.converged:
-        raise ValueError(f"the smooth rule did not converge on pixel {pixel}, sensor {sensor}")
+        raise ValueError(f"the {method} rule did not converge on pixel {pixel}, sensor {sensor}")
     if outcome.failures > 0:
         warnings.warn(f"{outcome.failures} quadrature pieces stopped refining before reaching tolerance "
                       f"{tolerance:g}", QuadratureWarning, stacklevel=2)

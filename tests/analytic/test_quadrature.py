@@ -117,3 +117,26 @@ def test_unknown_route_and_inapplicable_smooth_route_are_refused():
         pair_entries(scene, 0, 0, method="fast")
     with pytest.raises(ValueError, match="does not apply"):     # 1 mm bins cross every pixel
         pair_entries(scene, 0, 5, method="smooth")
+
+
+def _fine_scene(rng, waveform):
+    """A plane with small pixels (M = 40 ... 400) and bins that cut many of them: the strip route's ground."""
+    scene = _random_scene(rng, waveform)
+    return scene.replace(pixels=int(rng.integers(40, 400)), reflectance=1.0)
+
+
+@pytest.mark.parametrize("waveform", ["impulse", "square", "butterworth"])
+def test_strip_route_agrees_with_adaptive(rng, waveform):
+    """Cut pixels by slabs with conic sides (analytic.strips) against the (τ, φ) adaptive route."""
+    served = 0
+    for _ in range(6):
+        scene = _fine_scene(rng, waveform)
+        for _ in range(40):
+            sensor, pixel = int(rng.integers(scene.sensor_count)), int(rng.integers(scene.pixels**2))
+            try:
+                strip = pair_entries(scene, sensor, pixel, method="strip", tolerance=TOLERANCE)
+            except ValueError:     # near x* or a foot, or G_3 and G_4 disagree: another route serves
+                continue
+            _assert_agree(strip, _reference(scene, sensor, pixel), (waveform, scene.pixels, sensor, pixel))
+            served += len(strip[1]) > 1      # a cut pixel: more than one bin
+    assert served >= 10

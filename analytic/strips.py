@@ -1,0 +1,293 @@
+"""A cut pixel by strips: the pixel's share of each slab between two isochrones, in closed-form limits (compiled).
+
+A bin edge (or another kink of the kernels) that crosses a pixel splits it
+into slabs {τ_a <= d <= τ_b}; on each slab every kernel κ_n(d) is smooth,
+so the entries are smooth integrals over a region with curved sides. The
+sides are conics: the isochrone d = τ is the rectangle's section of the
+prolate spheroid with foci at the pair's ends, so along a line of the
+pixel it is a quadratic with closed-form roots. With the outer variable u
+chosen along the isochrones (the axis across which d changes least), the
+inner limits w(u) are smooth between the u where a side meets the pixel's
+edge, found in closed form too; the region is then a few pieces of tensor
+Gauss rules, no root-finding and no adaptive splitting.
+
+The route applies to pixels clear of the attenuation's peaks and of the
+point x* (there the isochrones turn inside the pixel, and the routes of
+:mod:`analytic.kernels` take over). Each entry is the G_4 x G_4 rule,
+accepted when G_3 x G_3 agrees with it within the tolerance (for a smooth
+integrand the difference far exceeds G_4's own error); otherwise nothing is
+kept and the caller integrates the pixel its other way.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .attenuation import attenuation_of_distances
+from .bins import BinRun, KernelProblem, bin_edge, bin_of, kernel_values
+from .kernel_cache import njit
+from .quadrature import GAUSS_NODES, GAUSS_WEIGHTS
+from .waveforms.pieces import ROUNDING
+
+__all__ = ["strip_entries", "HIGH_ORDER", "LOW_ORDER"]
+
+#: The rule kept (G_n in each variable) and the one that judges it.
+HIGH_ORDER = 4
+LOW_ORDER = 3
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _conic(frame, tau, swap):
+    """The isochrone d = τ as a conic in the pixel's (u, w) about the foci's midpoint.
+
+    Q(q) = A_uu q_u² + 2 A_uw q_u q_w + A_ww q_w² + 2 B_u q_u + 2 B_w q_w + C, q = (u, w) - m,
+    is zero on the isochrone and negative inside it (d < τ). Returns (m_u, m_w, A_uu, A_uw, A_ww,
+    B_u, B_w, C), or all zeros with A_uu = 0 when τ does not exceed the foci's distance.
+    """
+    sx, sy, kx, ky = frame.source_x, frame.source_y, frame.sensor_x, frame.sensor_y
+    if swap:
+        sx, sy, kx, ky = sy, sx, ky, kx
+    dx, dy, dz = kx - sx, ky - sy, frame.sensor_height - frame.source_height
+    focal = math.sqrt(dx * dx + dy * dy + dz * dz)
+    if not tau > focal:
+        return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    mu, mw, mz = 0.5 * (sx + kx), 0.5 * (sy + ky), 0.5 * (frame.source_height + frame.sensor_height)
+    eu, ew, ez = (dx / focal, dy / focal, dz / focal) if focal > 0.0 else (0.0, 0.0, 0.0)
+    ratio = (focal / tau) ** 2                      # (c / a)²
+    minor = 0.25 * (tau - focal) * (tau + focal)    # b², without the cancellation of a² - c²
+    pz = -mz * ez                                   # the plane's q_z = -m_z, projected on the axis
+    # |q|² - (c/a)² (q·e)² - b², expanded with q = (q_u, q_w, -m_z)
+    return (mu, mw, 1.0 - ratio * eu * eu, -ratio * eu * ew, 1.0 - ratio * ew * ew, -ratio * eu * pz,
+            -ratio * ew * pz, mz * mz - ratio * pz * pz - minor)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _roots(a, b, c):
+    """Real roots of a q² + 2 b q + c = 0 (a > 0), sorted: (low, high, True), or (0, 0, False) if none."""
+    disc = b * b - a * c
+    if disc < 0.0:
+        return 0.0, 0.0, False
+    t = -(b + math.copysign(math.sqrt(disc), b))
+    if t == 0.0:
+        return 0.0, 0.0, True
+    first, second = t / a, c / t
+    return min(first, second), max(first, second), True
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _inner_roots(conic, u):
+    """The w where the isochrone crosses the line at u: (low, high, True), or (0, 0, False) if it does not."""
+    mu, mw, auu, auw, aww, bu, bw, c = conic
+    qu = u - mu
+    low, high, real = _roots(aww, auw * qu + bw, (auu * qu + 2.0 * bu) * qu + c)
+    return low + mw, high + mw, real
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _add_crossings(conic, w, lo, hi, points, used):
+    """Append the u in (lo, hi) where the isochrone crosses the line at w; returns the new count."""
+    mu, mw, auu, auw, aww, bu, bw, c = conic
+    qw = w - mw
+    low, high, real = _roots(auu, auw * qw + bu, (aww * qw + 2.0 * bw) * qw + c)
+    if real:
+        for q in (low, high):
+            if lo < q + mu < hi:
+                points[used] = q + mu
+                used += 1
+    return used
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _turns_inside(conic, u0, u1, w0, w1):
+    """Whether the isochrone's tangent is along w at a point of the pixel (its inner roots merge there).
+
+    Away from the pixel the merge only slows the rule's convergence near it, which G_3 against G_4
+    detects.
+    """
+    mu, mw, auu, auw, aww, bu, bw, c = conic
+    # (A_uw q_u + B_w)² - A_ww (A_uu q_u² + 2 B_u q_u + C) = 0, a quadratic in q_u
+    a = auw * auw - aww * auu
+    b = auw * bw - aww * bu
+    e = bw * bw - aww * c
+    low, high, real = _roots(-a, -b, -e)         # -a = A_uu A_ww - A_uw² > 0 for an ellipse
+    if not real:
+        return False
+    for q in (low, high):
+        if u0 < q + mu < u1 and w0 < mw - (auw * q + bw) / aww < w1:
+            return True
+    return False
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _slab_pieces(frame, box, lower, upper, has_lower, has_upper, swap, points):
+    """Sorted u-breakpoints of the slab's region (the pixel's u-edges and the sides' crossings of its w-edges).
+
+    Returns the count, or -1 when a side turns inside the pixel (the route does not apply).
+    """
+    u0, u1, w0, w1 = (box.y0, box.y1, box.x0, box.x1) if swap else (box.x0, box.x1, box.y0, box.y1)
+    points[0] = u0
+    used = 1
+    for present, conic in ((has_lower, lower), (has_upper, upper)):
+        if present:
+            if _turns_inside(conic, u0, u1, w0, w1):
+                return -1
+            used = _add_crossings(conic, w0, u0, u1, points, used)
+            used = _add_crossings(conic, w1, u0, u1, points, used)
+    points[used] = u1
+    used += 1
+    points[:used].sort()
+    return used
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _region_rows(frame, lower, upper, has_lower, has_upper, u, w0, w1):
+    """The inner intervals of the slab's region on the line at u: up to two (w_a, w_b), as four numbers.
+
+    {d <= τ_b} is one interval on the line (d is convex), {d >= τ_a} the complement of one.
+    """
+    below_low, below_high = -np.inf, np.inf          # {d <= τ_b}
+    if has_upper:
+        below_low, below_high, real = _inner_roots(upper, u)
+        if not real:
+            return 0.0, 0.0, 0.0, 0.0
+    hole_low, hole_high = np.inf, np.inf              # {d < τ_a}: removed
+    if has_lower:
+        low, high, real = _inner_roots(lower, u)
+        if real:
+            hole_low, hole_high = low, high
+    start, stop = max(w0, below_low), min(w1, below_high)
+    return start, min(stop, hole_low), max(start, hole_high), stop
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _slab_rule(frame, kernel, lower, upper, has_lower, has_upper, swap, ua, ub, w0, w1, order, values, noise,
+               total, magnitude, rounding):
+    """G_order x G_order of a_k κ_n(d) over the slab's region for u in [ua, ub], added to total (per bin)."""
+    cu = 0.5 * (ua + ub)
+    hu = 0.5 * (ub - ua)
+    for ju in range(order):
+        u = cu + hu * GAUSS_NODES[order, ju]
+        wu = hu * GAUSS_WEIGHTS[order, ju]
+        first_a, first_b, second_a, second_b = _region_rows(frame, lower, upper, has_lower, has_upper, u, w0, w1)
+        for wa, wb in ((first_a, first_b), (second_a, second_b)):
+            if not wb > wa:
+                continue
+            cw = 0.5 * (wa + wb)
+            hw = 0.5 * (wb - wa)
+            for jw in range(order):
+                w = cw + hw * GAUSS_NODES[order, jw]
+                x, y = (w, u) if swap else (u, w)
+                ds2 = (x - frame.source_x) ** 2 + (y - frame.source_y) ** 2 + frame.source_height ** 2
+                dk2 = (x - frame.sensor_x) ** 2 + (y - frame.sensor_y) ** 2 + frame.sensor_height ** 2
+                weight = wu * hw * GAUSS_WEIGHTS[order, jw] * attenuation_of_distances(frame, x, y, ds2, dk2)
+                kernel_values(kernel, math.sqrt(ds2) + math.sqrt(dk2), weight, values, noise)
+                for i in range(kernel.run.bins):
+                    total[i] += values[i]
+                    magnitude[i] += abs(values[i])
+                    rounding[i] += noise[i]
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _slab_kinks(low, high, terms, axis, run, points):
+    """Sorted τ in (low, high) where some κ_n has a kink, between low and high; returns the count."""
+    points[0] = low
+    used = 1
+    for n in range(run.first, run.first + run.bins + 1):
+        edge = bin_edge(axis, n)
+        for i in range(terms.starts.size):
+            tau = edge - terms.starts[i]
+            if terms.kinks[i] and low < tau < high:
+                points[used] = tau
+                used += 1
+    points[used] = high
+    used += 1
+    points[:used].sort()
+    return used
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def strip_entries(frame, box, low, high, terms, axis, run, rtol, out, work):
+    """Add one (pair, pixel)'s entries to out[:run.bins] by strips; False (out zeroed) when the route does not serve.
+
+    Parameters
+    ----------
+    frame : analytic.isochrone.Frame
+        The pair, in the rectangle's frame.
+    box : analytic.isochrone.PixelBox
+        The pixel, metres; clear of the feet and of x* (the caller's test).
+    low, high : float
+        The pixel's range of d, metres.
+    terms : analytic.waveforms.WaveformTerms
+        The waveform's pieces.
+    axis : analytic.bins.TimeAxis
+        The pair's bins.
+    run : analytic.bins.BinRun
+        The bins the pixel's light reaches.
+    rtol : float
+        Relative accuracy of each entry.
+    out : float64[:]
+        Zero on entry, at least ``run.bins`` long.
+    work : analytic.quadrature.Workspace
+        Of at least ``run.bins`` components.
+    """
+    # the u-axis along the isochrones: d changes faster across w
+    cx, cy = 0.5 * (box.x0 + box.x1), 0.5 * (box.y0 + box.y1)
+    ds = math.sqrt((cx - frame.source_x) ** 2 + (cy - frame.source_y) ** 2 + frame.source_height ** 2)
+    dk = math.sqrt((cx - frame.sensor_x) ** 2 + (cy - frame.sensor_y) ** 2 + frame.sensor_height ** 2)
+    gx = (cx - frame.source_x) / ds + (cx - frame.sensor_x) / dk
+    gy = (cy - frame.source_y) / ds + (cy - frame.sensor_y) / dk
+    swap = abs(gx) > abs(gy)
+    w0, w1 = (box.x0, box.x1) if swap else (box.y0, box.y1)
+    kinks = 0
+    for i in range(terms.starts.size):
+        if terms.kinks[i]:
+            kinks += 1
+    taus = np.empty(2 + kinks * (run.bins + 1))
+    slabs = _slab_kinks(low, high, terms, axis, run, taus)
+    points = np.empty(10)
+    low_order, magnitude, rounding = work.lower, work.magnitude, work.rounding
+    for i in range(run.bins):
+        low_order[i] = 0.0
+        magnitude[i] = 0.0
+        rounding[i] = 0.0
+    scratch_magnitude, scratch_rounding = work.previous, work.before
+    for slab in range(slabs - 1):
+        tau_a, tau_b = taus[slab], taus[slab + 1]
+        if not tau_b > tau_a:
+            continue
+        lo_bin = max(run.first, bin_of(tau_a + terms.lead, axis) - 1)
+        hi_bin = min(run.first + run.bins - 1, bin_of(tau_b + terms.duration, axis) + 1)
+        if hi_bin < lo_bin:
+            continue
+        kernel = KernelProblem(terms, axis, BinRun(lo_bin, hi_bin - lo_bin + 1))
+        offset = lo_bin - run.first
+        has_lower, has_upper = slab > 0, slab < slabs - 2
+        lower, upper = _conic(frame, tau_a, swap), _conic(frame, tau_b, swap)
+        if (has_lower and lower[2] == 0.0) or (has_upper and upper[2] == 0.0):
+            return _discard(out, run.bins)
+        pieces = _slab_pieces(frame, box, lower, upper, has_lower, has_upper, swap, points)
+        if pieces < 0:
+            return _discard(out, run.bins)
+        for piece in range(pieces - 1):
+            ua, ub = points[piece], points[piece + 1]
+            if not ub > ua:
+                continue
+            _slab_rule(frame, kernel, lower, upper, has_lower, has_upper, swap, ua, ub, w0, w1, HIGH_ORDER,
+                       work.values, work.noise, out[offset:], magnitude[offset:], rounding[offset:])
+            _slab_rule(frame, kernel, lower, upper, has_lower, has_upper, swap, ua, ub, w0, w1, LOW_ORDER,
+                       work.values, work.noise, low_order[offset:], scratch_magnitude[offset:],
+                       scratch_rounding[offset:])
+    for i in range(run.bins):
+        if not abs(out[i] - low_order[i]) <= rtol * abs(out[i]) + 4.0 * (rounding[i] + ROUNDING * magnitude[i]):
+            return _discard(out, run.bins)
+    return True
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _discard(out, bins):
+    """Zero what a route that did not serve added; returns False."""
+    for i in range(bins):
+        out[i] = 0.0
+    return False

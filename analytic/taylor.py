@@ -90,8 +90,8 @@ def kernel_taylor(terms, axis, run, centre, half, rtol, coefficients, lower_edge
     Parameters
     ----------
     terms : WaveformTerms
-    axis : analytic.kernels.TimeAxis
-    run : analytic.kernels.BinRun
+    axis : analytic.bins.TimeAxis
+    run : analytic.bins.BinRun
     centre, half : float
         The range of path length, metres; no kink of any κ_n inside it.
     rtol : float

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from analytic.files import build_meta, save_exr, write_transient
+import scene_files
+from analytic.files import build_meta, write_transient
 from analytic.scene import Sampling, Scene
 from analytic.system import forward
 from validation.cli import main
@@ -55,21 +56,4 @@ def run_check(*argv) -> int:
 
 def write_scene_file(tmp_path):
     """small_scene as a scene file (its image an EXR beside it): what the command reads."""
-    image = np.arange(16, dtype=np.float64).reshape(4, 4) / 20.0
-    save_exr(tmp_path / "image.exr", image)
-    path = tmp_path / "small.toml"
-    path.write_text(f"""
-[plane]
-size = 1.0
-pixels = 4
-reflectance = "image.exr"
-[source]
-position = [0.5, 0.5, 1.0]
-[sensors]
-positions = [[0.8, 0.3, 1.0], [0.25, 0.7, 0.8]]
-[sampling]
-period = {WIDTH}
-start = {START}
-count = {COUNT}
-""")
-    return path
+    return scene_files.write_scene_file(tmp_path, small_scene())

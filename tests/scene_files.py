@@ -1,5 +1,6 @@
-"""Scene-file text shared by the tests: docs/design.md section 5's example, small."""
+"""Scene files shared by the tests: docs/design.md section 5's example, small, and any Scene written as a file."""
 
+import json
 import textwrap
 
 GOOD = """
@@ -31,4 +32,42 @@ def write_scene(folder, text=GOOD, name="scene.toml"):
     """Write scene-file text into ``folder``; returns its path."""
     path = folder / name
     path.write_text(textwrap.dedent(text))
+    return path
+
+
+def write_scene_file(folder, scene, name=None):
+    """``scene`` as a scene file in ``folder`` (``<scene.name>.toml``), what a command reads; returns its path.
+
+    A reflectance image that is not uniform goes into ``image.exr`` beside the file (float32, as a user's
+    would); every other field is written exactly (floats by their shortest round-trip text). Noise is not
+    written: a scene with noise is refused rather than silently written without it.
+    """
+    import numpy as np
+
+    from analytic.files import save_exr
+
+    if scene.noise is not None:
+        raise ValueError("write_scene_file: scenes with noise are not supported")
+    image = np.asarray(scene.reflectance)
+    if np.all(image == image.flat[0]):
+        reflectance = repr(float(image.flat[0]))
+    else:
+        save_exr(folder / "image.exr", image)
+        reflectance = '"image.exr"'
+    illumination = scene.illumination
+    waveform = [f"waveform = {json.dumps(illumination.waveform)}"] + [
+        f"{key} = {value!r}" for key in ("width", "cutoff", "duration", "order")
+        if (value := getattr(illumination, key)) is not None]
+    sampling = scene.sampling
+    lines = [f"name = {json.dumps(scene.name)}",
+             "[plane]", f"size = {scene.size!r}", f"pixels = {scene.pixels}", f"reflectance = {reflectance}",
+             "[source]", f"position = {json.dumps(np.asarray(scene.source).tolist())}",
+             f"intensity = {scene.intensity!r}",
+             "[illumination]", *waveform,
+             "[sensors]", f"positions = {json.dumps(np.asarray(scene.sensors).tolist())}",
+             "[sampling]", f"period = {sampling.bin_width_opl!r}", f"start = {sampling.start_opl!r}",
+             f"count = {sampling.count}",
+             "[model]", f"attenuation = {json.dumps(scene.attenuation)}", f"tolerance = {scene.tolerance!r}"]
+    path = folder / (name or f"{scene.name}.toml")
+    path.write_text("\n".join(lines) + "\n")
     return path

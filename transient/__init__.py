@@ -2,7 +2,8 @@
 
 ``backend`` picks the Mitsuba variant and a libLLVM Dr.Jit survives, and
 registers the plugins: ``sensor`` (``omni_point``), ``plane``
-(``transient_opl``, the single-plane estimator) and ``path``
+(``transient_opl``, the single-plane estimator, with ``plane_sampling``: its
+sampling techniques and their mixture density) and ``path``
 (``transient_opl_path``, diffuse scenes with several bounces) and ``nlos``
 (``transient_opl_nlos``, the third bounce through a relay wall), which share
 ``common`` (S(u), the attenuation, sample streams, jittered points, the

@@ -22,7 +22,8 @@ Only the reflectance texture is float32 (Mitsuba's bitmaps are), and so is
 the (u, v) that looks it up: a point within a float32 rounding (~6e-8 of
 the plane) of a pixel border may read the neighbouring pixel, either way.
 
-How x is drawn (measured in the README; :func:`techniques`):
+How x is drawn (measured in the README; :func:`techniques` chooses, the
+techniques themselves are :mod:`transient.plane_sampling`):
 
 - **by solid angle from the source** (spherical-rectangle sampling):
   p(x) ∝ cos θ_s / d_s², so the weight I ρ Ω_s cos θ_k / (π d_k²) stays
@@ -50,7 +51,6 @@ Import only after :func:`transient.backend.select_variant`.
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
 
 import drjit as dr
 import mitsuba as mi
@@ -61,8 +61,10 @@ from analytic.attenuation import ATTENUATIONS, attenuation_code
 from . import spherical_rectangle
 from .chunks import ReplicaLayout, checked_chunk
 from .intensity import emitter_intensity
-from .common import attenuation, deposit, height_over_cube, is_diffuse, jittered_point, opaque_f64, \
-    opaque_u32, reduce_mode, replica_of, sample_stream, time_axis_and_waveform
+from .common import attenuation, deposit, is_diffuse, jittered_point, opaque_f64, opaque_u32, reduce_mode, \
+    replica_of, sample_stream, time_axis_and_waveform
+from .plane_sampling import AREA, AREA_SAMPLING_RATIO, SOLID_ANGLE, Technique, block_bounds, mixture_density, \
+    peak_ratio, sampling_kind, warp
 
 __all__ = ["TransientPlaneIntegrator", "PLUGIN_NAME", "Technique", "techniques", "plane_frame",
            "AREA_SAMPLING_RATIO", "PEAK_RATIO_LIMIT", "STRATEGIES", "SAMPLERS",
@@ -78,13 +80,6 @@ STRATEGIES = ("mis", "source", "area")
 #: Point sets per technique: jittered-stratified, or independent uniform.
 SAMPLERS = ("stratified", "independent")
 
-#: A point whose density h / d³ varies by less than this factor r over the
-#: rectangle is sampled by area: the variance of area sampling is then
-#: within (1 + r)² / (4 r) = 4/3 of the solid angle's (Kantorovich's
-#: bound), while the solid angle's map costs 1.2 to 1.6 times as much per
-#: sample (measured on 2 CPU cores with 1 and 16 sensors; see the README).
-AREA_SAMPLING_RATIO = 3.0
-
 #: A sensor gets a sampling technique of its own when, with points drawn by
 #: the source alone, the largest weight cos θ_k / d_k² / p_s(x) exceeds its
 #: mean by more than this factor (the relative variance it bounds).
@@ -97,30 +92,6 @@ SOURCE_SHARE = 0.5
 # Agreement demanded between the double-precision geometry this plugin is
 # given and the float32 copy Mitsuba built the scene from: its rounding, with room.
 _FLOAT32_MATCH = 1e-6
-
-AREA, SOLID_ANGLE = 0, 1
-
-
-class Technique(NamedTuple):
-    """One way of drawing plane points, and its share of each replica.
-
-    Attributes
-    ----------
-    kind : int
-        ``AREA`` (uniform, p = 1 / (a b)) or ``SOLID_ANGLE`` (p = h / (Ω d³)
-        from ``point``).
-    point : (float, float, float)
-        (x, y, h) in the plane's frame, metres: the source or a sensor.
-    share : float
-        Fraction of each replica's samples drawn this way.
-    rectangle : SphericalRectangle or None
-        The constants of the solid-angle map (``SOLID_ANGLE`` only).
-    """
-
-    kind: int
-    point: tuple
-    share: float
-    rectangle: object
 
 
 def plane_frame(matrix: np.ndarray):
@@ -154,46 +125,6 @@ def plane_frame(matrix: np.ndarray):
     return corner, edge_x / width, edge_y / height, normal / np.linalg.norm(normal), width, height
 
 
-def _peak_ratio(source: Technique, sensor, width: float, height: float) -> float:
-    """max over x of cos θ_k / d_k² / p_s(x), over its mean ∫ cos θ_s cos θ_k / (d_s² d_k²) dx.
-
-    The mean comes from a fixed 64 x 64 stratified estimate by the
-    sensor's own solid angle (the integrand's peak), which is accurate to
-    far better than the factor this ratio is compared with.
-    """
-    if _kind_for(sensor, width, height) == AREA:
-        # its h / d³ varies under AREA_SAMPLING_RATIO over the rectangle: no peak to tame (and a
-        # rectangle it sees under an unresolvably small solid angle has no spherical set-up)
-        return 1.0
-    sx, sy, sh = source.point
-    kx, ky, kh = sensor
-    nearest = math.hypot(max(0.0, -kx, kx - width), max(0.0, -ky, ky - height))
-    closest = math.sqrt(nearest**2 + kh**2)
-    if source.kind == SOLID_ANGLE:
-        peak = source.rectangle.solid_angle * kh / closest**3
-    else:
-        source_nearest = math.hypot(max(0.0, -sx, sx - width), max(0.0, -sy, sy - height))
-        peak = width * height * sh / math.hypot(source_nearest, sh) ** 3 * kh / closest**3
-    own = spherical_rectangle.setup(sensor, width, height)
-    cells = (np.arange(64) + 0.5) / 64
-    u, v = np.meshgrid(cells, cells)
-    x, y = (np.array(c, dtype=np.float64) for c in
-            spherical_rectangle.sample(own, mi.Float64(u.ravel()), mi.Float64(v.ravel())))
-    source_squared = (x - sx) ** 2 + (y - sy) ** 2 + sh * sh
-    # ∫ (h_s / d_s³)(h_k / d_k³) dA by the sensor's own solid angle: the sensor factor is Ω_k p_k.
-    mean = own.solid_angle * float(np.mean(sh / (source_squared * np.sqrt(source_squared))))
-    return peak / mean
-
-
-def _kind_for(point, width: float, height: float) -> int:
-    """``AREA`` where h / d³ varies by less than :data:`AREA_SAMPLING_RATIO` over the rectangle."""
-    x, y, h = point
-    nearest = math.hypot(max(0.0, -x, x - width), max(0.0, -y, y - height))
-    farthest = math.hypot(max(abs(x), abs(x - width)), max(abs(y), abs(y - height)))
-    ratio = (math.hypot(farthest, h) / math.hypot(nearest, h)) ** 3
-    return AREA if ratio < AREA_SAMPLING_RATIO else SOLID_ANGLE
-
-
 def techniques(source, sensors, width: float, height: float, strategy: str = "mis") -> list[Technique]:
     """The sampling techniques of a scene and their shares, source first.
 
@@ -225,32 +156,19 @@ def techniques(source, sensors, width: float, height: float, strategy: str = "mi
         return [Technique(AREA, source, 1.0, None)]
     if strategy not in STRATEGIES:
         raise ValueError(f"strategy must be one of {STRATEGIES}, got {strategy!r}")
-    kind = _kind_for(source, width, height)
+    kind = sampling_kind(source, width, height)
     rectangle = spherical_rectangle.setup(source, width, height) if kind == SOLID_ANGLE else None
     first = Technique(kind, source, 1.0, rectangle)
     if strategy == "source":
         return [first]
     peaked = [tuple(float(v) for v in sensor) for sensor in np.asarray(sensors, dtype=np.float64)
-              if sensor[2] > 0.0 and _peak_ratio(first, sensor, width, height) > PEAK_RATIO_LIMIT]
+              if sensor[2] > 0.0 and peak_ratio(first, sensor, width, height) > PEAK_RATIO_LIMIT]
     if not peaked:
         return [first]
     share = (1.0 - SOURCE_SHARE) / len(peaked)
     return [first._replace(share=SOURCE_SHARE)] + [
         Technique(SOLID_ANGLE, sensor, share, spherical_rectangle.setup(sensor, width, height))
         for sensor in peaked]
-
-
-def _block_bounds(shares, replica_size: int) -> list[int]:
-    """First sample index of each technique's block in a replica, and n at the end.
-
-    Block t holds round(n Σ_{s<t} share_s) ... : every technique with a
-    positive share gets at least one sample when n >= number of techniques.
-    """
-    cumulative = np.concatenate([[0.0], np.cumsum(shares)])
-    bounds = [int(round(c * replica_size)) for c in cumulative[:-1]] + [int(replica_size)]
-    for t in range(1, len(bounds) - 1):      # never an empty block when n allows
-        bounds[t] = min(max(bounds[t], bounds[t - 1] + 1), replica_size - (len(bounds) - 1 - t))
-    return bounds
 
 
 class TransientPlaneIntegrator(mi.SamplingIntegrator):
@@ -481,7 +399,7 @@ class TransientPlaneIntegrator(mi.SamplingIntegrator):
         rng = sample_stream(opaque_u32(seed), mi.UInt32(index), mi.UInt32(index >> 32))
         replica, in_replica = replica_of(mi.Float64(lane) + opaque_f64(first - first_replica * size),
                                          opaque_f64(size))
-        bounds = _block_bounds([t.share for t in plan], size)
+        bounds = block_bounds([t.share for t in plan], size)
         technique = mi.UInt32(0)                                      # which technique draws x
         block_start = opaque_u32(0)                                   # its block in the replica
         block_size = opaque_u32(bounds[1] - bounds[0])
@@ -496,11 +414,11 @@ class TransientPlaneIntegrator(mi.SamplingIntegrator):
         else:
             u, v = jitter_u, jitter_v
 
-        x, y = self._warp(plan, technique, u, v)
+        x, y = warp(plan, technique, u, v, self.width, self.height)
         reflectance = self._reflectance(plane, x, y)
         # The balance heuristic: every point is weighted by the density of all techniques together.
         shares = [opaque_f64((bounds[t + 1] - bounds[t]) / size) for t in range(len(plan))]
-        weight_scale = reflectance / self._mixture(plan, shares, x, y)
+        weight_scale = reflectance / mixture_density(plan, shares, x, y, self.width, self.height)
 
         histogram = dr.zeros(mi.Float64, layout.histogram_rows * K * N)
         mode = reduce_mode()
@@ -518,44 +436,6 @@ class TransientPlaneIntegrator(mi.SamplingIntegrator):
                     terms=terms, taps=taps, mode=mode)
         dr.eval(histogram)
         return np.array(histogram, dtype=np.float64).reshape(-1, K, N)[:rows]
-
-    def _warp(self, plan, technique, u, v):
-        """The plane point of (u, v) under each sample's technique."""
-        area = (u * self.width, v * self.height)
-        kinds = {t.kind for t in plan}
-        if kinds == {AREA}:
-            return area
-        solid = [t for t in plan if t.kind == SOLID_ANGLE]
-        if len(solid) == 1:
-            rectangle = solid[0].rectangle
-        else:
-            # Gather each sample's constants (area techniques read a solid-angle one, unused).
-            order = [t if t.kind == SOLID_ANGLE else solid[0] for t in plan]
-            fields = spherical_rectangle.SphericalRectangle._fields
-            gathered = {}
-            for name in fields:
-                if name == "point":
-                    continue
-                table = mi.Float64([getattr(t.rectangle, name) for t in order])
-                gathered[name] = dr.gather(mi.Float64, table, technique)
-            points = [mi.Float64([t.rectangle.point[i] for t in order]) for i in range(3)]
-            gathered["point"] = tuple(dr.gather(mi.Float64, p, technique) for p in points)
-            rectangle = spherical_rectangle.SphericalRectangle(**gathered)
-        x, y = spherical_rectangle.sample(rectangle, u, v)
-        if kinds == {SOLID_ANGLE}:
-            return x, y
-        is_area = dr.gather(mi.Bool, mi.Bool([t.kind == AREA for t in plan]), technique)
-        return dr.select(is_area, area[0], x), dr.select(is_area, area[1], y)
-
-    def _mixture(self, plan, shares, x, y):
-        """p(x) = Σ_t share_t p_t(x), per square metre: the density of the whole replica's points."""
-        total = mi.Float64(0.0)
-        for technique, share in zip(plan, shares):
-            if technique.kind == AREA:
-                total += share / (self.width * self.height)
-            else:
-                total += share * height_over_cube(x, y, technique.point) / technique.rectangle.solid_angle
-        return total
 
     def _reflectance(self, plane, x, y):
         """ρ(x) from the rectangle's own BSDF texture (as Mitsuba stores it: float32), Float64.

@@ -1,15 +1,18 @@
-"""A scene outside the one-bounce model: two planes meeting at a corner.
+"""A scene outside the one-bounce model: two rectangles meeting at a corner.
 
 Floor [0, 1]² x {0} (normal +z) and wall {0} x [0, 1]² (normal +x), both
 diffuse with one albedo, a point source and omnidirectional sensors inside
-the corner. Nothing occludes a single bounce there, so the one-bounce
-transient is exactly the floor's model plus the wall's model (the wall seen
-in its own frame by the rotation (x, y, z) -> (y, z, x)); light that bounces
-between the planes is outside the analytic model. :func:`check_corner`
-renders with max_depth = 1 (must agree with the model) and max_depth = 3
-(reports the share of further bounces, and, when mitransient is installed,
-judges the three-bounce transient against mitransient's ``transient_path``
-of the same scene: a renderer nobody here wrote).
+the corner: one scene of two rectangles (:class:`analytic.geometry.Rectangle`,
+each lit face turned into the corner) and one set of point pairs (the
+source and each sensor). Nothing occludes a single bounce there, so the one-bounce
+transient is the sum over the rectangles of
+:func:`analytic.system.rectangle_matrix` times the albedo; light that
+bounces between the rectangles is outside the analytic model.
+:func:`check_corner` renders with max_depth = 1 (must agree with the model)
+and max_depth = 3 (reports the share of further bounces, and, when
+mitransient is installed, judges the three-bounce transient against
+mitransient's ``transient_path`` of the same scene: a renderer nobody here
+wrote).
 """
 
 from __future__ import annotations
@@ -18,10 +21,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from analytic.scene import Sampling, Scene
-from analytic.system import forward
+from analytic.geometry import PointPairs, Rectangle
+from analytic.scene import Illumination, Sampling, check_heights
+from analytic.system import rectangle_matrix
+from analytic.waveforms import make_waveform
 
-__all__ = ["Corner", "default_corner", "corner_model", "render_corner", "check_corner", "corner_against_mitransient"]
+__all__ = ["Corner", "default_corner", "corner_rectangles", "corner_pairs", "corner_model", "render_corner",
+           "check_corner", "corner_against_mitransient"]
+
+#: Side of the floor and of the wall, metres.
+CORNER_SIZE = 1.0
 
 
 @dataclass(frozen=True)
@@ -36,22 +45,61 @@ class Corner:
 
 
 def default_corner() -> Corner:
+    """Source and two sensors inside the corner, albedo 0.5, 60 bins of 0.05 m from 0.6 m."""
     return Corner(name="corner", source=(0.6, 0.4, 0.7), sensors=((0.5, 0.6, 0.8), (0.3, 0.2, 0.4)),
                   albedo=0.5, sampling=Sampling(bin_width_opl=0.05, start_opl=0.6, count=60))
 
 
-def _planes(corner: Corner) -> list[Scene]:
-    source = np.asarray(corner.source, float)
-    sensors = np.asarray(corner.sensors, float)
-    rotate = [1, 2, 0]                                    # the wall onto z = 0
-    return [Scene(name=f"{corner.name}-{part}", size=1.0, pixels=1, reflectance=corner.albedo,
-                  source=s, sensors=k, sampling=corner.sampling)
-            for part, s, k in (("floor", source, sensors), ("wall", source[rotate], sensors[:, rotate]))]
+def corner_rectangles() -> tuple[Rectangle, Rectangle]:
+    """The floor and the wall, each lit face turned into the corner, one pixel each (the albedo is uniform).
+
+    Returns
+    -------
+    (Rectangle, Rectangle)
+        The floor [0, 1]² x {0}, u along x and v along y (normal +z), and
+        the wall {0} x [0, 1]², u along y and v along z (normal u x v = +x,
+        into the corner).
+    """
+    origin = np.zeros(3)
+    x, y, z = np.eye(3) * CORNER_SIZE
+    return Rectangle(origin, x, y, 1), Rectangle(origin, y, z, 1)
+
+
+def corner_pairs(corner: Corner) -> PointPairs:
+    """One pair per sensor (the source, sensor k), shared by both rectangles.
+
+    The source's intensity is 1 W/sr and the attenuation Lambertian, as the
+    renders of :func:`render_corner` have them.
+
+    Raises
+    ------
+    SceneError
+        The source or a sensor outside the corner, or too close to either
+        rectangle to resolve (:func:`analytic.scene.check_heights`, in each
+        rectangle's frame).
+    """
+    sensors = np.asarray(corner.sensors, dtype=np.float64).reshape(-1, 3)
+    sources = np.repeat(np.asarray(corner.source, dtype=np.float64).reshape(1, 3), len(sensors), axis=0)
+    for rectangle in corner_rectangles():
+        check_heights(CORNER_SIZE, rectangle.local(sources[0]), rectangle.local(sensors))
+    return PointPairs(sources, sensors)
 
 
 def corner_model(corner: Corner) -> np.ndarray:
-    """One-bounce model: floor + wall, ``(K, N)``."""
-    return sum(forward(plane) for plane in _planes(corner))
+    """One-bounce model of the corner: Σ over its rectangles of A_rectangle times the albedo.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(K, N)`` float64, units of y for a 1 W/sr source.
+    """
+    pairs = corner_pairs(corner)
+    waveform = make_waveform(Illumination(), corner.sampling.bin_width_opl)
+    total = np.zeros(len(pairs) * corner.sampling.count)
+    for rectangle in corner_rectangles():
+        matrix = rectangle_matrix(rectangle, pairs, corner.sampling, waveform)
+        total += matrix @ np.full(rectangle.pixels ** 2, float(corner.albedo))
+    return total.reshape(len(pairs), corner.sampling.count)
 
 
 def render_corner(corner: Corner, *, spp: int, seed: int, max_depth: int, variant: str | None = None):

@@ -18,15 +18,14 @@ import os
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
-from pathlib import Path
 
 import numpy as np
 import OpenEXR
 import pytest
 
-from analytic.files import save_exr
 from analytic.scene import Illumination, Sampling, Scene, SceneError
 from analytic.system import forward
+from scene_files import write_scene_file
 from transient.export import RADIUS, export_scene, plane_to_world_matrix
 from validation.cli import main
 from validation.compare import assert_transients_agree
@@ -81,7 +80,7 @@ def test_refusals(tmp_path):
 
 
 def test_export_command(tmp_path, capsys):
-    scene_file = write_scene_file(tmp_path, [[0.8, 0.3, 1.0]])
+    scene_file = write_scene_file(tmp_path, small_scene(sensors=[(0.8, 0.3, 1.0)]))
     assert run_command("export", scene_file, "--format", "mitsuba", "--out", tmp_path / "ours") == 0
     assert (tmp_path / "ours" / "scene.xml").is_file() and (tmp_path / "ours" / "reflectance.exr").is_file()
     for argv, words in ((("--format", "mitsuba", "--radius", "0.01"), "--radius/--spp"),
@@ -163,27 +162,6 @@ def run_command(*argv) -> int:
     return main([*map(str, argv), "--quiet"])
 
 
-def write_scene_file(tmp_path, sensors) -> Path:
-    image = np.arange(16, dtype=np.float64).reshape(4, 4) / 20.0
-    save_exr(tmp_path / "image.exr", image)
-    path = tmp_path / "small.toml"
-    path.write_text(f"""name = "small"
-[plane]
-size = 1.0
-pixels = 4
-reflectance = "image.exr"
-[source]
-position = [0.5, 0.5, 1.0]
-[sensors]
-positions = {json.dumps(sensors)}
-[sampling]
-period = 0.05
-start = 1.7
-count = 24
-""")
-    return path
-
-
 @needs_mitransient
 # 8 (4) mitransient seeds are too few replicas for sign flips: the independent-bin limits and their
 # CorrelationWarning are expected here (tests/validation/test_compare.py tests that fallback).
@@ -195,7 +173,7 @@ def test_mitransient_renders_of_the_exported_scene_check_after_the_fit(tmp_path)
     irradiancemeter's conventions (scale 1/4, offset 2r/3 + RayEpsilon) and
     agrees after them.
     """
-    scene_file = write_scene_file(tmp_path, [[0.8, 0.3, 1.0], [0.25, 0.7, 0.8]])
+    scene_file = write_scene_file(tmp_path, small_scene())
     assert run_command("export", scene_file, "--format", "mitransient", "--out", tmp_path / "xml") == 0
     replicas = 8
     render_mitransient(tmp_path / "xml" / "scene.xml", 2**21, replicas, tmp_path)
@@ -220,7 +198,7 @@ def test_mitransient_renders_of_the_exported_scene_check_after_the_fit(tmp_path)
 @pytest.mark.filterwarnings("ignore::validation.compare.CorrelationWarning")
 def test_mitransient_save_frames_folders_are_replicas(tmp_path):
     """mitransient.vis.save_frames writes 000.exr ... per bin: one sensor's film, one folder per seed."""
-    scene_file = write_scene_file(tmp_path, [[0.8, 0.3, 1.0]])
+    scene_file = write_scene_file(tmp_path, small_scene(sensors=[(0.8, 0.3, 1.0)]))
     assert run_command("export", scene_file, "--format", "mitransient", "--out", tmp_path / "xml") == 0
     render_mitransient(tmp_path / "xml" / "scene.xml", 2**20, 4, tmp_path, mode="frames")
     folders = [tmp_path / f"frames_{seed}" for seed in range(4)]

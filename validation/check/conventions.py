@@ -15,6 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from analytic.scene import Scene
+# Mitsuba's ``math::RayEpsilon`` in single-precision variants (1500 x 2⁻²⁴ m): an irradiancemeter starts its
+# rays this far off its sphere (mitransient runs float32 variants). One definition, the renderer's.
+from transient.constants import RAY_EPSILON as RAY_EPSILON_FLOAT32
 
 from .fit import Fit
 
@@ -34,10 +37,6 @@ KNOWN_SCALES = (
     (0.25 / math.pi, "reads radiance averaged over directions (fluence / 4π)"),
     (4.0 * math.pi, "reads 4π times the fluence"),
 )
-
-#: Mitsuba's ``math::RayEpsilon`` in single-precision variants (1500 x 2⁻²⁴ m): an
-#: irradiancemeter starts its rays this far off its sphere (mitransient runs float32 variants).
-RAY_EPSILON_FLOAT32 = 1500 * 2.0**-24
 
 
 @dataclass(frozen=True)

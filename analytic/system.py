@@ -138,19 +138,22 @@ def _count(pairs, mode, grid, axis, lead, duration, per_pixel, widest):
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _fill(pairs, mode, grid, axis, terms, rtol, width, begin, end, indptr, rows, data, failures, smooth):
+def _fill(pairs, mode, grid, axis, terms, rtol, width, begin, end, indptr, rows, data, failures, smooth, lit):
     """Entries of columns begin ... end - 1 into their CSC slots (rows, data), in blocks dealt to the threads."""
     blocks = failures.shape[0]
     for block in prange(blocks):
-        failed, served = _fill_block(pairs, mode, grid, axis, terms, rtol, width, begin + block, end, blocks,
-                                     indptr, rows, data)
+        failed, served, reached = _fill_block(pairs, mode, grid, axis, terms, rtol, width, begin + block, end,
+                                              blocks, indptr, rows, data)
         failures[block] += failed
         smooth[block] += served
+        lit[block] += reached
 
 
 @njit(cache=True, error_model="numpy")
 def _fill_block(pairs, mode, grid, axis, terms, rtol, width, first, end, stride, indptr, rows, data):
-    """Columns first, first + stride, ... < end; returns (quadrature pieces failed, pairs the smooth route served).
+    """Columns first, first + stride, ... < end.
+
+    Returns (quadrature pieces failed, pairs the smooth route served, pairs whose light reaches a bin).
 
     One sequential function per block, so that the per-pair kernels inline into it (a real call per
     pair would pay a reference count on each of the scratch's arrays; inlined into the parallel loop
@@ -158,6 +161,7 @@ def _fill_block(pairs, mode, grid, axis, terms, rtol, width, first, end, stride,
     """
     scratch = make_scratch(width)
     served = 0
+    reached = 0
     for p in range(first, end, stride):
         box = pixel_box(grid, p)
         offset = indptr[p]
@@ -168,13 +172,14 @@ def _fill_block(pairs, mode, grid, axis, terms, rtol, width, first, end, stride,
             run = pixel_bins(low, high, pair_axis, terms.lead, terms.duration)
             if run.bins == 0:
                 continue
+            reached += 1
             for i in range(run.bins):
                 rows[offset + i] = k * axis.count + run.first + i
             if _pair_entries(frame, box, low, high, terms, pair_axis, run, rtol, data[offset:offset + run.bins],
                              scratch):
                 served += 1
             offset += run.bins
-    return scratch.work.failures[0] + scratch.inner.failures[0] + scratch.moments.failures[0], served
+    return scratch.work.failures[0] + scratch.inner.failures[0] + scratch.moments.failures[0], served, reached
 
 
 class _Problem(NamedTuple):
@@ -270,7 +275,7 @@ def count_entries(scene: Scene, *, memory_limit: int | None = None) -> np.ndarra
 
 
 def system_matrix(scene: Scene, *, tolerance: float | None = None, memory_limit: int | None = None,
-                  progress: bool = False) -> scipy.sparse.csr_array:
+                  progress: bool = False, statistics: dict | None = None) -> scipy.sparse.csr_array:
     """Assemble A for a scene.
 
     Parameters
@@ -285,6 +290,10 @@ def system_matrix(scene: Scene, *, tolerance: float | None = None, memory_limit:
         Bytes A may use; see :func:`count_entries`.
     progress : bool
         Show a progress bar over the pixels.
+    statistics : dict, optional
+        Filled with ``pairs`` (the (pair, pixel) combinations whose light
+        reaches a bin) and ``smooth_pairs`` (those the smooth route served;
+        the others were cut by a kernel breakpoint or near a foot).
 
     Returns
     -------
@@ -315,13 +324,13 @@ def system_matrix(scene: Scene, *, tolerance: float | None = None, memory_limit:
     tolerance = check_tolerance(scene.tolerance if tolerance is None else tolerance)
     rectangle, pairs = scene.geometry()
     return rectangle_matrix(rectangle, pairs, scene.sampling,
-                            make_waveform(scene.illumination, scene.sampling.bin_width_opl),
+                            make_waveform(scene.illumination, scene.sampling.bin_width_opl), statistics=statistics,
                             tolerance=tolerance, memory_limit=memory_limit, progress=progress)
 
 
 def rectangle_matrix(rectangle: Rectangle, pairs: PointPairs, sampling: Sampling, waveform: Waveform, *,
                      tolerance: float = 1e-6, memory_limit: int | None = None,
-                     progress: bool = False) -> scipy.sparse.csr_array:
+                     progress: bool = False, statistics: dict | None = None) -> scipy.sparse.csr_array:
     """Assemble A for a rectangle seen through point pairs (:mod:`analytic.geometry`).
 
     Parameters
@@ -340,6 +349,8 @@ def rectangle_matrix(rectangle: Rectangle, pairs: PointPairs, sampling: Sampling
         Bytes A may use (default half the memory available).
     progress : bool
         Show a progress bar over the pixels.
+    statistics : dict, optional
+        Filled as :func:`system_matrix` says.
 
     Returns
     -------
@@ -361,6 +372,7 @@ def rectangle_matrix(rectangle: Rectangle, pairs: PointPairs, sampling: Sampling
     blocks = max(1, _BLOCKS_PER_THREAD * _threads())
     failures = np.zeros(blocks, dtype=np.int64)
     smooth = np.zeros(blocks, dtype=np.int64)
+    lit = np.zeros(blocks, dtype=np.int64)
     chunks = min(100, columns) if progress else 1
     bounds = np.linspace(0, columns, chunks + 1).astype(np.int64)
     bar = None
@@ -369,11 +381,13 @@ def rectangle_matrix(rectangle: Rectangle, pairs: PointPairs, sampling: Sampling
         bar = tqdm(total=columns, desc="system matrix", unit="pixel", leave=False)
     for begin, end in itertools.pairwise(bounds):
         _fill(problem.pairs, problem.mode, problem.grid, problem.axis, waveform.terms, SAFETY * tolerance, width,
-              int(begin), int(end), indptr, rows, data, failures, smooth)
+              int(begin), int(end), indptr, rows, data, failures, smooth, lit)
         if bar is not None:
             bar.update(int(end - begin))
     if bar is not None:
         bar.close()
+    if statistics is not None:
+        statistics.update(pairs=int(lit.sum()), smooth_pairs=int(smooth.sum()))
     if failures.sum():
         warnings.warn(f"{int(failures.sum())} quadrature pieces stopped refining before reaching "
                       f"tolerance {tolerance:g}", QuadratureWarning, stacklevel=2)

@@ -1,33 +1,33 @@
-"""Speed, memory and accuracy of the exact system matrix A, against a brute force.
+"""Speed, memory and accuracy of the exact system matrix A, against a brute force and an earlier version.
 
-    python benchmarks/bench_model.py --out out/bench_model [--quick]
-        [--forward-command "{python} -m validation.cli forward {scene} --out {out} --quiet"]
+    python benchmarks/bench_model.py --out out/bench_model [--quick] [--before REV]
 
 Measures, on this machine (named in the output, with its load average):
 
-1. ``forward`` end to end, process start to files written (the command
-   is a parameter), against the brute-force script (benchmarks/supersampled.py:
-   32 x 32 samples per pixel at M = 50, 8 x 8 at M = 256, K = 16) on the
-   same scene file, interleaved runs, best and median.
-2. Where ``forward``'s time goes: Python start, imports, Numba's first
-   dispatch (cache load), A, y = A f, matplotlib's import and the figure
-   (which forward runs in a forked process, beside the rest), each in a
-   fresh process, and the rest of the command (files, exit).
-3. A's build against the same supersampling in one process, with every
-   entry's error relative to its row's largest against a tight assembly
-   (tolerance MIN_TOLERANCE).
-4. Scaling: time, CPU time, non-zeros, time per non-zero and peak memory
+1. A's build in one process, after a warm-up call (the honest measure of the
+   model: interpreter start-up is not the model), against NumPy midpoint
+   supersampling (benchmarks/supersampled.py: 32 x 32 samples per pixel at
+   M = 50, 8 x 8 at M = 256, K = 16) in the same process: the ratio, and
+   every entry's error relative to its row's largest against a tight
+   assembly. With ``--before REV`` the same child script runs on the
+   project as it was at git revision REV (``git archive``, its own Numba
+   cache, warmed first), so that before and after are one run's numbers.
+2. ``forward`` at M = 1024, K = 16 end to end (process start to files
+   written) and its peak resident memory, now and at REV.
+3. Scaling: time, CPU time, non-zeros, time per non-zero and peak memory
    against M (64 ... 1024, K = 16) and against K (1 ... 64, M = 256), each
-   in a fresh process.
+   in a fresh process, with the share of (pair, pixel) combinations that a
+   kernel breakpoint cuts (or a foot is near) and the cost of one: the
+   smooth pairs' cost per pair is measured on the same scene with one bin
+   that no edge crosses, and the cut pairs' cost is the rest of the time
+   over their number.
+4. ``forward`` and the brute-force script end to end at M = 50 and 256
+   (interleaved runs, best and median).
 5. The tolerance setting: build time and achieved error (against the tight
-   assembly) from 1e-2 to 1e-8 on the default scene, both as each entry's
-   relative error (what the tolerance bounds) and against its row's largest.
+   assembly) from 1e-2 to 1e-8 on the default scene.
 
-The project's modules are compiled first, as scripts/setup.sh does (a
-machine with PYTHONDONTWRITEBYTECODE would otherwise recompile them at every
-start of ``forward``). Prints markdown tables and writes ``results.json`` in
---out. Timings on a shared machine are provisional: compare ratios taken in
-the same run.
+Prints markdown tables and writes ``results.json`` in --out. Timings on a
+shared machine are provisional: compare ratios taken in the same run.
 """
 
 from __future__ import annotations
@@ -52,7 +52,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np  # noqa: E402
 
-from analytic.io import save_json  # noqa: E402
+from analytic.files import save_json  # noqa: E402
 from analytic.scene import default_scene  # noqa: E402
 from analytic.system import MIN_TOLERANCE, QuadratureWarning, system_matrix  # noqa: E402
 from supersampled import supersampled  # noqa: E402
@@ -76,7 +76,8 @@ def load() -> str:
 
 def scene_file(folder: Path, pixels: int, grid: int) -> Path:
     """The default scene's geometry (source 1 m above the centre, grid x grid sensors of extent 1 m,
-    T = 0.1 m, 40 bins from 0, impulse, lambertian) with M = pixels and a uniform reflectance."""
+    T = 0.1 m, the 10 bins from 2 m that hold the light, impulse, lambertian) with M = pixels and a
+    uniform reflectance."""
     path = folder / f"scene_M{pixels}_K{grid * grid}.toml"
     path.write_text(f"""[plane]
 size = 1.0
@@ -96,8 +97,8 @@ center = [0.5, 0.5, 1.0]
 
 [sampling]
 period = 0.1
-start = 0.0
-count = 40
+start = 2.0
+count = 10
 
 [model]
 attenuation = "lambertian"
@@ -105,55 +106,31 @@ attenuation = "lambertian"
     return path
 
 
-def run(command: str) -> float:
-    """Wall seconds of a command, process start to exit (it must succeed)."""
-    environment = dict(os.environ, PYTHONPATH=str(ROOT))
+def run(command: str, root: Path = ROOT) -> float:
+    """Wall seconds of a command, process start to exit (it must succeed), with the project at ``root``."""
+    return run_measured(command, root)[0]
+
+
+def run_measured(command: str, root: Path = ROOT) -> tuple[float, int]:
+    """(wall seconds, peak resident bytes) of a command, process start to exit (it must succeed)."""
+    environment = dict(os.environ, PYTHONPATH=f"{root}{os.pathsep}{Path(__file__).resolve().parent}")
     started = time.perf_counter()
-    subprocess.run(shlex.split(command), check=True, env=environment, stdout=subprocess.DEVNULL)
-    return time.perf_counter() - started
+    process = subprocess.Popen(shlex.split(command), env=environment, cwd=root, stdout=subprocess.DEVNULL)
+    _, status, usage = os.wait4(process.pid, 0)
+    seconds = time.perf_counter() - started
+    process.returncode = os.waitstatus_to_exitcode(status)
+    if process.returncode != 0:
+        raise subprocess.CalledProcessError(process.returncode, command)
+    return seconds, usage.ru_maxrss * 1024
 
 
-def child(code: str) -> dict:
-    """Run a Python snippet in a fresh process; it prints one JSON object."""
-    environment = dict(os.environ, PYTHONPATH=str(ROOT))
+def child(code: str, root: Path = ROOT) -> dict:
+    """Run a Python snippet in a fresh process with the project at ``root``; it prints one JSON object."""
+    environment = dict(os.environ, PYTHONPATH=f"{root}{os.pathsep}{Path(__file__).resolve().parent}")
     done = subprocess.run([sys.executable, "-c", code], check=True, env=environment, capture_output=True,
-                          text=True)
+                          text=True, cwd=root)
     return json.loads(done.stdout.strip().splitlines()[-1])
 
-
-BREAKDOWN = """
-import time, json
-t0 = time.perf_counter()
-import numpy, scipy.sparse
-t1 = time.perf_counter()
-import numba
-t2 = time.perf_counter()
-from analytic.scene_file import load_scene
-from analytic.system import system_matrix
-t3 = time.perf_counter()
-scene = load_scene({scene!r})
-system_matrix(scene.replace(pixels=2, reflectance=0.5))
-t4 = time.perf_counter()
-matrix = system_matrix(scene)
-t5 = time.perf_counter()
-y = matrix @ scene.reflectance.ravel()
-t6 = time.perf_counter()
-from matplotlib.backends import backend_agg
-from matplotlib import figure
-t7 = time.perf_counter()
-import io
-from validation.plots import model_figure
-model_figure(scene.sampling, y.reshape(scene.sensor_count, -1), title="x").savefig(io.BytesIO(), format="png")
-t8 = time.perf_counter()
-print(json.dumps(dict(numpy_scipy=t1 - t0, numba=t2 - t1, analytic=t3 - t2, first_dispatch=t4 - t3,
-                      matrix=t5 - t4, product=t6 - t5, matplotlib=t7 - t6, figure=t8 - t7)))
-"""
-
-#: Runs of each end-to-end command (short, and the most sensitive to a shared machine's load).
-END_TO_END_REPEATS = 7
-
-#: Parts of the breakdown that ``forward`` runs in its forked figure process, beside the others.
-FORKED_PARTS = ("matplotlib", "figure")
 
 SCALING = """
 import time, json, resource, warnings
@@ -168,18 +145,66 @@ def resident_kib(field):
 
 scene = load_scene({scene!r})
 system_matrix(scene.replace(pixels=2, reflectance=0.5))
+statistics = {{}}
 with open("/proc/self/clear_refs", "w") as handle:     # reset the peak (VmHWM) to the current size
     handle.write("5")
 before = resident_kib("VmRSS")
 wall = time.perf_counter()
 cpu = time.process_time()
-matrix = system_matrix(scene)
+matrix = system_matrix(scene, statistics=statistics)
 wall = time.perf_counter() - wall
 cpu = time.process_time() - cpu
 peak = resident_kib("VmHWM")
+from analytic.scene import Sampling
+uncut = scene.replace(sampling=Sampling(bin_width_opl=100.0, start_opl=0.0, count=1))
+uncut_statistics = {{}}
+uncut_cpu = time.process_time()
+system_matrix(uncut, statistics=uncut_statistics)
+uncut_cpu = time.process_time() - uncut_cpu
 print(json.dumps(dict(seconds=wall, cpu_seconds=cpu, nnz=int(matrix.nnz), rss_before_kib=before, rss_peak_kib=peak,
-                      matrix_bytes=int(matrix.data.nbytes + matrix.indices.nbytes + matrix.indptr.nbytes))))
+                      matrix_bytes=int(matrix.data.nbytes + matrix.indices.nbytes + matrix.indptr.nbytes),
+                      uncut_cpu_seconds=uncut_cpu, **statistics,
+                      uncut_smooth_pairs=uncut_statistics["smooth_pairs"])))
 """
+
+
+IN_PROCESS = """
+import json, time
+from analytic.scene import default_scene
+from analytic.system import system_matrix
+from supersampled import supersampled
+
+def best(function, repeats):
+    times = []
+    for _ in range(repeats):
+        started = time.perf_counter()
+        function()
+        times.append(time.perf_counter() - started)
+    return min(times)
+
+system_matrix(default_scene(pixels=2, noise=None))          # compile or load the cached kernels
+rows = []
+for pixels, factor in ((50, 32), (256, 8)):
+    scene = default_scene(pixels=pixels, noise=None)
+    sampling = scene.sampling
+    exact = best(lambda: system_matrix(scene), {repeats})
+    brute = best(lambda: supersampled(scene.size, pixels, scene.source, scene.sensors, sampling.start_opl,
+                                      sampling.bin_width_opl, sampling.count, factor, scene.intensity), {repeats})
+    rows.append(dict(M=pixels, factor=factor, exact_seconds=exact, brute_seconds=brute, ratio=exact / brute))
+print(json.dumps(rows))
+"""
+
+WARM = "{python} -c 'from analytic.scene import default_scene; from analytic.system import forward; " \
+       "forward(default_scene(pixels=4, noise=None))'"
+
+
+def checkout(revision: str) -> Path:
+    """The project's files at a git revision, in a temporary folder (``git archive``: no git state changes)."""
+    folder = Path(tempfile.mkdtemp(prefix="bench_model_before_"))
+    archive = subprocess.run(["git", "-C", str(ROOT), "archive", "--format=tar", revision], check=True,
+                             capture_output=True).stdout
+    subprocess.run(["tar", "-x", "-C", str(folder)], input=archive, check=True)
+    return folder
 
 
 def best(function, repeats):
@@ -219,17 +244,21 @@ def table(header, rows):
     print()
 
 
+def in_process(root: Path, repeats: int) -> list:
+    """Section 1's timings by the project at ``root``, in one fresh process after its warm-up."""
+    return child(IN_PROCESS.format(repeats=repeats), root)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default="out/bench_model")
     parser.add_argument("--quick", action="store_true", help="skip M = 512, 1024 and K = 64; fewer repeats")
-    parser.add_argument("--forward-command", default=FORWARD,
-                        help="end-to-end command; {python}, {scene} and {out} are filled in")
+    parser.add_argument("--before", metavar="REV", help="also time the project at this git revision")
     args = parser.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     repeats = 2 if args.quick else 3
-    results = {"machine": machine(), "load_average_start": load(), "forward_command": args.forward_command}
+    results = {"machine": machine(), "load_average_start": load(), "before": args.before}
     print(f"machine: {results['machine']}; load average at start {results['load_average_start']} "
           f"(shared machine: timings provisional)\n")
     for package in ("analytic", "transient", "validation"):  # as scripts/setup.sh does
@@ -237,15 +266,87 @@ def main():
     system_matrix(default_scene(pixels=2, noise=None))       # compile or load the cached kernels
     work = Path(tempfile.mkdtemp(prefix="bench_model_"))
     python = shlex.quote(sys.executable)
+    versions = {"now": ROOT}
+    if args.before:
+        versions = {f"before ({args.before})": checkout(args.before), "now": ROOT}
+        run(WARM.format(python=python), versions[f"before ({args.before})"])   # its kernels compiled once
 
-    # 1. end to end
+    # 1. A against the brute force, in one process
+    rows, comparison = [], []
+    for label, root in versions.items():
+        for entry in in_process(root, repeats):
+            entry["version"] = label
+            comparison.append(entry)
+            rows.append([label, str(entry["M"]), f"{entry['factor']}x{entry['factor']}",
+                         f"{entry['exact_seconds']:.3f}", f"{entry['brute_seconds']:.3f}", f"{entry['ratio']:.2f}"])
+    results["in_process"] = comparison
+    print(f"A's build against midpoint supersampling, in one process after a warm-up call (default scene, "
+          f"K = 16, tolerance 1e-6; best of {repeats}):\n")
+    table(["version", "M", "brute force", "exact A (s)", "brute (s)", "exact / brute"], rows)
+
+    errors = []
+    for pixels, factor in ((50, 32), (256, 8)):
+        scene = default_scene(pixels=pixels, noise=None)
+        reference = tight(scene)
+        sampling = scene.sampling
+        brute = supersampled(scene.size, pixels, scene.source, scene.sensors, sampling.start_opl,
+                             sampling.bin_width_opl, sampling.count, factor, scene.intensity)
+        errors.append({"M": pixels, "factor": factor, "exact_error": error_against(system_matrix(scene), reference),
+                       "brute_error": error_against(brute, reference)})
+    results["errors"] = errors
+    print("Their accuracy (max |A - A_tight| / row max, A_tight at tolerance 1e-10):\n")
+    table(["M", "exact error", "brute error"],
+          [[str(e["M"]), f"{e['exact_error']:.1e}", f"{e['brute_error']:.1e} ({e['factor']}x{e['factor']})"]
+           for e in errors])
+
+    # 2. forward at M = 1024, end to end, with its peak memory
+    if not args.quick:
+        path = scene_file(work, 1024, 4)
+        rows, big = [], []
+        for label, root in versions.items():
+            runs = [run_measured(FORWARD.format(python=python, scene=path, out=work / "f1024"), root)
+                    for _ in range(2)]
+            seconds, peak = min(r[0] for r in runs), max(r[1] for r in runs)
+            big.append({"version": label, "seconds": seconds, "peak_bytes": peak})
+            rows.append([label, f"{seconds:.2f}", f"{peak / 2**30:.2f}"])
+        results["forward_1024"] = big
+        print("`forward` at M = 1024, K = 16 (10 bins of 0.1 m), process start to files written (best of 2) "
+              "and peak resident memory:\n")
+        table(["version", "seconds", "peak memory (GiB)"], rows)
+
+    # 3. scaling, with the cut pairs' share and cost
+    sizes = (64, 128, 256) if args.quick else (64, 128, 256, 512, 1024)
+    grids = (1, 2, 4) if args.quick else (1, 2, 4, 8)
+    scaling = []
+    for pixels, grid in [(m, 4) for m in sizes] + [(256, g) for g in grids if g != 4]:
+        entry = child(SCALING.format(scene=str(scene_file(work, pixels, grid))))
+        entry.update(M=pixels, K=grid * grid)
+        scaling.append(entry)
+    results["scaling"] = scaling
+    print("Scaling (fresh process each; memory = growth of the peak resident size while A is built, A itself "
+          "included; cut = pairs a kernel breakpoint crosses or near a foot; smooth cost per pair from the same "
+          "scene with one uncut bin, cut cost = the rest of the CPU time over the cut pairs):\n")
+    rows = []
+    for entry in sorted(scaling, key=lambda e: (e["K"] != 16, e["K"], e["M"])):
+        growth = max(entry["rss_peak_kib"] - entry["rss_before_kib"], 0) * 1024
+        cut = entry["pairs"] - entry["smooth_pairs"]
+        smooth_cost = entry["uncut_cpu_seconds"] / max(entry["uncut_smooth_pairs"], 1)
+        cut_cost = max(entry["cpu_seconds"] - entry["smooth_pairs"] * smooth_cost, 0.0) / max(cut, 1)
+        entry.update(cut_pairs=cut, smooth_cost_seconds=smooth_cost, cut_cost_seconds=cut_cost)
+        rows.append([str(entry["M"]), str(entry["K"]), f"{entry['seconds']:.2f}", f"{entry['cpu_seconds']:.2f}",
+                     f"{entry['nnz']:,}", f"{entry['seconds'] / entry['nnz'] * 1e6:.2f}",
+                     f"{growth / 2**20:.0f}", f"{growth / entry['nnz']:.0f}",
+                     f"{cut / max(entry['pairs'], 1):.1%}", f"{smooth_cost * 1e6:.2f}", f"{cut_cost * 1e6:.1f}"])
+    table(["M", "K", "wall (s)", "CPU (s)", "nnz", "µs per nnz (wall)", "memory (MiB)", "bytes per nnz",
+           "cut pairs", "µs per smooth pair (CPU)", "µs per cut pair (CPU)"], rows)
+
+    # 4. end to end against the brute-force script
     rows, ends = [], []
     for pixels, factor in ((50, 32), (256, 8)):
         path = scene_file(work, pixels, 4)
         forward_times, brute_times = [], []
-        for _ in range(END_TO_END_REPEATS):     # interleaved, so that a busy spell hits both alike
-            forward_times.append(run(args.forward_command.format(python=python, scene=path,
-                                                                 out=work / f"f{pixels}")))
+        for _ in range(5):     # interleaved, so that a busy spell hits both alike
+            forward_times.append(run(FORWARD.format(python=python, scene=path, out=work / f"f{pixels}")))
             brute_times.append(run(BRUTE.format(python=python, scene=path, factor=factor, out=work / f"b{pixels}")))
         entry = {"M": pixels, "factor": factor, "forward_seconds": forward_times, "brute_seconds": brute_times,
                  "ratio_of_bests": min(forward_times) / min(brute_times),
@@ -256,71 +357,8 @@ def main():
                      f"{min(brute_times):.2f} / {statistics.median(brute_times):.2f}",
                      f"{entry['ratio_of_bests']:.2f} / {entry['ratio_of_medians']:.2f}"])
     results["end_to_end"] = ends
-    print(f"End to end, process start to files written ({END_TO_END_REPEATS} interleaved runs each; best / "
-          f"median); forward = `{args.forward_command}`:\n")
+    print("End to end, process start to files written (5 interleaved runs each; best / median):\n")
     table(["M", "brute force", "forward (s)", "brute script (s)", "forward / brute"], rows)
-
-    # 2. where forward's time goes
-    scene50 = scene_file(work, 50, 4)
-    startup = min(run(f"{python} -c pass") for _ in range(repeats))
-    parts = [child(BREAKDOWN.format(scene=str(scene50))) for _ in range(repeats)]
-    parts = {"python_start": startup, **{key: min(p[key] for p in parts) for key in parts[0]}}
-    total = min(ends[0]["forward_seconds"])
-    serial = sum(value for key, value in parts.items() if key not in FORKED_PARTS)
-    parts["rest_of_command"] = total - serial
-    results["forward_breakdown"] = {**parts, "total": total}
-    print("Where forward's time goes (M = 50, K = 16; each part best of fresh processes; the total is the "
-          "best run above; matplotlib and the figure run in forward's forked figure process, beside the command's "
-          "parts; the rest is the total less the command's parts: writing files, exit, waiting for the "
-          "figure):\n")
-    table(["part", "seconds", "share of the total"],
-          [[key.replace("_", " "), f"{value:.3f}",
-            "(forked, beside)" if key in FORKED_PARTS else f"{value / total:.0%}"] for key, value in parts.items()]
-          + [["total", f"{total:.3f}", ""]])
-
-    # 3. A against the brute force, in this process
-    rows, comparison = [], []
-    for pixels, factor in ((50, 32), (256, 8)):
-        scene = default_scene(pixels=pixels, noise=None)
-        reference = tight(scene)
-        exact_seconds, exact = best(lambda scene=scene: system_matrix(scene), repeats)
-        sampling = scene.sampling
-        brute_seconds, brute = best(
-            lambda scene=scene, pixels=pixels, factor=factor, sampling=sampling: supersampled(
-                scene.size, pixels, scene.source, scene.sensors, sampling.start_opl, sampling.bin_width_opl,
-                sampling.count, factor, scene.intensity), repeats)
-        entry = {"M": pixels, "K": scene.sensor_count, "factor": factor, "exact_seconds": exact_seconds,
-                 "exact_error": error_against(exact, reference), "brute_seconds": brute_seconds,
-                 "brute_error": error_against(brute, reference), "ratio": exact_seconds / brute_seconds,
-                 "nnz": int(exact.nnz)}
-        comparison.append(entry)
-        rows.append([str(pixels), f"{factor}x{factor}", f"{exact_seconds:.3f}", f"{entry['exact_error']:.1e}",
-                     f"{brute_seconds:.3f}", f"{entry['brute_error']:.1e}", f"{entry['ratio']:.2f}"])
-    results["against_brute_force"] = comparison
-    print("A's build against midpoint supersampling (K = 16, tolerance 1e-6; same process, best of "
-          f"{repeats}; error = max |A - A_tight| / row max):\n")
-    table(["M", "brute force", "exact (s)", "exact error", "brute (s)", "brute error", "exact / brute"], rows)
-
-    # 4. scaling
-    sizes = (64, 128, 256) if args.quick else (64, 128, 256, 512, 1024)
-    grids = (1, 2, 4) if args.quick else (1, 2, 4, 8)
-    scaling = []
-    for pixels, grid in [(m, 4) for m in sizes] + [(256, g) for g in grids if g != 4]:
-        entry = child(SCALING.format(scene=str(scene_file(work, pixels, grid))))
-        entry.update(M=pixels, K=grid * grid)
-        scaling.append(entry)
-    results["scaling"] = scaling
-    print("Scaling (fresh process each; memory = growth of the peak resident size while A is built, "
-          "A itself included):\n")
-    rows = []
-    for entry in sorted(scaling, key=lambda e: (e["K"] != 16, e["K"], e["M"])):
-        growth = max(entry["rss_peak_kib"] - entry["rss_before_kib"], 0) * 1024
-        rows.append([str(entry["M"]), str(entry["K"]), f"{entry['seconds']:.2f}", f"{entry['cpu_seconds']:.2f}",
-                     f"{entry['nnz']:,}", f"{entry['seconds'] / entry['nnz'] * 1e6:.2f}",
-                     f"{growth / 2**20:.0f}", f"{growth / entry['nnz']:.0f}",
-                     f"{entry['matrix_bytes'] / 2**20:.1f}"])
-    table(["M", "K", "wall (s)", "CPU (s)", "nnz", "µs per nnz (wall)", "memory (MiB)", "bytes per nnz",
-           "A (MiB)"], rows)
 
     # 5. tolerance: what it bounds (each entry's relative error) and the error against each row's largest
     scene = default_scene(noise=None)

@@ -1,4 +1,5 @@
-"""Scene files: TOML <-> :class:`analytic.scene.Scene` (docs/design.md section 5).
+"""Scene files: TOML <-> :class:`analytic.scene.Scene` (docs/design.md section 5), or
+:class:`analytic.relay_wall.RelayWallScene` when the file has a ``[relay_wall]`` table (section 7).
 
 Missing tables and keys take the defaults docs/design.md section 5 lists; an
 unknown key is an error, so a typo never falls back to a default. Every bad
@@ -50,7 +51,7 @@ _SCHEMA = {
 }
 
 
-def _table(data: dict, name: str) -> dict:
+def _table(data: dict, name: str, schema: dict = _SCHEMA) -> dict:
     table = data.get(name, {})
     if isinstance(table, list):
         raise SceneError(name, f"expected one table [{name}], got an array of tables [[{name}]]; "
@@ -58,8 +59,8 @@ def _table(data: dict, name: str) -> dict:
     if not isinstance(table, dict):
         raise SceneError(name, f"expected a table [{name}], got {table!r}")
     for key in table:
-        if key not in _SCHEMA[name]:
-            raise SceneError(f"{name}.{_key_name(key)}", _unknown_key(key, _SCHEMA[name]))
+        if key not in schema[name]:
+            raise SceneError(f"{name}.{_key_name(key)}", _unknown_key(key, schema[name]))
     return table
 
 
@@ -87,6 +88,21 @@ def _refuse_dates(value: Any, key: str) -> None:
     elif isinstance(value, list):
         for index, item in enumerate(value):
             _refuse_dates(item, f"{key}[{index}]")
+
+
+#: The tables of a relay-wall (NLOS) scene file (docs/design.md section 7).
+_RELAY_WALL_SCHEMA = {
+    "name": None,
+    "relay_wall": {"size", "reflectance"},
+    "hidden": {"center", "u", "v", "pixels", "reflectance"},
+    "laser": {"position", "intensity"},
+    "sensor": {"position"},
+    "scan": {"type", "grid", "laser_point", "laser_grid", "account_first_and_last_bounces"},
+    "illumination": _SCHEMA["illumination"],
+    "sampling": _SCHEMA["sampling"],
+    "model": {"tolerance"},
+    "noise": _SCHEMA["noise"],
+}
 
 
 def _sensors(table: dict) -> Any:
@@ -133,6 +149,8 @@ def scene_from_dict(data: dict, base_dir: str | Path = ".", *, name: str = "scen
         Naming the key and the problem.
     """
     _refuse_dates(data, "")
+    if "relay_wall" in data:
+        return _relay_wall_scene(data, base_dir, name)
     for key in data:
         if key not in _SCHEMA:
             raise SceneError(_key_name(key), _unknown_key(key, _SCHEMA))
@@ -142,21 +160,10 @@ def scene_from_dict(data: dict, base_dir: str | Path = ".", *, name: str = "scen
     sampling = _table(data, "sampling")
     model = _table(data, "model")
     pixels = _integer("plane.pixels", plane.get("pixels", 50))
-    reflectance = plane.get("reflectance", 0.5)
-    if isinstance(reflectance, str) and not reflectance:
-        raise SceneError("plane.reflectance", "empty string; give a number in [0, 1] or an image file "
-                                              "(.png or .exr, relative to the scene file)")
-    if isinstance(reflectance, str):
-        try:
-            reflectance = read_reflectance(Path(base_dir) / reflectance, pixels)
-        except ImageError as error:
-            raise SceneError("plane.reflectance", str(error)) from None
+    reflectance = _image(plane, "plane.reflectance", pixels, base_dir)
     noise = Noise(**_table(data, "noise")) if "noise" in data else None
-    label = data.get("name", name)
-    if not isinstance(label, str):
-        raise SceneError("name", f"expected a string, got {label!r}")
     return Scene(
-        name=printable(label),
+        name=_label(data, name),
         size=plane.get("size", 1.0),
         pixels=pixels,
         reflectance=reflectance,
@@ -171,28 +178,107 @@ def scene_from_dict(data: dict, base_dir: str | Path = ".", *, name: str = "scen
     )
 
 
+def _label(data: dict, name: str) -> str:
+    label = data.get("name", name)
+    if not isinstance(label, str):
+        raise SceneError("name", f"expected a string, got {label!r}")
+    return printable(label)
+
+
+def _image(table: dict, key: str, pixels: int, base_dir) -> Any:
+    """A reflectance key: a number, an array, or an image file relative to the scene file."""
+    reflectance = table.get("reflectance", 0.5)
+    if isinstance(reflectance, str) and not reflectance:
+        raise SceneError(key, "empty string; give a number in [0, 1] or an image file "
+                              "(.png or .exr, relative to the scene file)")
+    if isinstance(reflectance, str):
+        try:
+            return read_reflectance(Path(base_dir) / reflectance, pixels)
+        except ImageError as error:
+            raise SceneError(key, str(error)) from None
+    return reflectance
+
+
+def _relay_wall_scene(data: dict, base_dir, name: str):
+    """A capture through a relay wall from the tables of docs/design.md section 7."""
+    from .relay_wall import RelayWallScene, Scan
+
+    for key in data:
+        if key not in _RELAY_WALL_SCHEMA:
+            problem = _unknown_key(key, _RELAY_WALL_SCHEMA)
+            if key in ("plane", "source", "sensors"):
+                problem = (f"not used with [relay_wall] (the hidden rectangle is [hidden], the laser [laser], "
+                           f"the sensor [sensor], the read points [scan]); remove [{key}]")
+            raise SceneError(_key_name(key), problem)
+    tables = {key: _table(data, key, _RELAY_WALL_SCHEMA) for key in _RELAY_WALL_SCHEMA if key != "name"}
+    wall, hidden, laser, scan = tables["relay_wall"], tables["hidden"], tables["laser"], tables["scan"]
+    pixels = _integer("hidden.pixels", hidden.get("pixels", 32))
+    defaults = RelayWallScene.__dataclass_fields__
+    noise = Noise(**tables["noise"]) if "noise" in data else None
+    return RelayWallScene(
+        name=_label(data, name),
+        wall_size=wall.get("size", defaults["wall_size"].default),
+        wall_reflectance=wall.get("reflectance", defaults["wall_reflectance"].default),
+        center=hidden.get("center", defaults["center"].default), u=hidden.get("u", defaults["u"].default),
+        v=hidden.get("v", defaults["v"].default), pixels=pixels,
+        reflectance=_image(hidden, "hidden.reflectance", pixels, base_dir),
+        laser_position=laser.get("position", defaults["laser_position"].default),
+        intensity=laser.get("intensity", defaults["intensity"].default),
+        sensor_position=tables["sensor"].get("position", defaults["sensor_position"].default),
+        scan=Scan(**scan),
+        illumination=Illumination(**tables["illumination"]),
+        sampling=Sampling(**{_SAMPLING_FIELDS[key]: value for key, value in tables["sampling"].items()}),
+        tolerance=tables["model"].get("tolerance", 1e-6),
+        noise=noise,
+    )
+
+
+def _relay_wall_tables(scene) -> dict:
+    image = scene.reflectance
+    uniform = bool(np.all(image == image.flat[0]))
+    scan = {"type": scene.scan.type, "grid": list(scene.scan.grid),
+            "account_first_and_last_bounces": bool(scene.scan.account_first_and_last_bounces)}
+    if scene.scan.laser_point is not None:
+        scan["laser_point"] = np.asarray(scene.scan.laser_point).tolist()
+    if scene.scan.laser_grid is not None:
+        scan["laser_grid"] = list(scene.scan.laser_grid)
+    return {
+        "relay_wall": {"size": list(scene.wall_size), "reflectance": scene.wall_reflectance},
+        "hidden": {"center": scene.center.tolist(), "u": scene.u.tolist(), "v": scene.v.tolist(),
+                   "pixels": scene.pixels, "reflectance": float(image.flat[0]) if uniform else np.array(image)},
+        "laser": {"position": scene.laser_position.tolist(), "intensity": scene.intensity},
+        "sensor": {"position": scene.sensor_position.tolist()},
+        "scan": scan,
+        "model": {"tolerance": scene.tolerance},
+    }
+
+
 def scene_to_tables(scene: Scene) -> dict:
     """The scene as TOML tables that :func:`scene_from_dict` reads back to an equal scene.
 
     The reflectance is the image array itself (or its constant value when
     uniform); write it to a PNG or EXR to put it in a file.
     """
-    image = scene.reflectance
-    uniform = bool(np.all(image == image.flat[0]))
     illumination = {key: getattr(scene.illumination, key)
                     for key in ("width", "cutoff", "duration", "order")
                     if getattr(scene.illumination, key) is not None}
-    tables = {
-        "name": scene.name,
-        "plane": {"size": scene.size, "pixels": scene.pixels,
-                  "reflectance": float(image.flat[0]) if uniform else np.array(image)},
-        "source": {"position": scene.source.tolist(), "intensity": scene.intensity},
-        "illumination": {"waveform": scene.illumination.waveform, **illumination},
-        "sensors": {"positions": scene.sensors.tolist()},
-        "sampling": {"period": scene.sampling.bin_width_opl, "start": scene.sampling.start_opl,
-                     "count": scene.sampling.count},
-        "model": {"attenuation": scene.attenuation, "tolerance": scene.tolerance},
-    }
+    common = {"illumination": {"waveform": scene.illumination.waveform, **illumination},
+              "sampling": {"period": scene.sampling.bin_width_opl, "start": scene.sampling.start_opl,
+                           "count": scene.sampling.count}}
+    if not isinstance(scene, Scene):
+        tables = {"name": scene.name, **_relay_wall_tables(scene), **common}
+    else:
+        image = scene.reflectance
+        uniform = bool(np.all(image == image.flat[0]))
+        tables = {
+            "name": scene.name,
+            "plane": {"size": scene.size, "pixels": scene.pixels,
+                      "reflectance": float(image.flat[0]) if uniform else np.array(image)},
+            "source": {"position": scene.source.tolist(), "intensity": scene.intensity},
+            "sensors": {"positions": scene.sensors.tolist()},
+            **common,
+            "model": {"attenuation": scene.attenuation, "tolerance": scene.tolerance},
+        }
     if scene.noise is not None:
         noise = scene.noise
         own = {"sigma": noise.sigma} if noise.kind == "gaussian" else {"photons": noise.photons}

@@ -49,7 +49,7 @@ from analytic.scene import Scene, SceneError
 
 from .intensity import emitter_intensity
 
-__all__ = ["export_scene", "FORMATS", "RADIUS", "SPP", "plane_to_world_matrix"]
+__all__ = ["export_scene", "FORMATS", "RADIUS", "SPP", "plane_to_world_matrix", "MITRANSIENT_IMPULSE_ONLY"]
 
 FORMATS = ("mitsuba", "mitransient")
 
@@ -58,6 +58,14 @@ RADIUS = 1e-3
 
 #: Default samples per irradiancemeter for mitransient (``$spp`` in the XML).
 SPP = 2**20
+
+#: Why a pulse (square, Butterworth, ...) is not exported for mitransient (the README quotes it). Its
+#: point emitter emits a Dirac pulse and its film bins each path by floor((length - start_opl) /
+#: bin_width_opl), a box; its integrators read ``temporal_filter`` and discard it. A pulse's bin is
+#: ∫_bin (g * s) = ∫ g(τ) κ_n(τ) dτ, with κ_n a ramp wherever the pulse straddles a bin edge: box-binned
+#: samples of g (sums of g over bins) give it only in the limit of ever finer bins, so no export is exact.
+MITRANSIENT_IMPULSE_ONLY = ('mitransient renders the impulse response only; export the scene with '
+                            'waveform = "impulse" and convolve, or use our render')
 
 # Plugin names of this package (transient/plane.py, transient/sensor.py); kept
 # here as strings so that exporting never imports Mitsuba.
@@ -242,9 +250,9 @@ registered (the variant chosen by diffuse-imaging):
 from transient.backend import select_variant
 select_variant()
 import mitsuba as mi
-scene = mi.load_file("scene.xml")
-sums, squares = scene.integrator().render_transient(scene, seed=0, first_sample=0, sample_count=2**22)
-y = sums / 2**22          # (K, N), the same estimate as `diffuse-imaging render`
+from transient.render import render_loaded
+result = render_loaded(mi.load_file("scene.xml"), spp=2**22, seed=0)
+y, stderr = result.mean, result.stderr    # (K, N), the same estimate as `diffuse-imaging render`
 ```
 """,
     "mitransient": """# {name}: Mitsuba 3 scene for mitransient
@@ -309,7 +317,8 @@ def export_scene(scene: Scene, out_dir: str | Path, format: str, *, radius: floa
         Unknown format, a bad radius or spp, or either given for ``mitsuba``.
     SceneError
         ``mitransient`` with a waveform other than the impulse
-        (``illumination.waveform``): its point emitter emits a Dirac pulse;
+        (``illumination.waveform``, :data:`MITRANSIENT_IMPULSE_ONLY`): its
+        point emitter emits a Dirac pulse and its film has no temporal filter;
         a reflectance or an intensity that float32 (the texture's EXR,
         Mitsuba's float variants) cannot hold
         (:func:`analytic.files.float32_problem`).
@@ -326,13 +335,12 @@ def export_scene(scene: Scene, out_dir: str | Path, format: str, *, radius: floa
         raise ValueError(f"format: must be one of {', '.join(FORMATS)}, got {format!r}")
     if format == "mitsuba" and (radius is not None or spp is not None):
         raise ValueError("radius, spp: apply to format 'mitransient' only (our omni_point sensors are "
-                         "points; render_transient takes the sample count)")
+                         "points; render_loaded takes the sample count)")
     radius = RADIUS if radius is None else float(radius)
     spp = SPP if spp is None else int(spp)
     if format == "mitransient":
         if scene.illumination.waveform != "impulse":
-            raise SceneError("illumination.waveform", f"mitransient renders an impulse only, not "
-                             f"{scene.illumination.waveform!r}; export with format 'mitsuba'")
+            raise SceneError("illumination.waveform", MITRANSIENT_IMPULSE_ONLY)
         lowest = float(np.min(scene.sensors[:, 2]))
         if not (0.0 < radius < lowest):
             raise ValueError(f"radius: must lie in (0, {lowest:g}) m (below the lowest sensor's height), "

@@ -27,7 +27,10 @@ With ``out_dir`` the folder holds, every file written atomically:
 - ``transient.{npy,exr,h5}``, ``stderr.npy``, ``replicas.npy`` (the R
   replica means, ``(R, K, N)``, whose mean is ``transient.npy``) and
   ``meta.json`` with ``"complete": true``: only when every replica is done;
-  ``partial/`` is then removed.
+  ``partial/`` is then removed. A new render's first checkpoint removes an
+  earlier render's complete files (and its figure, :data:`FIGURE_FILE`)
+  from the folder together with replacing its state, so complete-looking
+  files are always those of the folder's own state.
 
 ``resume=True`` refuses a state that is missing, unreadable, corrupted,
 inconsistent or from another scene, seed, variant or sample plan, with a
@@ -50,7 +53,7 @@ from typing import Callable
 
 import numpy as np
 
-from analytic.files import build_meta, save_npy, staged_writes, write_transient
+from analytic.files import build_meta, discard, save_npy, staged_writes, write_transient
 from analytic.resources import require_memory
 from analytic.scene import Scene
 from analytic.window import window_share
@@ -60,7 +63,8 @@ from .render_state import (STATE_FILE, load_state, read_saved_render, save_scene
                            state_identity)
 
 __all__ = ["RenderResult", "RenderInterrupted", "render", "resume", "render_loaded", "sigterm_as_interrupt",
-           "DEFAULT_CHUNK", "DEFAULT_CHUNK_GPU", "FIRST_CHUNK", "PARTIAL_FOLDER", "REPLICAS_FILE", "MAX_SAMPLES"]
+           "DEFAULT_CHUNK", "DEFAULT_CHUNK_GPU", "FIRST_CHUNK", "PARTIAL_FOLDER", "REPLICAS_FILE", "FIGURE_FILE",
+           "MAX_SAMPLES"]
 
 #: Largest chunk on a CPU, samples: one fused kernel of this width keeps
 #: memory flat (only the per-replica K x N sums are stored) and takes well
@@ -89,6 +93,13 @@ _CHECKPOINT_SECONDS = 5.0
 
 # What write_transient and this module write into a partial folder (and nothing else is removed from it).
 _OUTPUT_FILES = ("transient.npy", "transient.exr", "transient.h5", "stderr.npy", REPLICAS_FILE, "meta.json")
+
+#: The figure ``diffuse-imaging render`` draws beside a complete render's files.
+FIGURE_FILE = "transient.png"
+
+# A complete render's files: an earlier render's are removed when a new render's first state replaces its
+# state, so that a folder never shows complete-looking results that its state does not hold.
+_FINAL_FILES = (*_OUTPUT_FILES, FIGURE_FILE)
 
 
 class RenderInterrupted(KeyboardInterrupt):
@@ -253,10 +264,12 @@ def _remove_partial(folder: Path) -> None:
 class _Outputs:
     """The files a render writes into its folder: state, scene, and the estimate (partial or complete)."""
 
-    def __init__(self, folder: Path, scene: Scene, identity: dict):
+    def __init__(self, folder: Path, scene: Scene, identity: dict, *, fresh: bool):
         self.folder, self.scene, self.identity = folder, scene, identity
         # Written again by every run (a resumed one too): a damaged or missing copy is repaired.
         self.scene_saved = False
+        # A new render replaces the folder's state: an earlier render's results go with it.
+        self.fresh = fresh
         self.share = window_share(scene)
 
     def checkpoint(self, accumulator: ReplicaAccumulator, *, complete: bool) -> None:
@@ -264,7 +277,11 @@ class _Outputs:
         if not self.scene_saved:
             save_scene(self.folder, self.scene)
             self.scene_saved = True
-        save_state(self.folder / STATE_FILE, self.identity, accumulator)
+        with staged_writes():
+            save_state(self.folder / STATE_FILE, self.identity, accumulator)
+            for name in _FINAL_FILES if self.fresh else ():
+                discard(self.folder / name)
+        self.fresh = False
         if accumulator.completed < 2:
             return
         identity = self.identity
@@ -367,7 +384,7 @@ def render(scene: Scene, *, spp: int, seed: int = 0, out_dir: str | Path | None 
                    else ReplicaAccumulator(layout, shape))
     outputs = None
     if out_dir is not None:
-        outputs = _Outputs(out_dir, scene, identity)
+        outputs = _Outputs(out_dir, scene, identity, fresh=not resume)
         if not resume:
             _remove_partial(out_dir)          # an earlier render's estimate, not this one's
     started_at = accumulator.done
@@ -434,10 +451,10 @@ def resume(out_dir: str | Path, *, scene: Scene | None = None, spp: int | None =
     ------
     RenderStateError
         The state or the saved scene cannot be read, or an argument given
-        differs from the state's (each named, on one line).
+        differs from the state's (each named, on one line, before any
+        work: a scene by the keys that differ).
     """
-    saved = read_saved_render(out_dir, scene=scene)
-    return render(saved.scene, spp=saved.spp if spp is None else spp,
-                  seed=saved.seed if seed is None else seed, out_dir=saved.folder,
-                  variant=saved.variant if variant is None else variant, resume=True, chunk_size=chunk_size,
-                  progress=progress, on_chunk=on_chunk, replicas=saved.replicas, estimator=saved.estimator)
+    saved = read_saved_render(out_dir, scene=scene, spp=spp, seed=seed, variant=variant)
+    return render(saved.scene, spp=saved.spp, seed=saved.seed, out_dir=saved.folder, variant=saved.variant,
+                  resume=True, chunk_size=chunk_size, progress=progress, on_chunk=on_chunk,
+                  replicas=saved.replicas, estimator=saved.estimator)

@@ -262,39 +262,109 @@ class SavedRender:
     planned: int
 
 
-def read_saved_render(out_dir: str | Path, *, scene: Scene | None = None) -> SavedRender:
-    """The render saved in a folder, read and checked (state, checksum, scene).
+def _scene_differences(started: Scene, given: Scene) -> list[str]:
+    """The scene keys ("[sampling] start", ...) in which ``given`` differs from the scene a render was
+    started with, among those the renderer reads (not its name, noise or tolerance)."""
+    from analytic.scene_file import scene_to_tables
+
+    old, new = scene_to_tables(started), scene_to_tables(given)
+    found = []
+    for table in ("plane", "source", "illumination", "sensors", "sampling", "model"):
+        first, second = old.get(table, {}), new.get(table, {})
+        for key in sorted(set(first) | set(second)):
+            if (table, key) == ("model", "tolerance"):
+                continue
+            if (table, key) == ("plane", "reflectance"):
+                same = np.array_equal(started.reflectance, given.reflectance)
+            else:
+                same = first.get(key) == second.get(key)
+            if not same:
+                found.append(f"[{table}] {key} {_shown(second.get(key))} (the state's: {_shown(first.get(key))})")
+    return found
+
+
+def _shown(value) -> str:
+    """A scene value, short: an image by its shape, a list of points by their count."""
+    if isinstance(value, np.ndarray):
+        return f"a {value.shape[0]} x {value.shape[1]} image"
+    if isinstance(value, list) and len(value) > 2 and all(isinstance(item, list) for item in value):
+        return f"{len(value)} points"
+    return "absent" if value is None else json.dumps(value, default=_python_number)
+
+
+def _given_scene_mismatch(folder: Path, given: Scene, stored: dict, estimator: dict) -> str | None:
+    """What differs between a scene given for a resume and the state's (None when it is the state's)."""
+    if scene_fingerprint(given, estimator) == stored.get("fingerprint"):
+        return None
+    try:
+        started = _load_saved_scene(folder)
+    except RenderStateError:
+        started = None
+    differences = (_scene_differences(started, given)
+                   if started is not None and scene_fingerprint(started, estimator) == stored.get("fingerprint")
+                   else [])
+    if not differences:
+        return f"the scene given differs from the one the render was started with, saved in {SCENE_FILE}"
+    return f"the scene given differs from the one the render was started with in {', '.join(differences)}"
+
+
+def _argument_mismatches(stored: dict, *, spp: int | None, seed: int | None, variant: str | None) -> list[str]:
+    """Each of --spp, --seed, --variant given again for a resume that differs from the state's."""
+    given = {"requested": spp, "seed": seed, "variant": variant}
+    return [f"{flag} {given[key]} differs from the state's {stored.get(key)}"
+            for key, flag in (("requested", "--spp"), ("seed", "--seed"), ("variant", "--variant"))
+            if given[key] is not None and given[key] != stored.get(key)]
+
+
+def read_saved_render(out_dir: str | Path, *, scene: Scene | None = None, spp: int | None = None,
+                      seed: int | None = None, variant: str | None = None) -> SavedRender:
+    """The render saved in a folder, read and checked (state, checksum, scene, and what is given again).
 
     Parameters
     ----------
     out_dir : str or Path
         The render's folder.
     scene : Scene, optional
-        The scene given again: used instead of ``render_scene.npz`` (which
-        may then be missing or damaged). Whether it is the render's is
-        checked when the render resumes, with the other arguments.
+        The scene given again: it must be the state's (by its fingerprint:
+        its name, noise and tolerance may differ), and is used instead of
+        ``render_scene.npz`` (which may then be missing or damaged).
+    spp, seed : int, optional
+        Given again: each must be the state's (the sample count asked for,
+        the seed).
+    variant : str, optional
+        Given again: must be the state's Mitsuba variant.
 
     Raises
     ------
     RenderStateError
-        No folder, no state, an unreadable, corrupted or foreign state, or
+        No folder, no state, an unreadable, corrupted or foreign state;
         (no scene given) a saved scene that cannot be read or does not
-        match the state.
+        match the state; or anything given again that differs from the
+        state's, each named on the one line (a scene by its keys that
+        differ, when the saved scene can be read).
     """
     folder = Path(out_dir)
     stored, progress = _read_state(folder)
-    given = scene is not None
-    scene = scene if given else _load_saved_scene(folder)
     try:
-        spp, seed, variant = int(stored["requested"]), int(stored["seed"]), str(stored["variant"])
+        requested, saved_seed, saved_variant = int(stored["requested"]), int(stored["seed"]), str(stored["variant"])
         replicas, size = int(stored["replicas"]), int(stored["replica_size"])
         estimator = dict(stored["estimator"])
     except (KeyError, TypeError, ValueError) as error:
         raise RenderStateError(f"resume: {folder / STATE_FILE} lacks {error}; {_FRESH}") from None
-    if not given and scene_fingerprint(scene, estimator) != stored.get("fingerprint"):
-        raise RenderStateError(f"resume: {folder / SCENE_FILE} does not hold the scene of {folder / STATE_FILE}; "
-                               f"give the scene file again: diffuse-imaging render SCENE --resume {folder}")
-    return SavedRender(folder=folder, scene=scene, spp=spp, seed=seed, variant=variant, replicas=replicas,
-                       estimator=estimator, done=int(progress["done"]), planned=replicas * size)
-
-
+    mismatches = _argument_mismatches(stored, spp=spp, seed=seed, variant=variant)
+    if scene is not None:
+        differs = _given_scene_mismatch(folder, scene, stored, estimator)
+        mismatches += [differs] if differs is not None else []
+    if mismatches:
+        raise RenderStateError(f"resume: {'; '.join(mismatches)} (in {folder / STATE_FILE}); leave them out "
+                               f"to resume with the state's own (diffuse-imaging render --resume {folder}), "
+                               f"or render into a new --out")
+    if scene is None:
+        scene = _load_saved_scene(folder)
+        if scene_fingerprint(scene, estimator) != stored.get("fingerprint"):
+            raise RenderStateError(f"resume: {folder / SCENE_FILE} does not hold the scene of "
+                                   f"{folder / STATE_FILE}; give the scene file again: diffuse-imaging render "
+                                   f"SCENE --resume {folder}")
+    return SavedRender(folder=folder, scene=scene, spp=requested, seed=saved_seed, variant=saved_variant,
+                       replicas=replicas, estimator=estimator, done=int(progress["done"]),
+                       planned=replicas * size)

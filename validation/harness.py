@@ -168,10 +168,12 @@ def reconstruct_from_noisy_data(matrix, scene: Scene, model: np.ndarray, rendere
     dict
         ``noise`` (the scene's, None when noiseless), ``rule``, ``data`` (one
         sentence saying which data and rule gave each number), ``model``
-        and ``render``: {``psnr``, ``ssim``, ``lambda``, ``image``},
+        and ``render``: {``psnr``, ``ssim``, ``lambda``, ``image``,
+        ``warnings``: the inversion's warnings, ``{"category", "message"}``},
         ``oracle``: {``psnr``, ``lambda``, ``image``}, ``flat_psnr``.
     """
-    from analytic.inversion import flat_image_psnr, image_metrics, reconstruct
+    from analytic.inversion import (RankDeficiencyWarning, RegularizationWarning, flat_image_psnr, image_metrics,
+                                    reconstruct)
     from analytic.noise import add_noise
 
     truth = scene.reflectance
@@ -186,15 +188,25 @@ def reconstruct_from_noisy_data(matrix, scene: Scene, model: np.ndarray, rendere
     else:
         model_data, render_data, what = model, rendered, "no added noise"
     results = {}
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)     # rank-deficient A: regularised answer
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("ignore", RuntimeWarning)     # numerical notices of the solvers
+        # the inversion's own warnings change what a number means: kept for the report (and run's stderr)
+        warnings.simplefilter("always", RankDeficiencyWarning)
+        warnings.simplefilter("always", RegularizationWarning)
         for key, data in (("model", model_data), ("render", render_data)):
+            first = len(caught)
             result = reconstruct(matrix, data.ravel(), pixels, rule=rule, truth=truth, sigma=sigma,
                                  lambdas=lambdas)
             results[key] = {"image": result.image, "lambda": float(result.lam),
                             **{k: v for k, v in image_metrics(result.image, truth).items()
-                               if k in ("psnr", "ssim")}}
+                               if k in ("psnr", "ssim")},
+                            "warnings": [{"category": w.category.__name__, "message": str(w.message)}
+                                         for w in caught[first:]]}
         oracle = reconstruct(matrix, model_data.ravel(), pixels, rule="oracle", truth=truth, lambdas=lambdas)
+    for unexpected in caught:       # anything else goes on to the caller, as it did
+        if not issubclass(unexpected.category, (RankDeficiencyWarning, RegularizationWarning)):
+            warnings.warn_explicit(unexpected.message, unexpected.category, unexpected.filename,
+                                   unexpected.lineno)
     rule_name = rule if isinstance(rule, str) else f"λ = {rule:g}"
     return {
         "noise": None if noise is None else {"kind": noise.kind, "sigma": noise.sigma,

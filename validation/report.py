@@ -205,9 +205,12 @@ def _draw_scene(check, folder: Path, link: str, heading: str) -> list[str]:
         save_figure(reconstructions_figure(
             f"{check.name}: reconstructions (the best flat image scores {recon['flat_psnr']:.1f} dB)",
             check.scene.reflectance, panels), folder / "reconstructions.png")
+        notes = [f"- warning, from the {data}'s data: {entry['message']}" for data in ("model", "render")
+                 for entry in recon[data].get("warnings", ())]
         lines += ["", recon["data"] + f" λ chosen: {recon['model']['lambda']:.3g} (model's data), "
                                       f"{recon['render']['lambda']:.3g} (render's data); the oracle's "
                                       f"{recon['oracle']['lambda']:.3g}.",
+                  *([""] + notes if notes else []),
                   "", f"![reconstructions]({link}reconstructions.png)"]
     return lines
 

@@ -10,15 +10,18 @@ import warnings
 import pytest
 
 from analytic.window import WindowWarning
-from scene_files import write_scene
+from scene_files import GOOD, write_scene
 from validation.cli.program import OWN_PACKAGES, _OneLineWarnings
+
+# a window that holds the light and little else: no window warning on stderr
+FITTED = GOOD.replace("start = 0.0\ncount = 40", "start = 1.9\ncount = 10")
 
 FILES = {"transient.npy", "transient.exr", "transient.h5", "meta.json", "transient.png"}
 
 
 def _forward(tmp_path, out, **options):
     """``diffuse-imaging forward`` in a new process; its summary line names ``out``."""
-    scene = write_scene(tmp_path)
+    scene = write_scene(tmp_path, FITTED)
     environment = {**os.environ, **options.pop("env", {})}
     return subprocess.run([sys.executable, "-m", "validation.cli", "forward", str(scene), "--out", str(out)],
                           env=environment, timeout=300, **options)
@@ -45,8 +48,9 @@ def test_a_full_stdout_ends_with_one_line_and_status_2(tmp_path):
 
 def test_a_reader_that_stops_reading_costs_no_traceback(tmp_path):
     out = tmp_path / "out"
-    with subprocess.Popen([sys.executable, "-m", "validation.cli", "forward", str(write_scene(tmp_path)),
-                           "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE) as process:
+    scene = write_scene(tmp_path, FITTED)
+    with subprocess.Popen([sys.executable, "-m", "validation.cli", "forward", str(scene), "--out", str(out)],
+                          stdout=subprocess.PIPE, stderr=subprocess.PIPE) as process:
         process.stdout.close()          # as `| head -0` would: the summary line meets a closed pipe
         stderr = process.stderr.read()
         status = process.wait(timeout=300)
@@ -87,6 +91,7 @@ def test_main_installs_the_policy(tmp_path, capsys):
     from validation.cli import main
 
     with warnings.catch_warnings():
-        assert main(["forward", str(write_scene(tmp_path)), "--out", str(tmp_path / "out"), "--quiet"]) == 0
+        assert main(["forward", str(write_scene(tmp_path, FITTED)), "--out", str(tmp_path / "out"),
+                     "--quiet"]) == 0
         assert isinstance(warnings.showwarning, _OneLineWarnings)
     assert capsys.readouterr().err == ""

@@ -75,9 +75,43 @@ def test_a_window_that_cuts_the_response_warns_in_one_line(tmp_path, capsys):
     assert json.loads((tmp_path / "out" / "meta.json").read_text())["window_share"] < 0.999
 
 
+@pytest.mark.filterwarnings("default::analytic.window.WindowWarning")
+def test_a_mostly_empty_window_warns_in_one_line_with_the_covering_window(tmp_path, capsys):
+    # GOOD's window is [0, 4) m; its light spans about [2.0, 2.7] m: 33 of its 40 bins receive none
+    path = write_scene(tmp_path, GOOD)
+    assert main(["forward", str(path), "--out", str(tmp_path / "out"), "--quiet"]) == 0
+    warning = [line for line in capsys.readouterr().err.splitlines() if "warning" in line]
+    assert len(warning) == 1 and "is mostly empty: 33 of its 40 bins receive no light" in warning[0], warning
+    assert "[sampling] start = 2, count = 7 covers the light" in warning[0]
+    # and so it is: the light lies in bins 20 to 26
+    y = np.load(tmp_path / "out" / "transient.npy")
+    lit = np.flatnonzero(y[0] > 0)
+    assert (lit[0], lit[-1]) == (20, 26)
+
+
+@pytest.mark.filterwarnings("default::analytic.window.WindowWarning")
+def test_window_auto_takes_the_bins_that_hold_all_the_light(tmp_path, capsys):
+    path = write_scene(tmp_path, GOOD)
+    # the same period with the auto window: every bin that receives light, and no other
+    assert main(["forward", str(path), "--window", "auto", "--out", str(tmp_path / "auto"), "--quiet"]) == 0
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("diffuse-imaging: window: start 2 m, count 7 "), lines
+    meta = json.loads((tmp_path / "auto" / "meta.json").read_text())
+    assert (meta["start_opl"], meta["bins"], meta["bin_width_opl"], meta["window_share"]) == (2.0, 7, 0.1, 1.0)
+    assert main(["forward", str(path), "--out", str(tmp_path / "scene"), "--quiet"]) == 0
+    assert "mostly empty" in capsys.readouterr().err
+    whole, auto = np.load(tmp_path / "scene" / "transient.npy"), np.load(tmp_path / "auto" / "transient.npy")
+    # the box prefilter: the same bins, the same numbers (bin edges j T on both grids)
+    np.testing.assert_allclose(auto, whole[:, 20:27], rtol=1e-12, atol=0)
+    assert np.all(auto > 0)
+
+
+FITTED = GOOD.replace("start = 0.0\ncount = 40", "start = 1.9\ncount = 10")
+
+
 def test_intensity_scales_the_model_exactly(tmp_path):
-    bright = GOOD.replace("position = [0.5, 0.5, 1.0]", "position = [0.5, 0.5, 1.0]\nintensity = 37.5")
-    for name, text in (("unit", GOOD), ("bright", bright)):
+    bright = FITTED.replace("position = [0.5, 0.5, 1.0]", "position = [0.5, 0.5, 1.0]\nintensity = 37.5")
+    for name, text in (("unit", FITTED), ("bright", bright)):
         assert main(["forward", str(write_scene(tmp_path, text, f"{name}.toml")), "--out",
                      str(tmp_path / name), "--quiet"]) == 0
     unit, scaled = np.load(tmp_path / "unit" / "transient.npy"), np.load(tmp_path / "bright" / "transient.npy")
@@ -86,6 +120,6 @@ def test_intensity_scales_the_model_exactly(tmp_path):
 
 def test_a_scene_name_is_drawn_as_it_is(tmp_path):
     # "$...$" would be matplotlib's mathtext (this one an error), 日本 is not in its font (a warning)
-    path = write_scene(tmp_path, "name = 'a$\\frac$b 日本'\n" + GOOD)      # a TOML literal string
+    path = write_scene(tmp_path, "name = 'a$\\frac$b 日本'\n" + FITTED)      # a TOML literal string
     assert main(["forward", str(path), "--out", str(tmp_path / "out"), "--quiet"]) == 0
     assert (tmp_path / "out" / "transient.png").stat().st_size > 0

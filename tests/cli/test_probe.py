@@ -428,12 +428,13 @@ class Probe:
         ok &= self.check(not stray, f"unexpected stderr: {stray[:3]}")
         return ok
 
-    def refused_or_answered(self, *words: str) -> bool:
-        """Either a one-line refusal, or exit 0; True when it answered (its numbers are then checked)."""
+    def refused_or_answered(self, *words: str, warnings: bool = False) -> bool:
+        """Either a one-line refusal, or exit 0 (with one-line warnings when allowed); True when it answered
+        (its numbers are then checked)."""
         if self.status == 2:
             self.refused(*words)
             return False
-        return self.answered()
+        return self.answered(warnings=warnings)
 
     def y(self, name: str = "transient.npy") -> np.ndarray | None:
         path = self.out / name
@@ -540,11 +541,12 @@ _toml_answer("multi-line string waveform", lambda t: t.replace('"impulse"', '"""
 _toml_answer("a 200 kB comment line", lambda t: "# " + "x" * 200_000 + "\n" + t)
 
 
-@case("toml", "start = -1e-400 (underflows to -0.0)", "exit 0, window from 0: y equal to the reference")
+@case("toml", "start = -1e-400 (underflows to -0.0)", "exit 0, window from 0 (mostly empty: a one-line warning): "
+                                                       "y equal to the reference")
 def _(probe):
     geometry = dataclasses.replace(GOOD, start=0.0, count=40)
     text = geometry.toml().replace("start = 0.0", "start = -1e-400")
-    if forward(probe, probe.file("scene.toml", text)).answered():
+    if forward(probe, probe.file("scene.toml", text)).answered(warnings=True):
         probe.matches_reference(geometry)
 
 
@@ -674,10 +676,10 @@ def _(probe):
         probe.check(y is not None and np.all(y == 0), "y is not 0 outside the light")
 
 
-@case("numbers", "sensor at the source", "exit 0; y equal to the reference")
+@case("numbers", "sensor at the source", "exit 0 (7 of 12 bins empty: a one-line warning); y equal to the reference")
 def _(probe):
     geometry = dataclasses.replace(GOOD, sensors=(GOOD.source,), start=1.9)
-    if forward(probe, probe.scene(geometry)).answered():
+    if forward(probe, probe.scene(geometry)).answered(warnings=True):
         probe.matches_reference(geometry)
 
 
@@ -1359,7 +1361,7 @@ data_refusal("data with an infinity", lambda p: p.npy("y.npy", np.where(np.arang
 def _(probe):
     data = probe.npy("y.npy", reference(GOOD)[0])
     probe.cli("reconstruct", probe.scene(), "--data", data, "--lambda", "1e-300", "--out", probe.out, "--quiet")
-    if probe.refused_or_answered("--lambda"):
+    if probe.refused_or_answered("--lambda", warnings=True):
         probe.y("reconstruction.npy")
 
 
@@ -1367,7 +1369,7 @@ def _(probe):
 def _(probe):
     data = probe.npy("y.npy", np.zeros((1, 12)))
     probe.cli("reconstruct", probe.scene(), "--data", data, "--out", probe.out, "--quiet")
-    if probe.refused_or_answered("0"):
+    if probe.refused_or_answered("0", warnings=True):
         probe.y("reconstruction.npy")
 
 
@@ -1376,7 +1378,7 @@ def _(probe):
     data = probe.npy("y.npy", _data()[0])
     probe.cli("reconstruct", probe.scene(), "--data", data, "--lambda", "gcv", "--lambda-range", "1e-300", "1e300",
               "--lambda-count", "3", "--out", probe.out, "--quiet")
-    if probe.refused_or_answered("--lambda"):
+    if probe.refused_or_answered("--lambda", warnings=True):
         probe.y("reconstruction.npy")
 
 
@@ -1392,7 +1394,7 @@ def _(probe):
 
     shutil.rmtree(probe.out)
     probe.cli("reconstruct", scene, "--data", probe.tmp / "model" / "transient.exr", "--out", probe.out, "--quiet")
-    if probe.answered():
+    if probe.answered(warnings=True):              # one sensor cannot fix 64 pixels: A's rank, in one line
         probe.y("reconstruction.npy")
         text = (probe.out / "metrics.json").read_text()
         probe.check("NaN" not in text and "Infinity" not in text, "metrics.json not finite")

@@ -17,6 +17,10 @@ from analytic.scene_file import load_scene
 from analytic.system import forward
 from validation.cli import main
 
+# reconstruct shows the inversion's warnings (a λ at the end of its grid, rank deficiency) on stderr
+pytestmark = pytest.mark.filterwarnings("default::analytic.inversion.RegularizationWarning",
+                                        "default::analytic.inversion.RankDeficiencyWarning")
+
 SCENE = """
 [plane]
 pixels = 8

@@ -41,7 +41,9 @@ def test_render_command_writes_files_that_agree_with_forward(tmp_path):
     result = _cli("render", scene_path, "--spp", 2**20, "--seed", 3, "--out", tmp_path / "r", "--quiet")
     assert result.returncode == 0, result.stderr
     names = {p.name for p in (tmp_path / "r").iterdir()}
-    assert {"transient.exr", "transient.npy", "stderr.npy", "replicas.npy", "meta.json"} <= names
+    # the figure too, as forward draws it
+    assert {"transient.exr", "transient.npy", "stderr.npy", "replicas.npy", "meta.json", "transient.png"} <= names
+    assert (tmp_path / "r" / "transient.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "partial" not in names
     meta = json.loads((tmp_path / "r" / "meta.json").read_text())
     assert meta["samples"] == 2**20 and meta["seed"] == 3 and meta["attenuation"] == "lambertian"
@@ -58,8 +60,8 @@ def test_render_command_writes_files_that_agree_with_forward(tmp_path):
 
 
 def test_terminated_render_resumes_to_the_same_numbers(tmp_path):
-    """SIGTERM after the first checkpoint: exit 130, one line with the samples done and the exact resume
-    command, no complete-looking output; `--resume DIR` alone finishes it, and its samples/s counts only
+    """SIGTERM after the first checkpoint: exit 130, one line with the exact resume command (the folder as
+    given), no complete-looking output; `--resume DIR` alone finishes it, and its samples/s counts only
     the samples it drew."""
     scene_path = tmp_path / "scene.toml"
     scene_path.write_text(SCENE)
@@ -67,8 +69,8 @@ def test_terminated_render_resumes_to_the_same_numbers(tmp_path):
     whole = _cli("render", scene_path, "--spp", samples, "--seed", 9, "--out", tmp_path / "whole", "--quiet")
     assert whole.returncode == 0, whole.stderr
     child = subprocess.Popen([sys.executable, "-m", "validation.cli", "render", str(scene_path), "--spp",
-                              str(samples), "--seed", "9", "--out", str(tmp_path / "part"), "--quiet"],
-                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+                              str(samples), "--seed", "9", "--out", "./part/", "--quiet"],
+                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
     deadline = time.monotonic() + 120
     while not (tmp_path / "part" / "render_state.npz").exists() and child.poll() is None:
         assert time.monotonic() < deadline
@@ -78,10 +80,10 @@ def test_terminated_render_resumes_to_the_same_numbers(tmp_path):
     if child.returncode == 0:
         pytest.skip("the render finished before the signal arrived")
     assert child.returncode == 130, errors
-    lines = errors.strip().splitlines()
-    assert len(lines) == 1 and re.search(r"interrupted after [\d,]+ of 16,777,216 samples", lines[0]), errors
-    assert lines[0].endswith(f"resume with: diffuse-imaging render --resume {tmp_path / 'part'}")
+    assert errors.strip().splitlines() == ["diffuse-imaging: interrupted; resume with: diffuse-imaging render "
+                                           "--resume ./part/"], errors
     assert not (tmp_path / "part" / "transient.npy").exists()
+    assert not (tmp_path / "part" / "transient.png").exists()
     with np.load(tmp_path / "part" / "render_state.npz") as state:
         done_before = int(state["done"])
     resumed = _cli("render", "--resume", tmp_path / "part")
@@ -126,6 +128,59 @@ def test_resume_refuses_arguments_that_differ_each_named_in_one_line(tmp_path):
     result = _cli("render", other, "--resume", folder)
     assert result.returncode == 2 and "scene given differs" in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
+    # what differs is named: the key and both values
+    assert "[source] position [0.4, 0.6, 0.8] (the state's: [0.4, 0.6, 0.7])" in result.stderr
+
+
+def test_resume_with_too_few_samples_names_the_samples_not_a_scene(tmp_path):
+    """--spp below the replica count used to end in a traceback (32 replicas need 32 samples)."""
+    _, folder = _interrupted_render(tmp_path)
+    result = _cli("render", "--resume", folder, "--spp", 10)
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "--spp 10 differs from the state's 4194304" in lines[0]
+    assert "scene" not in lines[0].split("(in")[0]
+
+
+def test_a_new_render_into_a_finished_folder_leaves_no_complete_looking_files_until_done(tmp_path):
+    """An earlier render's results beside a new, unfinished render's state would look like its own."""
+    from analytic.scene_file import load_scene
+    from transient.render import RenderInterrupted, render
+
+    scene_path = tmp_path / "scene.toml"
+    scene_path.write_text(SCENE)
+    assert _cli("render", scene_path, "--spp", 4096, "--out", tmp_path / "r", "--quiet").returncode == 0
+    assert (tmp_path / "r" / "transient.npy").exists() and (tmp_path / "r" / "transient.png").exists()
+
+    def stop(done):
+        raise KeyboardInterrupt
+
+    with pytest.raises(RenderInterrupted):
+        render(load_scene(scene_path), spp=2**17, seed=7, out_dir=tmp_path / "r", progress=False, on_chunk=stop)
+    names = {path.name for path in (tmp_path / "r").iterdir()}
+    assert names == {"render_state.npz", "render_scene.npz", "partial"}, names
+    assert json.loads((tmp_path / "r" / "partial" / "meta.json").read_text())["complete"] is False
+
+
+def test_window_auto_renders_the_covering_bins_and_a_resume_keeps_them(tmp_path):
+    from analytic.scene_file import load_scene
+    from analytic.window import covering_sampling
+
+    scene_path = tmp_path / "scene.toml"
+    scene_path.write_text(SCENE.replace("start = 1.0\ncount = 30", "start = 0.0\ncount = 80"))
+    covering = covering_sampling(load_scene(scene_path), 0.05)
+    result = _cli("render", scene_path, "--window", "auto", "--spp", 4096, "--out", tmp_path / "r", "--quiet")
+    assert result.returncode == 0, result.stderr
+    assert result.stderr.strip().splitlines() == [
+        line for line in result.stderr.strip().splitlines() if line.startswith("diffuse-imaging: window: ")]
+    assert f"start {covering.start_opl:.12g} m, count {covering.count} " in result.stderr
+    meta = json.loads((tmp_path / "r" / "meta.json").read_text())
+    assert (meta["start_opl"], meta["bins"], meta["window_share"]) == (covering.start_opl, covering.count, 1.0)
+    assert np.load(tmp_path / "r" / "transient.npy").shape == (2, covering.count)
+    # the scene file alone is another window: given again for a resume, the difference is named
+    refused = _cli("render", scene_path, "--resume", tmp_path / "r")
+    assert refused.returncode == 2 and "[sampling] count 80" in refused.stderr
+    assert _cli("render", scene_path, "--window", "auto", "--resume", tmp_path / "r").returncode == 0
 
 
 def test_new_render_needs_spp_and_help_offers_only_accepted_variants(tmp_path):

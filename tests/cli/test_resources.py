@@ -20,6 +20,9 @@ from analytic.files import save_exr, save_npy
 from scene_files import GOOD, write_scene
 from validation.cli import main
 
+# a window that holds the light and little else: no window warning (an error under pytest's filters)
+FITTED = GOOD.replace("start = 0.0\ncount = 40", "start = 1.9\ncount = 10")
+
 
 def _mount_tmpfs(where, size: str):
     where.mkdir()
@@ -46,7 +49,7 @@ def _one_error(capsys) -> str:
 def test_a_full_disk_is_one_line_and_leaves_nothing(tmp_path, small_disk, capsys):
     out = small_disk / "out"
     # the figure alone is larger than the disk
-    assert main(["forward", str(write_scene(tmp_path)), "--out", str(out), "--quiet"]) == 2
+    assert main(["forward", str(write_scene(tmp_path, FITTED)), "--out", str(out), "--quiet"]) == 2
     error = _one_error(capsys)
     assert "free some space" in error and str(out) in error
     assert not out.exists() and os.listdir(small_disk) == []
@@ -55,13 +58,13 @@ def test_a_full_disk_is_one_line_and_leaves_nothing(tmp_path, small_disk, capsys
 def test_a_read_only_file_system_is_one_line(tmp_path, small_disk, capsys):
     subprocess.run(["mount", "-o", "remount,ro", str(small_disk)], check=True)
     out = small_disk / "out"
-    assert main(["forward", str(write_scene(tmp_path)), "--out", str(out), "--quiet"]) == 2
+    assert main(["forward", str(write_scene(tmp_path, FITTED)), "--out", str(out), "--quiet"]) == 2
     assert "read-only" in _one_error(capsys)
     assert not out.exists()
 
 
 def test_out_naming_a_file_or_a_path_under_one(tmp_path, capsys):
-    scene = str(write_scene(tmp_path))
+    scene = str(write_scene(tmp_path, FITTED))
     (tmp_path / "taken").write_text("a file")
     assert main(["forward", scene, "--out", str(tmp_path / "taken"), "--quiet"]) == 2
     assert "is a file" in _one_error(capsys)
@@ -82,14 +85,14 @@ def test_a_second_command_on_a_busy_folder_names_the_first(tmp_path, capsys):
     try:
         with holder.stdout:
             assert holder.stdout.readline().strip() == "holding"
-        assert main(["forward", str(write_scene(tmp_path)), "--out", str(out), "--quiet"]) == 2
+        assert main(["forward", str(write_scene(tmp_path, FITTED)), "--out", str(out), "--quiet"]) == 2
         assert f"process {holder.pid}" in _one_error(capsys)
         assert sorted(os.listdir(out)) == [".diffuse-imaging.lock"]     # nothing written by the second
     finally:
         holder.kill()
         holder.wait()
     # once the first is gone (even killed), the folder is free again
-    assert main(["forward", str(write_scene(tmp_path)), "--out", str(out), "--quiet"]) == 0
+    assert main(["forward", str(write_scene(tmp_path, FITTED)), "--out", str(out), "--quiet"]) == 0
 
 
 def test_a_scheduler_nobody_runs_is_one_line(tmp_path, capsys, monkeypatch):
@@ -130,7 +133,7 @@ def test_every_writer_meeting_a_full_disk_is_one_resource_line(small_disk, save)
 
 
 def test_out_paths_that_are_no_folder_are_one_line(tmp_path, capsys):
-    scene = str(write_scene(tmp_path))
+    scene = str(write_scene(tmp_path, FITTED))
     fifo = tmp_path / "fifo"
     os.mkfifo(fifo)
     (tmp_path / "loop_a").symlink_to(tmp_path / "loop_b")
@@ -152,7 +155,7 @@ def test_out_paths_that_are_no_folder_are_one_line(tmp_path, capsys):
 def test_out_as_a_link_to_a_folder_is_that_folder(tmp_path, capsys):
     (tmp_path / "real").mkdir()
     (tmp_path / "link").symlink_to(tmp_path / "real")
-    assert main(["forward", str(write_scene(tmp_path)), "--out", str(tmp_path / "link"), "--quiet"]) == 0
+    assert main(["forward", str(write_scene(tmp_path, FITTED)), "--out", str(tmp_path / "link"), "--quiet"]) == 0
     assert (tmp_path / "real" / "transient.npy").is_file() and (tmp_path / "link").is_symlink()
 
 
@@ -163,6 +166,6 @@ def test_a_command_removes_none_of_the_users_files(tmp_path):
     drafts = [userdir / ".thesis.tmp-draft.tex", deep / ".thesis.tmp-draft.tex"]
     for draft in drafts:
         draft.write_text("chapter 1")
-    assert main(["forward", str(write_scene(tmp_path)), "--out", str(userdir), "--quiet"]) == 0
+    assert main(["forward", str(write_scene(tmp_path, FITTED)), "--out", str(userdir), "--quiet"]) == 0
     assert all(draft.read_text() == "chapter 1" for draft in drafts)
     assert not (userdir / ".diffuse-imaging.lock").exists()

@@ -2,6 +2,7 @@
 
 import json
 import re
+import warnings
 
 import numpy as np
 import pytest
@@ -15,8 +16,13 @@ SCHEMA = {"kind", "samples", "seed", "scene", "plane_size", "pixels", "source", 
 
 @pytest.fixture(scope="module")
 def run_folder(tmp_path_factory):
+    from analytic.inversion import RankDeficiencyWarning
+
     out = tmp_path_factory.mktemp("run") / "default"
-    assert main(["run", "--out", str(out), "--spp", str(2**20), "--quiet"]) == 0
+    with warnings.catch_warnings():
+        # 16 sensors x 12 bins fix 124 of the 2500 pixels: run says so (tested below, with one sensor)
+        warnings.simplefilter("default", RankDeficiencyWarning)
+        assert main(["run", "--out", str(out), "--spp", str(2**20), "--quiet"]) == 0
     return out
 
 
@@ -76,3 +82,123 @@ def test_intensity_scales_the_render_exactly(tmp_path):
     bright = render(scene, spp=2**14, seed=5, progress=False)
     np.testing.assert_allclose(bright.mean, scene.intensity * unit.mean, rtol=1e-12, atol=0)
     np.testing.assert_allclose(bright.stderr, scene.intensity * unit.stderr, rtol=1e-9, atol=0)
+
+
+# -- warnings that change what a number means: on stderr in one line, and in the report ----------------
+
+ONE_SENSOR = """
+[plane]
+size = 1
+pixels = 8
+reflectance = 0.5
+[source]
+position = [0.5, 0.5, 1]
+[sensors]
+positions = [[0.2, 0.7, 1]]
+[sampling]
+period = 0.1
+start = 1.9
+count = 12
+"""
+
+
+@pytest.fixture
+def one_sensor_data(tmp_path):
+    """One sensor's 12 bins for 64 pixels, and the model's transient of them (noiseless)."""
+    scene_path = tmp_path / "scene.toml"
+    scene_path.write_text(ONE_SENSOR)
+    assert main(["forward", str(scene_path), "--out", str(tmp_path / "f"), "--quiet"]) == 0
+    return scene_path, tmp_path / "f"
+
+
+def _warning_lines(text: str) -> list[str]:
+    return [line for line in text.splitlines() if line.startswith("diffuse-imaging: warning: ")]
+
+
+@pytest.mark.filterwarnings("default::analytic.inversion.RankDeficiencyWarning",
+                            "default::analytic.inversion.RegularizationWarning")
+def test_reconstruct_shows_its_warnings_on_stderr_and_in_its_report(tmp_path, one_sensor_data, capsys):
+    scene_path, data = one_sensor_data
+    # 12 measurements cannot fix 64 pixels, and a grid far above every useful λ puts the optimum at its end
+    assert main(["reconstruct", str(scene_path), "--data", str(data), "--out", str(tmp_path / "r"), "--lambda",
+                 "gcv", "--lambda-range", "1e6", "1e8", "--lambda-count", "5", "--quiet"]) == 0
+    shown = _warning_lines(capsys.readouterr().err)
+    metrics = json.loads((tmp_path / "r" / "metrics.json").read_text())
+    assert metrics["rank"] is not None and metrics["rank"] <= 12 < metrics["unknowns"] == 64
+    assert any(f"A has rank {metrics['rank']} for 64 unknowns" in line for line in shown), shown
+    assert any("optimum is at the" in line and "of the grid" in line for line in shown), shown
+    report = (tmp_path / "r" / "report.md").read_text()
+    for line in shown:
+        assert f"- warning: {line.removeprefix('diffuse-imaging: warning: ')}" in report
+    # the report gives λ, and says in words what each of its numbers means
+    assert f"| λ | {metrics['lambda']:.4g} |" in report and "- **λ**: the weight of the penalty" in report
+    for name in ("rule", "PSNR (dB)", "SSIM", "‖A f − y‖", "‖D f‖", "rank of A", "m"):
+        assert f"- **{name}**: " in report, name
+
+
+def test_run_window_auto_states_and_records_the_covering_window(tmp_path):
+    import subprocess
+    import sys
+
+    from analytic.scene_file import load_scene
+    from analytic.window import covering_sampling
+
+    scene_path = tmp_path / "wide.toml"
+    scene_path.write_text(ONE_SENSOR.replace("start = 1.9\ncount = 12", "start = 0\ncount = 40"))
+    covering = covering_sampling(load_scene(scene_path), 0.1)
+    assert (covering.start_opl, covering.count) == (2.0, 7)        # the light spans [2.03, 2.68] m
+    result = subprocess.run([sys.executable, "-m", "validation.cli", "run", str(scene_path), "--window", "auto",
+                             "--spp", "8192", "--out", str(tmp_path / "run"), "--quiet"],
+                            capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr
+    assert "diffuse-imaging: window: start 2 m, count 7 " in result.stderr
+    assert "mostly empty" not in result.stderr
+    for part in ("model", "render"):
+        meta = json.loads((tmp_path / "run" / part / "meta.json").read_text())
+        assert (meta["start_opl"], meta["bins"]) == (2.0, 7), part
+    without = subprocess.run([sys.executable, "-m", "validation.cli", "run", str(scene_path), "--spp", "8192",
+                              "--out", str(tmp_path / "scene"), "--quiet"], capture_output=True, text=True,
+                             timeout=600)
+    assert without.returncode == 0, without.stderr
+    assert len([line for line in _warning_lines(without.stderr) if "is mostly empty" in line]) == 1
+
+
+def test_run_shows_each_reconstruction_warning_naming_its_data():
+    """What run's reconstructions warned about (kept by the harness as category and message) is shown again,
+    each in its own class, so the one-line policy shows it on stderr."""
+    from analytic.inversion import RankDeficiencyWarning, RegularizationWarning
+    from validation.cli.checks import show_reconstruction_warnings
+
+    reconstructions = {
+        "model": {"warnings": [{"category": "RankDeficiencyWarning", "message": "A has rank 7 for 64 unknowns"}]},
+        "render": {"warnings": [{"category": "RegularizationWarning", "message": "the gcv optimum is at the "
+                                                                                "largest λ of the grid"}]},
+        "oracle": {"warnings": [{"category": "RegularizationWarning", "message": "not shown: a bound"}]},
+    }
+    with pytest.warns(Warning) as caught:
+        show_reconstruction_warnings(reconstructions)
+    assert [(w.category, str(w.message)) for w in caught] == [
+        (RankDeficiencyWarning, "reconstruction from the model's data: A has rank 7 for 64 unknowns"),
+        (RegularizationWarning, "reconstruction from the render's data: the gcv optimum is at the largest λ of "
+                                "the grid")]
+    show_reconstruction_warnings({"model": {"psnr": 20.0}})          # none kept: nothing shown
+
+
+def test_run_shows_the_reconstructions_warnings_on_stderr_and_in_its_report(tmp_path):
+    """One sensor's 12 bins cannot fix 64 pixels: both reconstructions warn, in one line each, and the
+    report says so under them."""
+    import subprocess
+    import sys
+
+    scene_path = tmp_path / "scene.toml"
+    scene_path.write_text(ONE_SENSOR)
+    result = subprocess.run([sys.executable, "-m", "validation.cli", "run", str(scene_path), "--spp", "8192",
+                             "--out", str(tmp_path / "run"), "--quiet"], capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr
+    shown = _warning_lines(result.stderr)
+    report = (tmp_path / "run" / "report.md").read_text()
+    for data in ("model", "render"):
+        lines = [line for line in shown if line.startswith(f"diffuse-imaging: warning: reconstruction from the "
+                                                           f"{data}'s data: A has rank ")]
+        assert len(lines) == 1, shown
+        assert f"- warning, from the {data}'s data: A has rank " in report

@@ -1,7 +1,7 @@
 """The ``diffuse-imaging`` command line.
 
 One module per group of commands: :mod:`.model` (forward), :mod:`.render`,
-:mod:`.checks` (validate, run), :mod:`.reconstruct` (reconstruct,
+:mod:`.plot`, :mod:`.checks` (validate, run), :mod:`.reconstruct` (reconstruct,
 reproduce), :mod:`.sweep`, :mod:`.bench`, :mod:`.interop` (check, export);
 :mod:`.common` holds what they share and :mod:`.program` the parser, a
 command's run and the policy for errors, warnings and output. Heavy modules

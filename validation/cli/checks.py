@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import sys
+import warnings
 from pathlib import Path
 
-from .common import UsageError, add_quiet, check_samples_type, load_scene_argument, seed_type, show_progress
+from .common import (UsageError, add_quiet, add_window_option, announce_window, apply_window, check_samples_type,
+                     load_plane_scene, load_scene_argument, seed_type, show_progress)
 from .reconstruct import add_lambda_options
 
-__all__ = ["add_commands", "command_validate", "command_run"]
+__all__ = ["add_commands", "command_validate", "command_run", "show_reconstruction_warnings"]
 
 DEFAULT_SAMPLES = 2**22
 
@@ -57,13 +59,12 @@ def command_validate(args) -> int:
     """
     from analytic.errors import UserError
     from analytic.files import output_folder, staged_writes
-    from analytic.scene_file import load_scene
     from validation.corner import check_corner
     from validation.harness import check_scene
     from validation.report import write_report
 
     if args.scene:
-        suite = [(load_scene(path), args.spp or DEFAULT_SAMPLES) for path in args.scene]
+        suite = [(load_plane_scene(path), args.spp or DEFAULT_SAMPLES) for path in args.scene]
         labels = [f"scene {scene.name!r} ({path})" for (scene, _), path in zip(suite, args.scene)]
     else:
         suite = _suite_samples(args.spp)
@@ -127,12 +128,14 @@ def command_run(args) -> int:
 
     from .reconstruct import lambda_grid_of
 
-    scene = load_scene_argument(args.scene)
+    scene = apply_window(args, load_scene_argument(args.scene))
     data_driven_rule(scene, args.rule)            # a rule the scene cannot serve is refused before any work
     grid = lambda_grid_of(args)
     with output_folder(args.out) as out:
+        announce_window(args, scene)              # check_scene's own warning of a cut window is the same line
         check = check_scene(scene, spp=args.spp, seed=args.seed, progress=show_progress(args), rule=args.rule,
                             lambdas=grid)
+        show_reconstruction_warnings(check.reconstructions)
         share = check.metrics["window_share"]
         with staged_writes():
             write_transient(out / "model", check.model, build_meta(scene, kind="model", window_share=share))
@@ -147,6 +150,25 @@ def command_run(args) -> int:
             print(f"reconstruction PSNR: {recon['model']['psnr']:.1f} dB from model data, "
                   f"{recon['render']['psnr']:.1f} dB from rendered data -> {Path(args.out) / 'report.md'}")
     return 0 if check.agreement.agrees else 1
+
+
+def show_reconstruction_warnings(reconstructions: dict) -> None:
+    """Each warning of ``run``'s reconstructions again, naming the data it came from, for the one-line policy.
+
+    ``reconstructions`` is :func:`validation.harness.reconstruct_from_noisy_data`'s
+    result; its ``model`` and ``render`` entries may hold ``warnings``, a
+    list of ``{"category": name, "message": text}`` with the category's
+    name in :mod:`analytic.inversion` (``RankDeficiencyWarning``,
+    ``RegularizationWarning``); another name is shown as a RuntimeWarning.
+    """
+    from analytic import inversion
+
+    for key, data in (("model", "the model's data"), ("render", "the render's data")):
+        for entry in reconstructions.get(key, {}).get("warnings", ()):
+            category = getattr(inversion, str(entry.get("category")), None)
+            if not (isinstance(category, type) and issubclass(category, Warning)):
+                category = RuntimeWarning
+            warnings.warn(f"reconstruction from {data}: {entry['message']}", category, stacklevel=2)
 
 
 def add_commands(subparsers) -> None:
@@ -170,5 +192,6 @@ def add_commands(subparsers) -> None:
                      help=f"render samples, at least 4,096 (default {DEFAULT_SAMPLES:,})")
     run.add_argument("--seed", type=seed_type, default=0, help="random seed in [0, 2^32) (default 0)")
     add_lambda_options(run, default="auto")
+    add_window_option(run)
     add_quiet(run)
     run.set_defaults(run=command_run)

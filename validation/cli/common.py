@@ -14,8 +14,8 @@ import sys
 from analytic.errors import UserError
 
 __all__ = ["UsageError", "OneLineParser", "seed_type", "samples_type", "positive_float_type",
-           "load_scene_argument", "show_progress", "MAX_SAMPLES", "add_quiet",
-           "check_samples_type"]
+           "load_scene_argument", "load_plane_scene", "show_progress", "MAX_SAMPLES", "add_quiet",
+           "check_samples_type", "add_window_option", "apply_window", "announce_window"]
 
 #: Most samples a render may be asked for: 2^44, about two days at 1e8 samples/s.
 MAX_SAMPLES = 2**44
@@ -87,11 +87,24 @@ def positive_float_type(option: str):
 
 
 def load_scene_argument(path: str | None):
-    """The scene a command was given: a TOML file, or the built-in default scene."""
+    """The scene a command was given: a TOML file, or the built-in default scene (a plane scene)."""
     from analytic.scene import default_scene
+
+    return default_scene() if path is None else load_plane_scene(path)
+
+
+def load_plane_scene(path):
+    """A plane scene file; a relay-wall (NLOS) one is refused in one line: the commands do not take it yet."""
+    from analytic.errors import SceneError
+    from analytic.relay_wall import RelayWallScene
     from analytic.scene_file import load_scene
 
-    return default_scene() if path is None else load_scene(path)
+    scene = load_scene(path)
+    if isinstance(scene, RelayWallScene):
+        raise SceneError("relay_wall", f"{path} is a relay-wall (NLOS) capture: the commands do not take one "
+                                       f"yet; model it from Python (analytic.load_scene, analytic.system_matrix) "
+                                       f"or render it with transient_opl_nlos (docs/model.md)")
+    return scene
 
 
 def show_progress(args) -> bool:
@@ -102,3 +115,54 @@ def show_progress(args) -> bool:
 def add_quiet(parser) -> None:
     """The ``--quiet`` flag every command has."""
     parser.add_argument("--quiet", action="store_true", help="no progress bars or summary")
+
+
+def add_window_option(parser) -> None:
+    """``--window scene|auto``: the scene's own bins, or the bins that cover its light at its period."""
+    parser.add_argument("--window", choices=("scene", "auto"), default="scene",
+                        help="scene: the scene's [sampling] start and count (default); auto: replace them by "
+                             "the bins that hold every path length and the pulse at the scene's period "
+                             "(stated on stderr, recorded in meta.json's start_opl and bins)")
+
+
+def apply_window(args, scene):
+    """The scene with the window ``--window`` asks for: ``scene`` itself for ``scene``, for ``auto`` its copy
+    with :func:`analytic.window.auto_sampling` (a SceneError when no window of its period covers the light).
+
+    Nothing is printed: :func:`announce_window` states it once the command's inputs are all accepted.
+    """
+    if getattr(args, "window", "scene") != "auto":
+        return scene
+    from analytic.window import auto_sampling
+
+    return scene.replace(sampling=auto_sampling(scene))
+
+
+def announce_window(args, scene, share: float | None = None) -> float:
+    """State the window ``--window auto`` chose (one line on stderr), then warn in one line when the window
+    cuts the light, or else when it is mostly empty; returns its share of the light.
+
+    Called once a command's inputs are all accepted and before its work, so that a refused command's
+    stderr is its one error line.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The command's arguments (``window``, when it has the option).
+    scene : analytic.Scene
+        The scene with the window the command uses (:func:`apply_window`).
+    share : float, optional
+        The window's share of the light (:func:`analytic.window.window_share`), computed unless given.
+    """
+    from analytic.window import response_range, warn_if_cut, warn_if_mostly_empty, window_share
+
+    if getattr(args, "window", "scene") == "auto":
+        sampling = scene.sampling
+        low, high = response_range(scene)
+        print(f"diffuse-imaging: window: start {sampling.start_opl:.12g} m, count {sampling.count} (bins of "
+              f"{sampling.bin_width_opl:g} m holding every path length, {low:.6g} to {high:.6g} m, and the "
+              f"pulse)", file=sys.stderr)
+    share = window_share(scene) if share is None else share
+    warn_if_cut(scene, share)
+    warn_if_mostly_empty(scene, share)
+    return share

@@ -7,7 +7,7 @@ import contextlib
 import math
 from pathlib import Path
 
-from .common import UsageError, add_quiet, load_scene_argument, positive_float_type
+from .common import UsageError, add_quiet, announce_window, load_scene_argument, positive_float_type
 
 __all__ = ["add_commands", "command_check", "command_export"]
 
@@ -83,6 +83,7 @@ def command_check(args) -> int:
     data, stderr, dof = _read_inputs(args, scene)
     result = check_transient(scene, data, stderr=stderr, dof=dof, shape_only=args.shape_only, expect=expect)
     with output_folder(args.out) as out:
+        announce_window(args, scene)
         write_check_report(out, result, scene_name=scene.name, data_paths=args.data)
     if not args.quiet:
         print(result.summary())

@@ -5,7 +5,8 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from .common import add_quiet, load_scene_argument, positive_float_type, show_progress
+from .common import (add_quiet, add_window_option, announce_window, apply_window, load_scene_argument,
+                     positive_float_type, show_progress)
 
 __all__ = ["add_commands", "command_forward"]
 
@@ -15,15 +16,13 @@ def command_forward(args) -> int:
     from analytic.files import build_meta, output_folder, staged_writes, write_transient
     from analytic.noise import add_noise
     from analytic.system import forward, system_matrix
-    from analytic.window import warn_if_cut, window_share
     from validation.plots import model_figure, save_figure
 
-    scene = load_scene_argument(args.scene)
+    scene = apply_window(args, load_scene_argument(args.scene))
     if args.tolerance is not None:
         scene = scene.replace(tolerance=args.tolerance)
-    share = window_share(scene)
-    warn_if_cut(scene, share)
     with output_folder(args.out) as out:
+        share = announce_window(args, scene)
         started = time.perf_counter()
         matrix = system_matrix(scene, progress=show_progress(args))
         assembly = time.perf_counter() - started
@@ -51,5 +50,6 @@ def add_commands(subparsers) -> None:
     forward.add_argument("--out", required=True, help="output folder")
     forward.add_argument("--tolerance", type=positive_float_type("--tolerance"),
                          help="relative accuracy of every entry of A (default: the scene's, 1e-6)")
+    add_window_option(forward)
     add_quiet(forward)
     forward.set_defaults(run=command_forward)

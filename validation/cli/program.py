@@ -39,7 +39,7 @@ OWN_PACKAGES = ("analytic", "transient", "validation")
 
 def build_parser() -> OneLineParser:
     """The ``diffuse-imaging`` parser with every command."""
-    from . import bench, checks, interop, model, reconstruct, render, sweep
+    from . import bench, checks, interop, model, plot, reconstruct, render, sweep
 
     parser = OneLineParser(
         prog="diffuse-imaging",
@@ -47,7 +47,7 @@ def build_parser() -> OneLineParser:
                     "rendering, cross-check, reconstruction. Lengths in metres, time as optical "
                     "path length in metres (c = 1).")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for module in (model, render, checks, reconstruct, sweep, bench, interop):
+    for module in (model, render, plot, checks, reconstruct, sweep, bench, interop):
         module.add_commands(commands)
     return parser
 

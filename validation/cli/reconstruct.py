@@ -65,7 +65,7 @@ def command_reconstruct(args) -> int:
     from analytic.errors import SceneError
     from analytic.files import (PrecisionWarning, discard, float32_problem, output_folder, reading_folder,
                              save_exr, save_json, save_npy, save_png_image, staged_writes)
-    from analytic.inversion import image_metrics, reconstruct
+    from analytic.inversion import RankDeficiencyWarning, RegularizationWarning, image_metrics, reconstruct
     from analytic.system import system_matrix
     from validation.harness import data_driven_rule
     from validation.plots import criterion_figure, reconstruction_figure, save_figure
@@ -142,9 +142,16 @@ def command_reconstruct(args) -> int:
                 + (f" (σ = {sigma:g} from the scene's [noise])" if sigma is not None else "") + ". "
                 f"PSNR {metrics['psnr']:.2f} dB, SSIM {metrics['ssim']:.3f} against the scene's "
                 f"reflectance (data range 1).", "",
+                *_result_table(result, metrics, sigma, args.regularizer), "",
                 "![truth, reconstruction and error](comparison.png)", "",
-                "![the λ rule's criterion and the L-curve](criterion.png)", ""]
-                + ([""] + [f"- warning: {note}" for note in notes] if notes else []))
+                "![the λ rule's criterion and the L-curve](criterion.png)", "",
+                *_warning_lines(notes)])
+    # after the files: the inversion's own warnings again (rank deficiency, a λ rule that could not do what
+    # it was asked), for the one-line policy; the report holds every warning
+    for caught_warning in caught:
+        if issubclass(caught_warning.category, (RankDeficiencyWarning, RegularizationWarning)):
+            warnings.warn_explicit(caught_warning.message, caught_warning.category, caught_warning.filename,
+                                   caught_warning.lineno)
     if exr_problem is not None:
         warnings.warn(f"{out / 'reconstruction.exr'}: not written, {exr_problem}; reconstruction.npy "
                       f"(float64) is the exact record", PrecisionWarning, stacklevel=1)
@@ -153,6 +160,42 @@ def command_reconstruct(args) -> int:
               f"(A assembled in {assembly:.2f} s); PSNR {metrics['psnr']:.2f} dB, SSIM "
               f"{metrics['ssim']:.3f} (range 1) -> {out}")
     return 0
+
+
+def _result_table(result, metrics: dict, sigma: float | None, regularizer: str) -> list[str]:
+    """The reconstruction's numbers as a table, with what each means in words below it."""
+    rank = "-" if result.rank is None else f"{result.rank}"
+    penalty = (("‖D f‖", "the image's roughness, the penalty's size (D the 5-point Laplacian)")
+               if regularizer == "laplacian" else
+               ("TV(f)", "the image's total variation, the penalty's size"))
+    rule = {"value": "given (--lambda VALUE)", "oracle": "oracle (needs the true image: a bound)",
+            "gcv": "generalised cross-validation", "lcurve": "L-curve corner",
+            "discrepancy": f"discrepancy (‖A f − y‖² = m σ², σ = {sigma:g})" if sigma is not None
+            else "discrepancy"}.get(result.rule, result.rule)
+    rows = [
+        ("λ", f"{result.lam:.4g}", "the weight of the penalty on roughness the image was found with: larger "
+                                   "gives a smoother image that fits the data less closely"),
+        ("rule", rule, "how λ was chosen from the data"),
+        ("PSNR (dB)", f"{metrics['psnr']:.2f}", "peak signal-to-noise ratio against the scene's reflectance over a "
+                                               "data range of 1: higher is closer"),
+        ("SSIM", f"{metrics['ssim']:.3f}", "structural similarity against the scene's reflectance (1 is equal)"),
+        ("‖A f − y‖", f"{result.residual_norm:.4g}", "the residual: how far the image's modelled transient is "
+                                                     "from the data (units of y)"),
+        (penalty[0], f"{result.seminorm:.4g}", penalty[1]),
+        ("rank of A", f"{rank} of {result.unknowns}", "how many independent numbers of the image the data fix "
+                                                      "(svd method only); the penalty fills the rest"),
+        ("m", f"{result.measurements}", "measurements: sensors x bins, the rows of A"),
+    ]
+    return (["| quantity | value |", "|---|---|"] + [f"| {name} | {value} |" for name, value, _ in rows]
+            + [""] + [f"- **{name}**: {meaning}." for name, _, meaning in rows])
+
+
+def _warning_lines(notes: list[str]) -> list[str]:
+    """The warnings section of the report: each changes what a number above means."""
+    if not notes:
+        return []
+    return (["## Warnings", "", "Each changes what a number above means (also shown on stderr):", ""]
+            + [f"- warning: {note}" for note in notes])
 
 
 def _read_data(path: str, scene) -> np.ndarray:

@@ -21,7 +21,8 @@ import lazy_loader
 
 __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "common": ["new_figure", "save_figure", "NANOSECONDS_PER_METRE", "Y_LABEL"],
-    "transients": ["transients_figure", "model_figure", "z_map_figure"],
+    "transients": ["transients_figure", "model_figure", "z_map_figure", "transient_figure", "finish_time_figure"],
+    "captures": ["capture_figure"],
     "check": ["check_transients_figure", "check_z_figure"],
     "reconstruction": ["reconstructions_figure", "reconstruction_figure", "criterion_figure",
                        "conditioning_figure", "panels_figure"],

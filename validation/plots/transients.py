@@ -1,4 +1,5 @@
-"""Figures of transients: model against render per sensor with z strips, the model alone, and the z map."""
+"""Figures of transients: model against render per sensor with z strips, one transient (the model, a render, any
+file ``plot`` reads), and the z map."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ import numpy as np
 from .axes import nanosecond_axis, round_origin, time_axis, window_edges, window_edges_in_view
 from .common import columns_for_legend, new_figure, plain_text, suptitle
 
-__all__ = ["transients_figure", "model_figure", "z_map_figure"]
+__all__ = ["transients_figure", "transient_figure", "model_figure", "z_map_figure", "finish_time_figure"]
 
 
 def _sensor_list(chosen: np.ndarray, sensors: int) -> str:
@@ -166,27 +167,67 @@ def transients_figure(sampling, transients: dict[str, np.ndarray], *,
 
 
 def model_figure(sampling, y: np.ndarray, noisy: np.ndarray | None = None, *, title: str = "", max_curves: int = 4):
-    """``forward``'s figure: every sensor's transient as an image, and a few of them as curves.
+    """``forward``'s figure: :func:`transient_figure` of the model, with its noisy samples when there are any."""
+    return transient_figure(sampling, y, noisy=noisy, label="model", title=title, max_curves=max_curves)
+
+
+def _sensor_groups(y: np.ndarray) -> list[list[int]]:
+    """Sensors whose transients are equal (to 1e-9 of the peak) grouped, in order of their first sensor:
+    a symmetric array repeats curves, and one line serves each group."""
+    peak = float(np.abs(y).max()) or 1.0
+    groups: dict[bytes, list[int]] = {}
+    for k, row in enumerate(np.round(y / (1e-9 * peak))):
+        groups.setdefault(row.tobytes(), []).append(k)
+    return list(groups.values())
+
+
+def _group_label(sensors: list[int]) -> str:
+    if len(sensors) == 1:
+        return f"sensor {sensors[0]}"
+    shown = ", ".join(str(k) for k in sensors[:6]) + (", ..." if len(sensors) > 6 else "")
+    return f"sensors {shown} (equal)"
+
+
+def _curves_title(label: str, drawn: int, groups: int, sensors: int, *, band: bool, noisy: bool) -> str:
+    """What the curve panel shows: which data, how drawn, and which of the sensors."""
+    what = f"{label} (lines)" + (", ±1 standard error (band)" if band else "") \
+        + (" and model + noise (points)" if noisy else "")
+    if drawn == groups:
+        return what if groups == sensors else f"{what}; equal curves drawn once"
+    if groups == sensors:
+        return f"{what}; {drawn} of {sensors} sensors, evenly chosen"
+    return f"{what}; {drawn} of {groups} distinct curves ({sensors} sensors), evenly chosen"
+
+
+def transient_figure(sampling, y: np.ndarray, *, stderr: np.ndarray | None = None, noisy: np.ndarray | None = None,
+                     label: str = "model", title: str = "", max_curves: int = 16):
+    """A transient on its time axis: every sensor as an image, and one line per sensor.
 
     Two panels whatever K is (:func:`transients_figure`' eight took ``forward``
     longer to draw than to compute A): left, y_k[n] over sensors x path
-    length; right, the step curves of up to ``max_curves`` sensors with
-    distinct transients (evenly chosen; a symmetric array repeats curves),
-    with the noisy samples as points when there are any, and the
-    nanosecond axis and the window's edges (dotted, when in view).
+    length; right, one step line per sensor (sensors with equal transients,
+    as a symmetric array has, share one line named after all of them; beyond
+    ``max_curves`` lines an evenly chosen ``max_curves``, and the panel says
+    so), with ±1 standard error as a band and noisy samples as points when
+    given; the nanosecond axis along the top and the window's edges (dotted,
+    when in view).
 
     Parameters
     ----------
     sampling : analytic.Sampling
         The bins (path length in metres).
     y : ndarray
-        ``(K, N)`` noiseless transient, W m⁻¹ for I in W/sr.
+        ``(K, N)`` transient, W m⁻¹ for I in W/sr.
+    stderr : ndarray, optional
+        ``(K, N)`` standard error of ``y`` (a render's), drawn as a band.
     noisy : ndarray, optional
-        ``(K, N)`` noisy transient.
+        ``(K, N)`` noisy samples of the model, drawn as points.
+    label : str
+        What ``y`` is ("model", "render", "data").
     title : str
         Figure title.
     max_curves : int
-        Sensors drawn as curves.
+        Most lines drawn.
 
     Returns
     -------
@@ -196,10 +237,14 @@ def model_figure(sampling, y: np.ndarray, noisy: np.ndarray | None = None, *, ti
     sensors = y.shape[0]
     time = time_axis(sampling, [y])
     first, last, scale, edges = time.first, time.last, time.scale, time.edges
-    width, height = 10.0, 3.9
+    groups = _sensor_groups(y)
+    chosen = [groups[i] for i in np.unique(np.linspace(0, len(groups) - 1, min(len(groups), max_curves))
+                                           .round().astype(int))]
+    outside = len(chosen) > 4           # a legend of many lines goes beside the panel, not over the curves
+    width, height = (11.5 if outside else 10.0), 3.9
     # a fixed layout: constrained layout would double the drawing time
     figure = new_figure(width, height, layout=None)
-    figure.subplots_adjust(left=0.6 / width, right=1 - 0.2 / width, top=1 - 0.85 / height,
+    figure.subplots_adjust(left=0.6 / width, right=1 - (1.75 if outside else 0.2) / width, top=1 - 0.85 / height,
                            bottom=0.55 / height, wspace=0.32)
     image_axis, curve_axis = figure.subplots(1, 2, gridspec_kw={"width_ratios": [1.0, 1.0]})
     image = image_axis.imshow(y[:, first:last] * scale, aspect="auto", interpolation="nearest",
@@ -215,28 +260,50 @@ def model_figure(sampling, y: np.ndarray, noisy: np.ndarray | None = None, *, ti
         image_axis.set_yticks(range(sensors))
     else:
         image_axis.yaxis.set_major_locator(MaxNLocator(nbins=6, integer=True))
-    peak = float(np.abs(y).max()) or 1.0
-    distinct = np.sort(np.unique(np.round(y / (1e-9 * peak)), axis=0, return_index=True)[1])
-    chosen = distinct[np.unique(np.linspace(0, distinct.size - 1, min(distinct.size, max_curves)).round()
-                                .astype(int))]
-    for i, k in enumerate(chosen):
-        curve_axis.stairs(y[k, first:last] * scale, edges, color=f"C{i}", lw=1.2, label=f"sensor {k}")
+    colours = _line_colours(len(chosen))
+    for colour, group in zip(colours, chosen):
+        k = group[0]
+        curve_axis.stairs(y[k, first:last] * scale, edges, color=colour, lw=1.2, label=_group_label(group))
+        if stderr is not None:
+            error = np.atleast_2d(stderr)[k, first:last] * scale
+            low, high = y[k, first:last] * scale - error, y[k, first:last] * scale + error
+            curve_axis.fill_between(edges, np.append(low, low[-1]), np.append(high, high[-1]), step="post",
+                                    color=colour, alpha=0.3, lw=0)
         if noisy is not None:
             curve_axis.plot(time.centres, np.atleast_2d(noisy)[k, first:last] * scale, "o", ms=2.5,
-                            color=f"C{i}")
+                            color=colour)
     curve_axis.set_ylabel(time.y_label, fontsize=8)
-    curve_axis.set_title("model (lines)" + (" and model + noise (points)" if noisy is not None else ""),
-                         fontsize=8, loc="left")
-    curve_axis.legend(fontsize=7, loc="upper right")
-    edges_shown = window_edges(curve_axis, time)
+    curve_axis.set_title(plain_text(_curves_title(label, len(chosen), len(groups), sensors,
+                                                  band=stderr is not None, noisy=noisy is not None)),
+                         fontsize=8, loc="left", parse_math=False)
+    if outside:
+        curve_axis.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), frameon=False)
+    else:
+        curve_axis.legend(fontsize=7, loc="upper right")
     for axis in (image_axis, curve_axis):
         axis.set_xlabel(time.x_label, fontsize=8)
         axis.tick_params(labelsize=8)
+    finish_time_figure(figure, curve_axis, time, title)
+    return figure
+
+
+def finish_time_figure(figure, axis, time, title: str) -> None:
+    """The time panel's window edges (dotted, when in view) and nanosecond axis (along its top, when the
+    path lengths start at 0), and the figure's title, which names the dotted edges when they are drawn."""
+    edges_shown = window_edges(axis, time)
     if time.origin == 0:
-        nanosecond_axis(curve_axis)
+        nanosecond_axis(axis)
     if title:
         suptitle(figure, title + ("  (dotted: the window's edges)" if edges_shown else ""), fontsize=9)
-    return figure
+
+
+def _line_colours(count: int) -> list:
+    """matplotlib's ten cycle colours, or evenly spaced viridis colours for more lines."""
+    if count <= 10:
+        return [f"C{i}" for i in range(count)]
+    from matplotlib import colormaps
+
+    return [colormaps["viridis"](value) for value in np.linspace(0.0, 0.9, count)]
 
 
 def z_map_figure(z: np.ndarray, threshold: float, sampling, title: str):

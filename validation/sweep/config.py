@@ -241,6 +241,8 @@ def sweep_from_dict(data: dict, base_dir: str | Path = ".") -> Sweep:
         except SceneError as error:
             key = f"grid.{error.key}" if error.key in grid else error.key
             raise SceneError(key, f"{error.problem} (item {name})") from None
+        if not isinstance(scene, Scene):
+            raise SceneError("relay_wall", "a relay-wall (NLOS) capture cannot be swept yet; sweep plane scenes")
         items.append(SweepItem(index=index, name=name, parameters=parameters, scene=scene))
     return Sweep(items=tuple(items), samples=samples, seed=seed, chunk_size=chunk_size,
                  cross_check=cross_check, variant=variant, grid=grid, base=base)

@@ -1,0 +1,93 @@
+"""Relay-wall scene files (docs/design.md section 7): every key read, written back, and refused when wrong."""
+
+import numpy as np
+import pytest
+
+from analytic.errors import SceneError
+from analytic.relay_wall import RelayWallScene, Scan
+from analytic.scene import Illumination, Sampling
+from analytic.scene_file import load_scene, scene_from_dict, scene_to_tables
+
+EVERY_KEY = """
+name = "around the corner"
+[relay_wall]
+size = [2.5, 1.5]
+reflectance = 0.8
+[hidden]
+center = [0.1, -0.2, 1.1]
+u = [0.9, 0.0, 0.1]
+v = [0.0, -0.7, 0.0]
+pixels = 12
+reflectance = 0.4
+[laser]
+position = [-0.5, 0.1, 0.3]
+intensity = 2.5
+[sensor]
+position = [0.4, -0.1, 0.2]
+[scan]
+type = "exhaustive"
+grid = [3, 2]
+laser_grid = [2, 2]
+account_first_and_last_bounces = true
+[illumination]
+waveform = "square"
+width = 0.05
+[sampling]
+period = 0.02
+start = 1.5
+count = 150
+[model]
+tolerance = 1e-7
+"""
+
+
+def _write(tmp_path, text):
+    path = tmp_path / "wall.toml"
+    path.write_text(text)
+    return path
+
+
+def test_every_key_reaches_the_scene(tmp_path):
+    scene = load_scene(_write(tmp_path, EVERY_KEY))
+    expected = RelayWallScene(
+        name="around the corner", wall_size=(2.5, 1.5), wall_reflectance=0.8, center=(0.1, -0.2, 1.1),
+        u=(0.9, 0.0, 0.1), v=(0.0, -0.7, 0.0), pixels=12, reflectance=0.4, laser_position=(-0.5, 0.1, 0.3),
+        intensity=2.5, sensor_position=(0.4, -0.1, 0.2),
+        scan=Scan(type="exhaustive", grid=(3, 2), laser_grid=(2, 2), account_first_and_last_bounces=True),
+        illumination=Illumination(waveform="square", width=0.05),
+        sampling=Sampling(bin_width_opl=0.02, start_opl=1.5, count=150), tolerance=1e-7)
+    assert isinstance(scene, RelayWallScene) and scene.sensor_count == 24
+    for name in ("wall_size", "wall_reflectance", "pixels", "intensity", "scan", "illumination", "sampling",
+                 "tolerance", "name"):
+        assert getattr(scene, name) == getattr(expected, name), name
+    for name in ("center", "u", "v", "laser_position", "sensor_position", "reflectance"):
+        assert np.array_equal(getattr(scene, name), getattr(expected, name)), name
+
+
+def test_tables_read_back_to_the_same_scene(tmp_path):
+    scene = load_scene(_write(tmp_path, EVERY_KEY))
+    again = scene_from_dict(scene_to_tables(scene))
+    first, second = scene.geometry()[1], again.geometry()[1]
+    for name in ("sources", "sensors", "offsets", "scales"):
+        assert np.array_equal(getattr(first, name), getattr(second, name)), name
+    assert again.scan == scene.scan and again.sampling == scene.sampling and again.name == scene.name
+
+
+@pytest.mark.parametrize("extra, key", [
+    ("[plane]\nsize = 1\n", "plane"),
+    ("[sensors]\npositions = [[0, 0, 1]]\n", "sensors"),
+    ("[hidden]\nnormal = [0, 0, -1]\n", "hidden.normal"),
+    ("[model]\nattenuation = \"paper\"\n", "model.attenuation"),
+])
+def test_keys_that_do_not_belong_are_refused_by_name(tmp_path, extra, key):
+    text = "[relay_wall]\nsize = [2.0, 2.0]\n" + extra
+    with pytest.raises(SceneError) as raised:
+        load_scene(_write(tmp_path, text))
+    assert str(raised.value).startswith(key)
+
+
+def test_a_bare_relay_wall_table_is_the_default_capture(tmp_path):
+    scene = load_scene(_write(tmp_path, "[relay_wall]\n"))
+    default = RelayWallScene()
+    assert scene.scan == default.scan and scene.sensor_count == default.sensor_count
+

@@ -18,5 +18,11 @@ python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ig
 # pip compiles a regular install's modules, not an editable one's: compile them here, so that commands
 # do not recompile them at every start where PYTHONDONTWRITEBYTECODE is set
 python3 -m compileall -q analytic transient validation
+# Numba compiles the model's kernels on their first use (tens of seconds on 2 cores) and caches them beside
+# the sources; Dr.Jit caches the renderer's kernels in ~/.drjit. One small run of the main job pays both
+# here, so that the first real command runs at its warm speed (the README states both times)
+warm=$(mktemp -d)
+python3 -m validation.cli run examples/paper.toml --spp 4096 --out "$warm/run" --quiet
+rm -rf "$warm"
 # tal (y-tal) pins numpy < 2: it gets its own environment, used by the tests that read our HDF5 with it
 bash scripts/setup_interop.sh

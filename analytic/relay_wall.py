@@ -231,12 +231,12 @@ class RelayWallScene:
         object.__setattr__(self, "tolerance", check_tolerance(self.tolerance))
         if not isinstance(self.name, str):
             raise SceneError("name", f"expected a string, got {self.name!r}")
-        self._check_hidden()
-        self._check_points()
-        pairs = self.sensor_count
+        pairs = self.sensor_count          # from the grids alone: before any array of points is built
         if pairs > MAX_PAIRS:
             raise SceneError("scan.grid", f"{pairs:,} (laser point, read point) pairs; at most {MAX_PAIRS:,} "
                                           f"are supported")
+        self._check_hidden()
+        self._check_points()
         # y, its noisy copy, the render's mean, error and replicas: P N doubles each
         require_memory(8 * 8 * pairs * self.sampling.count,
                        f"{pairs:,} pairs x sampling.count = {self.sampling.count} bins",

@@ -77,24 +77,56 @@ def _roots(a, b, c):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _inner_roots(conic, u):
+def _polish(frame, tau, u, w, swap, along_w):
+    """A root of d = τ on the line through (u, w) along w (or u), refined by Newton's method on d itself.
+
+    The conic's coefficients are taken about the foci's midpoint: with a focus far away its
+    constant term is a difference of large numbers, and a root can be off by eps |q|² / |∇Q|,
+    enough to move a slab's edge by more than the tolerance. d - τ has no such cancellation.
+    """
+    for _ in range(2):
+        x, y = (w, u) if swap else (u, w)
+        ds = math.sqrt((x - frame.source_x) ** 2 + (y - frame.source_y) ** 2 + frame.source_height ** 2)
+        dk = math.sqrt((x - frame.sensor_x) ** 2 + (y - frame.sensor_y) ** 2 + frame.sensor_height ** 2)
+        if along_w != swap:      # the derivative along y
+            slope = (y - frame.source_y) / ds + (y - frame.sensor_y) / dk
+        else:
+            slope = (x - frame.source_x) / ds + (x - frame.sensor_x) / dk
+        if slope == 0.0:
+            break
+        step = (ds + dk - tau) / slope
+        # the closed form is off by rounding only: a larger step is a near-tangent line, left alone
+        if not abs(step) <= 1e-6 * (tau + abs(u) + abs(w)):
+            break
+        if along_w:
+            w -= step
+        else:
+            u -= step
+    return w if along_w else u
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _inner_roots(frame, conic, tau, u, swap):
     """The w where the isochrone crosses the line at u: (low, high, True), or (0, 0, False) if it does not."""
     mu, mw, auu, auw, aww, bu, bw, c = conic
     qu = u - mu
     low, high, real = _roots(aww, auw * qu + bw, (auu * qu + 2.0 * bu) * qu + c)
-    return low + mw, high + mw, real
+    if not real:
+        return 0.0, 0.0, False
+    return (_polish(frame, tau, u, low + mw, swap, True), _polish(frame, tau, u, high + mw, swap, True), True)
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _add_crossings(conic, w, lo, hi, points, used):
+def _add_crossings(frame, conic, tau, w, lo, hi, swap, points, used):
     """Append the u in (lo, hi) where the isochrone crosses the line at w; returns the new count."""
     mu, mw, auu, auw, aww, bu, bw, c = conic
     qw = w - mw
     low, high, real = _roots(auu, auw * qw + bu, (aww * qw + 2.0 * bw) * qw + c)
     if real:
         for q in (low, high):
-            if lo < q + mu < hi:
-                points[used] = q + mu
+            u = _polish(frame, tau, q + mu, w, swap, False)
+            if lo < u < hi:
+                points[used] = u
                 used += 1
     return used
 
@@ -121,7 +153,7 @@ def _turns_inside(conic, u0, u1, w0, w1):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _slab_pieces(frame, box, lower, upper, has_lower, has_upper, swap, points):
+def _slab_pieces(frame, box, lower, upper, tau_a, tau_b, has_lower, has_upper, swap, points):
     """Sorted u-breakpoints of the slab's region (the pixel's u-edges and the sides' crossings of its w-edges).
 
     Returns the count, or -1 when a side turns inside the pixel (the route does not apply).
@@ -129,12 +161,12 @@ def _slab_pieces(frame, box, lower, upper, has_lower, has_upper, swap, points):
     u0, u1, w0, w1 = (box.y0, box.y1, box.x0, box.x1) if swap else (box.x0, box.x1, box.y0, box.y1)
     points[0] = u0
     used = 1
-    for present, conic in ((has_lower, lower), (has_upper, upper)):
+    for present, conic, tau in ((has_lower, lower, tau_a), (has_upper, upper, tau_b)):
         if present:
             if _turns_inside(conic, u0, u1, w0, w1):
                 return -1
-            used = _add_crossings(conic, w0, u0, u1, points, used)
-            used = _add_crossings(conic, w1, u0, u1, points, used)
+            used = _add_crossings(frame, conic, tau, w0, u0, u1, swap, points, used)
+            used = _add_crossings(frame, conic, tau, w1, u0, u1, swap, points, used)
     points[used] = u1
     used += 1
     points[:used].sort()
@@ -142,19 +174,19 @@ def _slab_pieces(frame, box, lower, upper, has_lower, has_upper, swap, points):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _region_rows(frame, lower, upper, has_lower, has_upper, u, w0, w1):
+def _region_rows(frame, lower, upper, tau_a, tau_b, has_lower, has_upper, swap, u, w0, w1):
     """The inner intervals of the slab's region on the line at u: up to two (w_a, w_b), as four numbers.
 
     {d <= τ_b} is one interval on the line (d is convex), {d >= τ_a} the complement of one.
     """
     below_low, below_high = -np.inf, np.inf          # {d <= τ_b}
     if has_upper:
-        below_low, below_high, real = _inner_roots(upper, u)
+        below_low, below_high, real = _inner_roots(frame, upper, tau_b, u, swap)
         if not real:
             return 0.0, 0.0, 0.0, 0.0
     hole_low, hole_high = np.inf, np.inf              # {d < τ_a}: removed
     if has_lower:
-        low, high, real = _inner_roots(lower, u)
+        low, high, real = _inner_roots(frame, lower, tau_a, u, swap)
         if real:
             hole_low, hole_high = low, high
     start, stop = max(w0, below_low), min(w1, below_high)
@@ -162,15 +194,16 @@ def _region_rows(frame, lower, upper, has_lower, has_upper, u, w0, w1):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _slab_rule(frame, kernel, lower, upper, has_lower, has_upper, swap, ua, ub, w0, w1, order, values, noise,
-               total, magnitude, rounding):
+def _slab_rule(frame, kernel, lower, upper, tau_a, tau_b, has_lower, has_upper, swap, ua, ub, w0, w1, order,
+               values, noise, total, magnitude, rounding):
     """G_order x G_order of a_k κ_n(d) over the slab's region for u in [ua, ub], added to total (per bin)."""
     cu = 0.5 * (ua + ub)
     hu = 0.5 * (ub - ua)
     for ju in range(order):
         u = cu + hu * GAUSS_NODES[order, ju]
         wu = hu * GAUSS_WEIGHTS[order, ju]
-        first_a, first_b, second_a, second_b = _region_rows(frame, lower, upper, has_lower, has_upper, u, w0, w1)
+        first_a, first_b, second_a, second_b = _region_rows(frame, lower, upper, tau_a, tau_b, has_lower, has_upper,
+                                                            swap, u, w0, w1)
         for wa, wb in ((first_a, first_b), (second_a, second_b)):
             if not wb > wa:
                 continue
@@ -267,17 +300,17 @@ def strip_entries(frame, box, low, high, terms, axis, run, rtol, out, work):
         lower, upper = _conic(frame, tau_a, swap), _conic(frame, tau_b, swap)
         if (has_lower and lower[2] == 0.0) or (has_upper and upper[2] == 0.0):
             return _discard(out, run.bins)
-        pieces = _slab_pieces(frame, box, lower, upper, has_lower, has_upper, swap, points)
+        pieces = _slab_pieces(frame, box, lower, upper, tau_a, tau_b, has_lower, has_upper, swap, points)
         if pieces < 0:
             return _discard(out, run.bins)
         for piece in range(pieces - 1):
             ua, ub = points[piece], points[piece + 1]
             if not ub > ua:
                 continue
-            _slab_rule(frame, kernel, lower, upper, has_lower, has_upper, swap, ua, ub, w0, w1, HIGH_ORDER,
-                       work.values, work.noise, out[offset:], magnitude[offset:], rounding[offset:])
-            _slab_rule(frame, kernel, lower, upper, has_lower, has_upper, swap, ua, ub, w0, w1, LOW_ORDER,
-                       work.values, work.noise, low_order[offset:], scratch_magnitude[offset:],
+            _slab_rule(frame, kernel, lower, upper, tau_a, tau_b, has_lower, has_upper, swap, ua, ub, w0, w1,
+                       HIGH_ORDER, work.values, work.noise, out[offset:], magnitude[offset:], rounding[offset:])
+            _slab_rule(frame, kernel, lower, upper, tau_a, tau_b, has_lower, has_upper, swap, ua, ub, w0, w1,
+                       LOW_ORDER, work.values, work.noise, low_order[offset:], scratch_magnitude[offset:],
                        scratch_rounding[offset:])
     for i in range(run.bins):
         if not abs(out[i] - low_order[i]) <= rtol * abs(out[i]) + 4.0 * (rounding[i] + ROUNDING * magnitude[i]):

@@ -91,3 +91,10 @@ def test_a_bare_relay_wall_table_is_the_default_capture(tmp_path):
     default = RelayWallScene()
     assert scene.scan == default.scan and scene.sensor_count == default.sensor_count
 
+
+
+def test_an_oversized_scan_is_refused_before_its_points_are_built(tmp_path):
+    """A 10^5 x 10^5 confocal grid needed 75 GiB for its points before the pair count was checked."""
+    with pytest.raises(SceneError) as raised:
+        load_scene(_write(tmp_path, "[relay_wall]\n[scan]\ntype = \"confocal\"\ngrid = [100000, 100000]\n"))
+    assert str(raised.value).startswith("scan.grid")

@@ -95,6 +95,7 @@ def test_paper_and_lambertian_differ_by_pi_over_cos(rng):
         np.testing.assert_allclose(compiled, attenuation(points, source, sensor, kind), rtol=1e-13)
 
 
+@pytest.mark.slow      # 13 s; the entries are held to independent references in test_system.py
 def test_bin_integral_of_impulse_response_equals_sample():
     """∫_bin g_k(t) dt (contour form with the coarea factor) = y_k[n] for the impulse."""
     scene = default_scene(pixels=20, noise=None)

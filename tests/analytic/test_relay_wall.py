@@ -103,6 +103,7 @@ def test_single_scan_entries_match_the_reference(pose, rng):
     _check_entries(_scene(pose), rng)
 
 
+@pytest.mark.slow      # 13 s; confocal pairs are also held to the model by tests/transient/test_nlos.py
 def test_confocal_pairs_with_l_equal_s_match_the_reference(rng):
     _check_entries(_scene("tilted", scan=Scan(type="confocal", grid=(2, 2))), rng)
 

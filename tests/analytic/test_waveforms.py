@@ -205,7 +205,7 @@ REFERENCE_CASES = [
     (8, 1e-6, 3e6, 1e3),
     (8, 1e6, 1e-12, 1e-6),
     (13, DEFAULT_CUTOFF, 0.05, PERIOD),
-    (MAX_ORDER, DEFAULT_CUTOFF, 1e300, PERIOD),
+    pytest.param(MAX_ORDER, DEFAULT_CUTOFF, 1e300, PERIOD, marks=pytest.mark.slow),   # 11 s
 ]
 
 

@@ -25,6 +25,7 @@ def test_device_figures_follow_the_stated_mapping():
                                                              rel=1e-6)
 
 
+@pytest.mark.slow      # 6 s; reproduce --quick also runs in docs/paper.md's slow snippet
 def test_reproduce_quick_writes_report_with_every_claim(tmp_path):
     status = main(["reproduce", "--out", str(tmp_path / "q"), "--quick", "--quiet"])
     assert status == 0

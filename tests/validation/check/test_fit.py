@@ -30,6 +30,7 @@ def test_known_scale_and_offset_are_recovered(scene, model, rng):
     assert "path lengths short" in result.diagnosis
 
 
+@pytest.mark.slow      # 7 s of repeated fits
 def test_the_fits_standard_errors_describe_its_spread(scene, model, rng):
     """The jackknife standard errors that the thresholds above use are neither inflated nor too small:
     over 100 independent data sets the fitted values scatter by about the stated error (the sample

@@ -86,11 +86,23 @@ def positive_float_type(option: str):
     return parse
 
 
-def load_scene_argument(path: str | None):
-    """The scene a command was given: a TOML file, or the built-in default scene (a plane scene)."""
-    from analytic.scene import default_scene
+def load_scene_argument(path: str | None, *, relay_wall: bool = False):
+    """The scene a command was given: a TOML file, or the built-in default scene (a plane scene).
 
-    return default_scene() if path is None else load_plane_scene(path)
+    Parameters
+    ----------
+    path : str, optional
+        The scene file; None for the built-in plane scene.
+    relay_wall : bool
+        Whether the command takes a relay-wall (NLOS) scene file too; when
+        False such a file is refused in one line (:func:`load_plane_scene`).
+    """
+    from analytic.scene import default_scene
+    from analytic.scene_file import load_scene
+
+    if path is None:
+        return default_scene()
+    return load_scene(path) if relay_wall else load_plane_scene(path)
 
 
 def load_plane_scene(path):

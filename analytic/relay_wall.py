@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from .detector import Detector
 from .errors import SceneError
 from .geometry import PointPairs, Rectangle
 from .resources import require_memory
@@ -161,7 +162,7 @@ def _reflectance(key: str, value: Any, pixels: int) -> np.ndarray:
 class RelayWallScene:
     """A capture through a relay wall: the scene file's ``[relay_wall]``, ``[hidden]``, ``[laser]``,
     ``[sensor]`` and ``[scan]`` tables (docs/design.md section 7), with the plane scene's
-    ``[illumination]``, ``[sampling]``, ``[model] tolerance`` and ``[noise]``.
+    ``[illumination]``, ``[sampling]``, ``[model] tolerance``, ``[noise]`` and ``[detector]``.
 
     Parameters
     ----------
@@ -182,7 +183,7 @@ class RelayWallScene:
     intensity : float
         I, the laser's radiant intensity toward the wall, W/sr.
     scan : Scan
-    illumination, sampling, tolerance, noise, name
+    illumination, sampling, tolerance, noise, detector, name
         As for :class:`analytic.scene.Scene`.
     """
 
@@ -201,6 +202,7 @@ class RelayWallScene:
     sampling: Sampling = field(default_factory=Sampling)
     tolerance: float = 1e-6
     noise: Noise | None = None
+    detector: Detector | None = None
     name: str = "relay-wall"
 
     def __post_init__(self):
@@ -228,6 +230,8 @@ class RelayWallScene:
                 raise SceneError(name, f"expected a {kind.__name__}")
         if self.noise is not None and not isinstance(self.noise, Noise):
             raise SceneError("noise", "expected a Noise or None")
+        if self.detector is not None and not isinstance(self.detector, Detector):
+            raise SceneError("detector", "expected an analytic.detector.Detector or None")
         object.__setattr__(self, "tolerance", check_tolerance(self.tolerance))
         if not isinstance(self.name, str):
             raise SceneError("name", f"expected a string, got {self.name!r}")

@@ -29,23 +29,21 @@ from typing import Any
 
 import numpy as np
 
+from .detector import Detector
 from .errors import SceneError
 from .geometry import ATTENUATIONS, plane_geometry
 from .reflectance import builtin_reflectance
 from .resources import require_memory
+from .values import MAX_LENGTH, MIN_LENGTH, _integer, _number
 
 __all__ = ["SceneError", "Illumination", "Sampling", "Noise", "Scene", "default_scene", "sensor_grid",
            "WAVEFORMS", "ATTENUATIONS", "NOISE_KINDS", "MAX_LENGTH", "MIN_LENGTH", "MIN_HEIGHT_FRACTION", "MAX_SENSORS", "MIN_TOLERANCE", "MAX_TOLERANCE",
            "check_heights", "check_tolerance", "scene_extent", "minimum_height",
            "DEFAULT_ARRAY"]
 
-WAVEFORMS = ("impulse", "square", "butterworth")
+WAVEFORMS = ("impulse", "square", "butterworth", "gaussian", "emg", "sampled")
 NOISE_KINDS = ("gaussian", "poisson")
 
-#: Largest |length| or |coordinate| accepted, metres.
-MAX_LENGTH = 1e12
-#: Smallest positive length accepted (plane size, bin width), metres.
-MIN_LENGTH = 1e-9
 #: Smallest height of the source or a sensor, as a fraction of the scene's extent (:func:`check_heights`).
 MIN_HEIGHT_FRACTION = 1e-9
 #: Largest Gaussian noise σ: m σ² (the discrepancy rule's target) stays finite.
@@ -61,43 +59,6 @@ MAX_SENSORS = 1024
 _BIN_RESOLUTION = 1e-12
 #: Seeds are 32-bit, as the renderer's.
 _SEED_LIMIT = 2**32
-
-
-def _number(key: str, value: Any, *, positive: bool = False, nonnegative: bool = False,
-            length: bool = False) -> float:
-    """A finite float; ``length``: within ±MAX_LENGTH and, if positive, at least MIN_LENGTH."""
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise SceneError(key, f"expected a number, got {value!r}")
-    try:
-        value = float(value)
-    except OverflowError:
-        raise SceneError(key, f"{value} is beyond the range of a float64") from None
-    if not math.isfinite(value):
-        raise SceneError(key, f"must be finite, got {value}")
-    if positive and not value > 0.0:
-        raise SceneError(key, f"must be > 0, got {value}")
-    if nonnegative and not value >= 0.0:
-        raise SceneError(key, f"must be >= 0, got {value}")
-    if length:
-        if abs(value) > MAX_LENGTH:
-            raise SceneError(key, f"{value} m is beyond the ±{MAX_LENGTH:g} m this tool resolves in float64")
-        if positive and value < MIN_LENGTH:
-            raise SceneError(key, f"{value} m is below the smallest length supported, {MIN_LENGTH:g} m")
-    return value
-
-
-def _integer(key: str, value: Any, *, minimum: int = 1, maximum: int | None = None) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        if isinstance(value, float) and math.isfinite(value) and value.is_integer():
-            value = int(value)
-        else:
-            raise SceneError(key, f"expected a whole number, got {value!r}")
-    value = int(value)
-    if value < minimum:
-        raise SceneError(key, f"must be >= {minimum}, got {value}")
-    if maximum is not None and value > maximum:
-        raise SceneError(key, f"must be <= {maximum}, got {value}")
-    return value
 
 
 def _point(key: str, value: Any) -> np.ndarray:
@@ -183,14 +144,17 @@ def _choice(key: str, value: Any, options: tuple[str, ...]) -> str:
 
 @dataclass(frozen=True, kw_only=True)
 class Illumination:
-    """The source's intensity waveform s(t).
+    """The source's intensity waveform s(t) (docs/design.md sections 2 and 8).
 
     Parameters
     ----------
-    waveform : {"impulse", "square", "butterworth"}
-        Dirac impulse; unit-amplitude box of width ``width``; or the truncated
-        impulse response of an analogue Butterworth low-pass scaled to unit
-        peak amplitude.
+    waveform : {"impulse", "square", "butterworth", "gaussian", "emg", "sampled"}
+        Dirac impulse; unit-amplitude box of width ``width``; the truncated
+        impulse response of an analogue Butterworth low-pass; a Gaussian of
+        FWHM ``fwhm`` centred at 0; a Gaussian convolved with an exponential
+        of time constant ``tail`` (EMG, a SPAD's response); or the
+        piecewise-linear interpolation of measured ``samples``. Each but the
+        impulse is scaled to unit peak amplitude.
     width : float, optional
         Square pulse width, metres of path length. Default: period / 5.
     cutoff : float, optional
@@ -201,6 +165,23 @@ class Illumination:
         Default: 3 / cutoff (the envelope has decayed below 1e-4 by then).
     order : int, optional
         Butterworth order. Default 3 (the paper's).
+    fwhm : float, optional
+        Gaussian and EMG (required): the Gaussian's full width at half
+        maximum, metres of path (1 ps = 2.99792458e-4 m).
+    tail : float, optional
+        EMG (required): the exponential's time constant, metres of path.
+    samples : sequence of float, optional
+        Sampled: the response's samples (>= 0, some > 0), or read from
+        ``file``; stored as a tuple.
+    file : str, optional
+        Sampled: the .npy/.csv file the samples come from (the scene file
+        reads it, relative to itself; given alone here, relative to the
+        working folder). Recorded in the description only.
+    sample_width, sample_width_ps : float, optional
+        Sampled (exactly one of them): the samples' spacing, metres of path
+        or picoseconds.
+    start : float, optional
+        Sampled: path length of the first sample, metres. Default 0.
     """
 
     waveform: str = "impulse"
@@ -208,11 +189,19 @@ class Illumination:
     cutoff: float | None = None
     duration: float | None = None
     order: int | None = None
+    fwhm: float | None = None
+    tail: float | None = None
+    samples: Any = None
+    file: str | None = field(default=None, compare=False)
+    sample_width: float | None = None
+    sample_width_ps: float | None = None
+    start: float | None = None
 
     def __post_init__(self):
         _choice("illumination.waveform", self.waveform, WAVEFORMS)
-        own = {"square": ("width",), "butterworth": ("cutoff", "duration", "order")}
-        for name in ("width", "cutoff", "duration", "order"):
+        own = {"square": ("width",), "butterworth": ("cutoff", "duration", "order"), "gaussian": ("fwhm",),
+               "emg": ("fwhm", "tail"), "sampled": ("samples", "file", "sample_width", "sample_width_ps", "start")}
+        for name in _ILLUMINATION_KEYS:
             value = getattr(self, name)
             if value is None:
                 continue
@@ -221,9 +210,44 @@ class Illumination:
                                  f"does not apply to waveform = {self.waveform!r}")
             if name == "order":
                 object.__setattr__(self, name, _integer("illumination.order", value))
-                continue
-            # the waveform's own bounds (analytic.waveforms.make_waveform) depend on the period
-            object.__setattr__(self, name, _number(f"illumination.{name}", value, positive=True))
+            elif name in ("fwhm", "tail", "sample_width"):
+                object.__setattr__(self, name, _number(f"illumination.{name}", value, positive=True, length=True))
+            elif name == "start":
+                object.__setattr__(self, name, _number("illumination.start", value, length=True))
+            elif name in ("width", "cutoff", "duration", "sample_width_ps"):
+                # the waveform's own bounds (analytic.waveforms.make_waveform) depend on the period
+                object.__setattr__(self, name, _number(f"illumination.{name}", value, positive=True))
+        if self.waveform == "sampled":
+            self._check_sampled()
+
+    def _check_sampled(self):
+        """Samples from ``samples`` or ``file`` (exactly one), a spacing from exactly one key, a resolvable span."""
+        from .waveforms.measured import check_samples, finite_span, read_samples, sample_width_metres
+
+        if self.file is not None and not isinstance(self.file, str):
+            raise SceneError("illumination.file", f"expected a file name, got {self.file!r}")
+        if self.samples is None and self.file is None:
+            raise SceneError("illumination.file", "required with waveform = 'sampled' (a .npy or .csv of the "
+                                                  "response's samples), or give samples = [...]")
+        if self.samples is None:
+            samples = read_samples(self.file)
+        else:
+            samples = check_samples(self.samples)
+        object.__setattr__(self, "samples", tuple(float(v) for v in samples))
+        given = [name for name in ("sample_width", "sample_width_ps") if getattr(self, name) is not None]
+        if len(given) != 1:
+            raise SceneError("illumination.sample_width", "give exactly one of sample_width (metres of path) and "
+                             f"sample_width_ps (picoseconds); got {' and '.join(given) or 'neither'}")
+        width = sample_width_metres(self.sample_width, self.sample_width_ps)
+        if not width >= MIN_LENGTH:
+            raise SceneError(f"illumination.{given[0]}", f"{width:g} m is below the smallest length supported, "
+                                                         f"{MIN_LENGTH:g} m")
+        finite_span(len(samples), width, 0.0 if self.start is None else self.start, MAX_LENGTH, _BIN_RESOLUTION)
+
+
+#: Every optional key of ``[illumination]`` (the scene file's names).
+_ILLUMINATION_KEYS = ("width", "cutoff", "duration", "order", "fwhm", "tail", "samples", "file", "sample_width",
+                      "sample_width_ps", "start")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -346,6 +370,9 @@ class Scene:
         largest entry of its row. Default 1e-6.
     noise : Noise or None
         Noise for ``transient_noisy.npy``; None means noiseless.
+    detector : analytic.detector.Detector or None
+        Photon counting for ``counts_expected.npy`` and ``counts.npy``
+        (docs/design.md section 8); None: no counts.
     name : str
         Label used in reports.
     """
@@ -361,6 +388,7 @@ class Scene:
     attenuation: str = "lambertian"
     tolerance: float = 1e-6
     noise: Noise | None = None
+    detector: Detector | None = None
     name: str = "scene"
 
     def __post_init__(self):
@@ -416,6 +444,8 @@ class Scene:
         object.__setattr__(self, "tolerance", check_tolerance(self.tolerance))
         if self.noise is not None and not isinstance(self.noise, Noise):
             raise SceneError("noise", "expected a Noise or None")
+        if self.detector is not None and not isinstance(self.detector, Detector):
+            raise SceneError("detector", "expected an analytic.detector.Detector or None")
         if not isinstance(self.name, str):
             raise SceneError("name", f"expected a string, got {self.name!r}")
         # the name labels reports, figures and printed lines: one line of printable text

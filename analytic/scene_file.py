@@ -17,10 +17,11 @@ from typing import Any
 
 import numpy as np
 
+from .detector import Detector
 from .errors import ImageError, SceneError
 from .reflectance import printable, read_reflectance, regular_file_problem
-from .scene import (MAX_SENSORS, Illumination, Noise, Sampling, Scene, _integer, _number, _point,
-                    sensor_grid)
+from .scene import (_ILLUMINATION_KEYS, MAX_SENSORS, Illumination, Noise, Sampling, Scene, _integer, _number,
+                    _point, sensor_grid)
 
 __all__ = ["load_scene", "read_toml", "scene_from_dict", "scene_to_tables", "MAX_FILE_BYTES"]
 
@@ -43,11 +44,12 @@ _SCHEMA = {
     "name": None,
     "plane": {"size", "pixels", "reflectance"},
     "source": {"position", "intensity"},
-    "illumination": {"waveform", "width", "cutoff", "duration", "order"},
+    "illumination": {"waveform", *_ILLUMINATION_KEYS},
     "sensors": {"positions", "grid", "extent", "center"},
     "sampling": {"period", "start", "count"},
     "model": {"attenuation", "tolerance"},
     "noise": {"kind", "sigma", "photons", "seed"},
+    "detector": {"photons", "background", "cycles", "dead_time", "seed"},
 }
 
 
@@ -102,6 +104,7 @@ _RELAY_WALL_SCHEMA = {
     "sampling": _SCHEMA["sampling"],
     "model": {"tolerance"},
     "noise": _SCHEMA["noise"],
+    "detector": _SCHEMA["detector"],
 }
 
 
@@ -163,6 +166,7 @@ def scene_from_dict(data: dict, base_dir: str | Path = ".", *, name: str = "scen
     reflectance = _image(plane, "plane.reflectance", pixels, base_dir)
     noise = Noise(**_table(data, "noise")) if "noise" in data else None
     return Scene(
+        detector=_detector(data),
         name=_label(data, name),
         size=plane.get("size", 1.0),
         pixels=pixels,
@@ -170,12 +174,38 @@ def scene_from_dict(data: dict, base_dir: str | Path = ".", *, name: str = "scen
         source=source.get("position", (0.5, 0.5, 1.0)),
         intensity=source.get("intensity", 1.0),
         sensors=_sensors(_table(data, "sensors")),
-        illumination=Illumination(**illumination),
+        illumination=_illumination(illumination, base_dir),
         sampling=Sampling(**{_SAMPLING_FIELDS[key]: value for key, value in sampling.items()}),
         attenuation=model.get("attenuation", "lambertian"),
         tolerance=model.get("tolerance", 1e-6),
         noise=noise,
     )
+
+
+def _illumination(table: dict, base_dir) -> Illumination:
+    """``[illumination]``, a sampled response's ``file`` read relative to the scene file."""
+    table = dict(table)
+    if "file" in table:
+        if "samples" in table:
+            raise SceneError("illumination.samples", "give the samples in a file or inline, not both")
+        name = table["file"]
+        if not isinstance(name, str) or not name:
+            raise SceneError("illumination.file", f"expected a file name (.npy or .csv, relative to the scene "
+                                                  f"file), got {name!r}")
+        from .waveforms.measured import read_samples
+
+        table["samples"] = read_samples(Path(base_dir) / name)
+    return Illumination(**table)
+
+
+def _detector(data: dict, schema: dict = _SCHEMA) -> Detector | None:
+    """``[detector]`` (docs/design.md section 8), or None when absent."""
+    if "detector" not in data:
+        return None
+    table = _table(data, "detector", schema)
+    if "photons" not in table:
+        raise SceneError("detector.photons", "required: expected signal photons per laser cycle per unit of y")
+    return Detector(**table)
 
 
 def _label(data: dict, name: str) -> str:
@@ -226,10 +256,11 @@ def _relay_wall_scene(data: dict, base_dir, name: str):
         intensity=laser.get("intensity", defaults["intensity"].default),
         sensor_position=tables["sensor"].get("position", defaults["sensor_position"].default),
         scan=Scan(**scan),
-        illumination=Illumination(**tables["illumination"]),
+        illumination=_illumination(tables["illumination"], base_dir),
         sampling=Sampling(**{_SAMPLING_FIELDS[key]: value for key, value in tables["sampling"].items()}),
         tolerance=tables["model"].get("tolerance", 1e-6),
         noise=noise,
+        detector=_detector(data, _RELAY_WALL_SCHEMA),
     )
 
 
@@ -259,9 +290,10 @@ def scene_to_tables(scene: Scene) -> dict:
     The reflectance is the image array itself (or its constant value when
     uniform); write it to a PNG or EXR to put it in a file.
     """
-    illumination = {key: getattr(scene.illumination, key)
-                    for key in ("width", "cutoff", "duration", "order")
-                    if getattr(scene.illumination, key) is not None}
+    # a sampled response's samples inline (the file they came from is a label; the tables stand alone)
+    illumination = {key: list(value) if key == "samples" else value
+                    for key in _ILLUMINATION_KEYS if key != "file"
+                    for value in [getattr(scene.illumination, key)] if value is not None}
     common = {"illumination": {"waveform": scene.illumination.waveform, **illumination},
               "sampling": {"period": scene.sampling.bin_width_opl, "start": scene.sampling.start_opl,
                            "count": scene.sampling.count}}
@@ -283,6 +315,8 @@ def scene_to_tables(scene: Scene) -> dict:
         noise = scene.noise
         own = {"sigma": noise.sigma} if noise.kind == "gaussian" else {"photons": noise.photons}
         tables["noise"] = {"kind": noise.kind, **own, "seed": noise.seed}
+    if scene.detector is not None:
+        tables["detector"] = scene.detector.as_dict()
     return tables
 
 

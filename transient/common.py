@@ -29,7 +29,8 @@ import mitsuba as mi
 from analytic.attenuation import LAMBERTIAN, attenuation_formula
 from analytic.binning import bin_index
 from analytic.scene import Illumination
-from analytic.waveforms import POLYNOMIAL, WaveformTerms, make_waveform
+from analytic.waveforms import ERRORFUNCTIONS, POLYNOMIAL, WaveformTerms, make_waveform
+from analytic.waveforms import special
 
 __all__ = ["cumulative", "kernel_between", "attenuation", "height_over_cube", "sample_stream", "jittered_point", "replica_of", "deposit",
            "reduce_mode", "opaque_u32", "opaque_f64", "is_diffuse", "time_axis_and_waveform"]
@@ -50,6 +51,16 @@ def opaque_f64(value: float):
 
 
 # -- the waveform's cumulative --------------------------------------------------
+
+
+def erfcx(v):
+    """erfcx(v) = e^{v²} erfc(v) for v >= 0 in Dr.Jit Float64 (v < 0 clamped): Cody's three ranges of
+    :mod:`analytic.waveforms.special`, the expressions NumPy and Numba evaluate, chosen by ``dr.select``."""
+    v = dr.maximum(v, 0.0)
+    low = special.small(dr.minimum(v, special.SMALL), dr.exp)
+    middle = special.middle(dr.clip(v, special.SMALL, special.LARGE), dr.exp)
+    high = special.large(dr.maximum(v, special.LARGE), dr.exp)
+    return dr.select(v <= special.SMALL, low, dr.select(v <= special.LARGE, middle, high))
 
 
 def _piece_index(terms: WaveformTerms, u):
@@ -73,14 +84,62 @@ def _piece_form(terms: WaveformTerms, piece: int, u):
             value = value * x + coefficient
         return value
     value = mi.Float64(0.0)
+    if terms.families[piece] == ERRORFUNCTIONS:
+        for b, centre, beta, gamma, p, shift in zip(*[iter(coefficients)] * 6):
+            y = x - centre
+            value += b * dr.exp(y * (beta - gamma * y)) * erfcx(p * y + shift)
+        return value
     for a, w, b, c in zip(*[iter(coefficients)] * 4):
         term = b * dr.cos(w * x) + c * dr.sin(w * x) if w else mi.Float64(b)
         value += dr.exp(a * x) * term
     return value
 
 
+#: Above this many pieces of polynomials (a sampled response), a lane finds its piece by binary search and
+#: gathers its coefficients, instead of evaluating every piece and selecting.
+_GATHER_PIECES = 8
+
+
+def _polynomial_tables(terms: WaveformTerms):
+    """(starts, constants, origins, coefficients (piece-major, degree + 1 each)) as Dr.Jit arrays."""
+    count = len(terms.starts)
+    width = max(terms.degree, 0) + 1
+    table = [0.0] * (count * width)
+    for piece in range(count):
+        first, last = int(terms.offsets[piece]), int(terms.offsets[piece + 1])
+        for m in range(last - first):
+            table[piece * width + m] = float(terms.coefficients[first + m])
+    return (mi.Float64([float(v) for v in terms.starts]), mi.Float64([float(v) for v in terms.constants]),
+            mi.Float64([float(v) for v in terms.origins]), mi.Float64(table), width)
+
+
+def _gathered_constant_and_form(terms: WaveformTerms, u):
+    """(K_i, F_i(u)) for polynomial pieces: the piece by binary search over the starts, its terms gathered."""
+    starts, constants, origins, table, width = _polynomial_tables(terms)
+    count = len(terms.starts)
+    below = mi.UInt32(0)                    # how many starts lie below u (piece = below - 1)
+    step = 1 << (count.bit_length() - 1)
+    while step:
+        candidate = below + step
+        inside = candidate <= count
+        start = dr.gather(mi.Float64, starts, dr.minimum(candidate, count) - 1, active=inside)
+        below = dr.select(inside & (start < u), candidate, below)
+        step >>= 1
+    found = below > 0
+    piece = dr.maximum(mi.Int32(below) - 1, 0)
+    piece = mi.UInt32(piece)
+    x = u - dr.gather(mi.Float64, origins, piece, active=found)
+    form = mi.Float64(0.0)
+    for m in range(width - 1, -1, -1):
+        form = form * x + dr.gather(mi.Float64, table, piece * width + m, active=found)
+    constant = dr.gather(mi.Float64, constants, piece, active=found)
+    return dr.select(found, constant, 0.0), dr.select(found, form, 0.0)
+
+
 def _constant_and_form(terms: WaveformTerms, u):
     """(K_i, F_i(u)) of each lane's piece (0, 0 where S = 0): S(u) = K_i + F_i(u)."""
+    if terms.degree >= 0 and len(terms.starts) > _GATHER_PIECES:
+        return _gathered_constant_and_form(terms, u)
     index = _piece_index(terms, u)
     constant, form = mi.Float64(0.0), mi.Float64(0.0)
     for piece in range(len(terms.starts)):
@@ -355,7 +414,10 @@ def time_axis_and_waveform(props, plugin: str):
     props : mi.Properties
         ``bins``, ``bin_width_opl`` (m), ``start_opl`` (m, default 0),
         ``waveform`` and its options (``pulse_width``, ``cutoff``,
-        ``duration``, ``order``), named as the scene file names them.
+        ``duration``, ``order``, ``fwhm``, ``tail``; a sampled response's
+        ``samples`` as one string of comma-separated numbers,
+        ``sample_width`` in metres and ``sample_start``), named as the
+        scene file names them where they can be.
     plugin : str
         The plugin's name, for messages.
 
@@ -377,7 +439,13 @@ def time_axis_and_waveform(props, plugin: str):
         raise ValueError(f"{plugin}: start_opl must be finite, got {start_opl}")
     options = {name: props.get(key) if key in props else None
                for name, key in (("width", "pulse_width"), ("cutoff", "cutoff"), ("duration", "duration"),
-                                 ("order", "order"))}
+                                 ("order", "order"), ("fwhm", "fwhm"), ("tail", "tail"),
+                                 ("sample_width", "sample_width"), ("start", "sample_start"))}
+    if "samples" in props:
+        try:
+            options["samples"] = [float(value) for value in str(props.get("samples")).split(",")]
+        except ValueError:
+            raise ValueError(f"{plugin}: samples must be comma-separated numbers") from None
     # Illumination validates names and values exactly as the scene file does.
     illumination = Illumination(waveform=props.get("waveform", "impulse"), **options)
     return bins, start_opl, bin_width_opl, make_waveform(illumination, bin_width_opl)

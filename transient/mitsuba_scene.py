@@ -84,6 +84,16 @@ def _illumination_entries(scene: Scene) -> dict:
             value = getattr(illumination, name)
             if value is not None:
                 entries[name] = int(value) if name == "order" else float(value)
+    elif illumination.waveform in ("gaussian", "emg"):
+        entries.update({name: float(getattr(illumination, name)) for name in ("fwhm", "tail")
+                        if getattr(illumination, name) is not None})
+    elif illumination.waveform == "sampled":
+        from analytic.waveforms.measured import sample_width_metres
+
+        # repr: the plugin reads back the very floats, so its pieces are the model's
+        entries["samples"] = ",".join(repr(float(value)) for value in illumination.samples)
+        entries["sample_width"] = sample_width_metres(illumination.sample_width, illumination.sample_width_ps)
+        entries["sample_start"] = 0.0 if illumination.start is None else float(illumination.start)
     return entries
 
 

@@ -1,7 +1,7 @@
 """Illumination waveforms s(t) and the sampling kernels κ_n they induce.
 
-A waveform is causal with support [0, duration] (duration 0 for the Dirac
-impulse). Its cumulative S(u) = ∫_{-∞}^u s(t) dt is known in closed form,
+A waveform has support [lead, duration] with lead <= 0 <= duration (a
+causal pulse has lead 0; a Gaussian centred at 0 starts before it). Its cumulative S(u) = ∫_{-∞}^u s(t) dt is known in closed form,
 piece by piece (:mod:`analytic.waveforms.pieces`), so the box-prefiltered
 sample of light that left the plane at path length τ is
 
@@ -12,7 +12,7 @@ pieces' kinks) shifted to the bin edges, every κ_n is smooth in τ; the
 quadrature of the system matrix splits its integrals there.
 
 One module per waveform (:mod:`.impulse`, :mod:`.square`,
-:mod:`.butterworth`), each with ``PARAMETERS`` (its scene keys) and
+:mod:`.butterworth`, :mod:`.gaussian`, :mod:`.emg`, :mod:`.sampled`), each with ``PARAMETERS`` (its scene keys) and
 ``build(illumination, period) -> Waveform``; :data:`analytic.waveforms.builders.BUILDERS`
 maps the scene's ``waveform`` name to it. A new waveform is one such module and
 its tests.
@@ -24,6 +24,9 @@ __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "builders": ["make_waveform", "BUILDERS"],
     "waveform": ["Waveform"],
     "pieces": ["WaveformTerms", "make_terms", "cumulative_scalar", "kernel_scalar", "piece_of", "piece_value",
-               "POLYNOMIAL", "EXPONENTIALS"],
+               "POLYNOMIAL", "EXPONENTIALS", "ERRORFUNCTIONS"],
+    "special": ["erfcx_scalar", "erfcx_array", "erfcx_taylor"],
+    "measured": ["read_samples", "check_samples", "MAX_SAMPLES", "METRES_PER_PICOSECOND"],
+    "emg": ["TAIL_RATIO_RANGE"],
     "butterworth": ["MAX_ORDER", "CUTOFF_RANGE", "CUTOFF_PERIOD_RANGE", "MIN_CUTOFF_DURATION"],
 })

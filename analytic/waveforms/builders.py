@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
-from . import butterworth, impulse, square
+from . import butterworth, emg, gaussian, impulse, sampled, square
 from .waveform import Waveform
 
 __all__ = ["make_waveform", "BUILDERS"]
 
 #: The scene's ``[illumination] waveform`` -> the module that builds it.
-BUILDERS = {"impulse": impulse, "square": square, "butterworth": butterworth}
+BUILDERS = {"impulse": impulse, "square": square, "butterworth": butterworth, "gaussian": gaussian, "emg": emg,
+            "sampled": sampled}
 
 
 def make_waveform(illumination, period: float) -> Waveform:
@@ -21,7 +22,7 @@ def make_waveform(illumination, period: float) -> Waveform:
     period : float
         Sampling period T, metres; sets the defaults (square width T/5,
         Butterworth cutoff 1/(2T) cycles per metre, duration 3/cutoff,
-        order 3).
+        order 3). The Gaussian, EMG and sampled pulses have no default.
 
     Returns
     -------

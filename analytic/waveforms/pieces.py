@@ -13,13 +13,19 @@ S is stored as pieces: piece i covers (b_i, b_{i+1}] (the last one up to
 
 with K_i a constant and F_i a closed form of one *family*:
 
-============== ===============================================================
-``POLYNOMIAL`` F(u) = Σ_m c_m (u - o)^m (Horner; no coefficient: F = 0)
-``EXPONENTIALS`` F(u) = Σ_j e^{a_j (u - o)} (b_j cos ω_j (u - o) + c_j sin ω_j (u - o))
-============== ===============================================================
+================== ===========================================================
+``POLYNOMIAL``     F(u) = Σ_m c_m (u - o)^m (Horner; no coefficient: F = 0)
+``EXPONENTIALS``   F(u) = Σ_j e^{a_j (u - o)} (b_j cos ω_j (u - o) + c_j sin ω_j (u - o))
+``ERRORFUNCTIONS`` F(u) = Σ_j b_j e^{y (β_j - γ_j y)} erfcx(p_j y + s_j), y = u - o - c_j
+================== ===========================================================
 
 (o is the piece's origin; coefficients are stored flat, four per term for
-``EXPONENTIALS``: a_j, ω_j, b_j, c_j). Why a constant and a form, not S
+``EXPONENTIALS``: a_j, ω_j, b_j, c_j; six for ``ERRORFUNCTIONS``: b_j, c_j,
+β_j, γ_j >= 0, p_j, s_j, built so that p_j y + s_j >= 0 over the piece,
+where erfcx(v) = e^{v²} erfc(v) <= 1 (:mod:`analytic.waveforms.special`),
+and the exponent stays at most a few units above its value at the piece's
+ends: no term overflows, and e^{-v²} erfcx(v) keeps erfc's relative
+accuracy in a Gaussian's tails). Why a constant and a form, not S
 itself: far in a pulse's tail S is its area less a remainder 1e-13 of it,
 and a kernel computed as the difference of two such S keeps only their
 rounding. Each kernel is computed as
@@ -47,14 +53,18 @@ from typing import NamedTuple
 import numpy as np
 
 from ..kernel_cache import njit
+from .special import RECIPROCAL_SQRT_PI, erfcx_array, erfcx_scalar, erfcx_taylor
 
-__all__ = ["WaveformTerms", "make_terms", "POLYNOMIAL", "EXPONENTIALS", "piece_of", "piece_value",
+__all__ = ["WaveformTerms", "make_terms", "POLYNOMIAL", "EXPONENTIALS", "ERRORFUNCTIONS", "TERM_SIZES",
+           "piece_of", "piece_value",
            "piece_derivatives", "piece_derivative_bound",
            "cumulative_scalar", "kernel_scalar", "cumulative_array", "derivative_array", "kernel_array",
            "ROUNDING"]
 
 #: Families of the pieces' closed forms.
-POLYNOMIAL, EXPONENTIALS = 0, 1
+POLYNOMIAL, EXPONENTIALS, ERRORFUNCTIONS = 0, 1, 2
+#: Coefficients per term of each family (POLYNOMIAL: one per power).
+TERM_SIZES = {POLYNOMIAL: 1, EXPONENTIALS: 4, ERRORFUNCTIONS: 6}
 
 #: Relative rounding allowed per term of a closed form when bounding a kernel's rounding error
 #: (a few roundings of each term and of the sums).
@@ -73,7 +83,7 @@ class WaveformTerms(NamedTuple):
     constants : float64[P]
         K_i, metres (dimensionless for the impulse).
     families : int64[P]
-        ``POLYNOMIAL`` or ``EXPONENTIALS``.
+        ``POLYNOMIAL``, ``EXPONENTIALS`` or ``ERRORFUNCTIONS``.
     origins : float64[P]
         o_i, metres.
     offsets : int64[P + 1]
@@ -135,8 +145,10 @@ def make_terms(pieces, duration: float, lead: float = 0.0) -> WaveformTerms:
     if not lead <= 0.0 <= duration or not math.isfinite(lead):
         raise ValueError(f"the pulse must start at lead <= 0 (got {lead}) and end at duration >= 0 (got {duration})")
     for piece in pieces:
-        if piece[3] == EXPONENTIALS and len(piece[5]) % 4:
-            raise ValueError("EXPONENTIALS pieces take four coefficients per term")
+        if piece[3] not in TERM_SIZES:
+            raise ValueError(f"unknown family {piece[3]!r}")
+        if len(piece[5]) % TERM_SIZES[piece[3]]:
+            raise ValueError(f"family {piece[3]} takes {TERM_SIZES[piece[3]]} coefficients per term")
     sizes = [len(p[5]) for p in pieces]
     polynomial = all(p[3] == POLYNOMIAL for p in pieces)
     degree = max((size - 1 for size in sizes), default=0) if polynomial else -1
@@ -169,6 +181,23 @@ def piece_of(terms, u):
     return low
 
 
+@njit(cache=True, error_model="numpy")
+def _error_terms(coefficients, first, last, x):
+    """(Σ_j b_j e^{y(β_j - γ_j y)} erfcx(p_j y + s_j), a bound on its rounding's scale) at x = u - o.
+
+    The scale counts each exponent's size: e^E carries E's rounding ε|E| as a relative error.
+    """
+    value = 0.0
+    size = 0.0
+    for t in range(first, last, 6):
+        y = x - coefficients[t + 1]
+        exponent = y * (coefficients[t + 2] - coefficients[t + 3] * y)
+        term = coefficients[t] * math.exp(exponent) * erfcx_scalar(coefficients[t + 4] * y + coefficients[t + 5])
+        value += term
+        size += abs(term) * (1.0 + abs(exponent))
+    return value, size
+
+
 @njit(cache=True, error_model="numpy", inline="always")
 def piece_value(terms, piece, u):
     """(F_i(u), a bound on the size of its terms) for piece i, metres."""
@@ -184,6 +213,8 @@ def piece_value(terms, piece, u):
             value = value * x + coefficients[m]
             size = size * magnitude + abs(coefficients[m])
         return value, size
+    if terms.families[piece] == 2:          # ERRORFUNCTIONS
+        return _error_terms(coefficients, first, last, x)
     for j in range(first, last, 4):         # EXPONENTIALS
         envelope = math.exp(coefficients[j] * x)
         frequency = coefficients[j + 1]
@@ -199,12 +230,49 @@ def piece_value(terms, piece, u):
 
 
 @njit(cache=True, error_model="numpy")
+def _error_derivatives(coefficients, first, last, x, count, out):
+    """out[j] += d^j/dx^j of the ERRORFUNCTIONS terms at x, j = 1 ... count - 1 (see piece_derivatives)."""
+    exponential = np.empty(count)
+    scaled = np.empty(count)
+    for t in range(first, last, 6):
+        b = coefficients[t]
+        y = x - coefficients[t + 1]
+        beta = coefficients[t + 2]
+        gamma = coefficients[t + 3]
+        p = coefficients[t + 4]
+        # e^{(y + h)(β - γ(y + h))} = e^{y(β - γy)} e^{a h - γ h²}, a = β - 2γy: Taylor coefficients
+        # e_0 = 1, e_1 = a, (k + 1) e_{k+1} = a e_k - 2γ e_{k-1} (Hermite's recurrence, stable upward)
+        slope = beta - 2.0 * gamma * y
+        exponential[0] = 1.0
+        if count > 1:
+            exponential[1] = slope
+        for k in range(1, count - 1):
+            exponential[k + 1] = (slope * exponential[k] - 2.0 * gamma * exponential[k - 1]) / (k + 1)
+        erfcx_taylor(p * y + coefficients[t + 5], count, scaled)
+        power = 1.0
+        for k in range(count):
+            scaled[k] *= power
+            power *= p
+        front = b * math.exp(y * (beta - gamma * y))
+        factorial = 1.0
+        for j in range(1, count):
+            factorial *= j
+            total = 0.0
+            for i in range(j + 1):
+                total += exponential[i] * scaled[j - i]
+            out[j] += front * total * factorial
+
+
+@njit(cache=True, error_model="numpy")
 def piece_derivatives(terms, piece, u, count, out):
     """out[j] = d^j F_i / du^j at u for j = 1 ... count - 1 (out[0] is left alone), metres^(1-j).
 
     POLYNOMIAL: Σ_m c_m m!/(m-j)! x^(m-j); EXPONENTIALS: each term is
     Re[(b - i c) e^{z x}] with z = a + iω, so its j-th derivative is
-    Re[(b - i c) z^j e^{z x}].
+    Re[(b - i c) z^j e^{z x}]; ERRORFUNCTIONS: j! times the Taylor
+    coefficients of each term, the Cauchy product of those of
+    e^{y(β - γy)} (Hermite's recurrence) and of erfcx(p y + s)
+    (:func:`analytic.waveforms.special.erfcx_taylor`).
     """
     first = terms.offsets[piece]
     last = terms.offsets[piece + 1]
@@ -222,6 +290,9 @@ def piece_derivatives(terms, piece, u, count, out):
                 value = value * x + coefficients[first + m] * factor
             out[j] = value
         return
+    if terms.families[piece] == 2:          # ERRORFUNCTIONS
+        _error_derivatives(coefficients, first, last, x, count, out)
+        return
     for t in range(first, last, 4):          # EXPONENTIALS
         z = complex(coefficients[t], coefficients[t + 1])
         term = complex(coefficients[t + 2], -coefficients[t + 3]) * np.exp(z * x)
@@ -231,11 +302,86 @@ def piece_derivatives(terms, piece, u, count, out):
 
 
 @njit(cache=True, error_model="numpy")
+def _error_terms_bound(coefficients, first, last, low, high, radius):
+    """max |F(z)| over the complex points within ``radius`` of [low, high] (x = u - o), ERRORFUNCTIONS.
+
+    For z = y + iη, Re[z(β - γz)] = βy - γ(y² - η²) <= max over y of (βy - γy²) + γ radius², and
+    |erfcx(v)| <= 1 where Re v >= 0 (|w(z)| <= 1 in the upper half-plane), <= 1 + 2 e^{(Re v)²} where
+    Re v < 0 (erfcx(v) = 2e^{v²} - erfcx(-v)).
+    """
+    total = 0.0
+    for t in range(first, last, 6):
+        centre = coefficients[t + 1]
+        beta = coefficients[t + 2]
+        gamma = coefficients[t + 3]
+        p = coefficients[t + 4]
+        y_low = low - centre - radius
+        y_high = high - centre + radius
+        if gamma > 0.0:
+            vertex = min(max(beta / (2.0 * gamma), y_low), y_high)
+            exponent = vertex * (beta - gamma * vertex) + gamma * radius * radius
+        else:
+            exponent = max(beta * y_low, beta * y_high)
+        smallest = min(p * y_low, p * y_high) + coefficients[t + 5]
+        factor = 1.0
+        if smallest < 0.0:
+            factor = 1.0 + 2.0 * math.exp(smallest * smallest)
+        total += abs(coefficients[t]) * math.exp(exponent) * factor
+    return total
+
+
+@njit(cache=True, error_model="numpy")
+def _error_derivative_bound(coefficients, first, last, low, high, order):
+    """A bound on |d^order F / dx^order| over [low, high] for ERRORFUNCTIONS terms, by Cauchy's estimate.
+
+    |F^(n)(x)| <= n! max_{|z - x| = ρ} |F(z)| / ρ^n for every ρ > 0; the radii tried are where a
+    Gaussian factor e^{-γy²} at distance d from its centre (n / (2γd), √(n / 2γ)), an exponential e^{βy}
+    (n / |β|), or the erfcx argument's margin above 0 ((p y + s) / |p|) make one term's bound least,
+    and the piece's length; the least bound is returned.
+    """
+    factorial = 1.0
+    for k in range(2, order + 1):
+        factorial *= k
+    best = math.inf
+    for t in range(first - 6, last, 6):
+        for choice in range(4):
+            radius = 0.0
+            if t < first:           # the piece's length, once
+                if choice > 0:
+                    continue
+                radius = high - low
+            else:
+                centre = coefficients[t + 1]
+                beta = coefficients[t + 2]
+                gamma = coefficients[t + 3]
+                p = coefficients[t + 4]
+                y_low = low - centre
+                y_high = high - centre
+                if choice == 0 and gamma > 0.0:
+                    vertex = beta / (2.0 * gamma)
+                    distance = max(y_low - vertex, vertex - y_high, 0.0)
+                    if distance > 0.0:
+                        radius = order / (2.0 * gamma * distance)
+                elif choice == 1 and gamma > 0.0:
+                    radius = math.sqrt(order / (2.0 * gamma))
+                elif choice == 2 and beta != 0.0:
+                    radius = order / abs(beta)
+                elif choice == 3 and p != 0.0:
+                    radius = (min(p * y_low, p * y_high) + coefficients[t + 5]) / abs(p)
+            if not radius > 0.0:
+                continue
+            bound = factorial * _error_terms_bound(coefficients, first, last, low, high, radius) / radius ** order
+            best = min(best, bound)
+    return best
+
+
+@njit(cache=True, error_model="numpy")
 def piece_derivative_bound(terms, piece, low, high, order):
     """A bound on |d^order F_i / du^order| over u in [low, high], metres^(1-order).
 
     POLYNOMIAL: Σ_m |c_m| m!/(m-order)! max|x|^(m-order); EXPONENTIALS:
-    Σ e^{a x} (|b| + |c|) |a + iω|^order at the end where e^{a x} is largest.
+    Σ e^{a x} (|b| + |c|) |a + iω|^order at the end where e^{a x} is largest;
+    ERRORFUNCTIONS: Cauchy's estimate (:func:`_error_derivative_bound`).
     """
     first = terms.offsets[piece]
     last = terms.offsets[piece + 1]
@@ -250,6 +396,8 @@ def piece_derivative_bound(terms, piece, low, high, order):
                 factor *= q
             bound += abs(coefficients[first + m]) * factor * reach ** (m - order)
         return bound
+    if terms.families[piece] == 2:
+        return _error_derivative_bound(coefficients, first, last, low - origin, high - origin, order)
     for t in range(first, last, 4):
         a = coefficients[t]
         envelope = math.exp(a * ((high if a > 0.0 else low) - origin))
@@ -309,6 +457,18 @@ def _forms(terms: WaveformTerms, piece: int, x: np.ndarray, derivative: bool) ->
             coefficients = np.polynomial.polynomial.polyder(coefficients) if coefficients.size > 1 else [0.0]
         return np.polynomial.polynomial.polyval(x, coefficients)
     value = np.zeros_like(x)
+    if terms.families[piece] == ERRORFUNCTIONS:
+        for b, centre, beta, gamma, p, shift in coefficients.reshape(-1, 6):
+            y = x - centre
+            front = b * np.exp(y * (beta - gamma * y))
+            argument = p * y + shift
+            scaled = erfcx_array(argument)
+            if derivative:      # d/dy e^E erfcx(v) = e^E [(E' + 2pv) erfcx(v) - 2p/√π]
+                value += front * ((beta - 2.0 * gamma * y + 2.0 * p * argument) * scaled
+                                  - 2.0 * p * RECIPROCAL_SQRT_PI)
+            else:
+                value += front * scaled
+        return value
     for a, w, b, c in coefficients.reshape(-1, 4):
         if derivative:      # d/dx of e^{ax}(b cos wx + c sin wx)
             b, c = a * b + w * c, a * c - w * b

@@ -1,0 +1,148 @@
+"""A measured instrument response's samples: read from a file and checked (NumPy only, no Numba).
+
+The ``sampled`` waveform (docs/design.md section 8) takes its samples from
+``[illumination] file`` (.npy: a 1-D array; .csv or .txt: one number per
+line, blank lines and lines starting with ``#`` skipped) or inline as
+``[illumination] samples = [...]``. :func:`check_samples` is what the
+scene's :class:`~analytic.scene.Illumination` runs on either.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import SceneError
+
+__all__ = ["read_samples", "check_samples", "sample_width_metres", "finite_span", "MAX_SAMPLES",
+           "METRES_PER_PICOSECOND", "SUFFIXES"]
+
+#: Most samples accepted: each is a kink of the pulse, where the model cuts its integrals.
+MAX_SAMPLES = 100_000
+#: Path length light travels in one picosecond, metres (c = 299 792 458 m/s).
+METRES_PER_PICOSECOND = 2.99792458e-4
+#: File types read.
+SUFFIXES = (".npy", ".csv", ".txt")
+#: Largest file read, bytes (a text file of MAX_SAMPLES numbers is ~2.5 MB).
+_MAX_BYTES = 16 << 20
+
+
+def read_samples(path, key: str = "illumination.file") -> np.ndarray:
+    """The samples of an instrument-response file, float64, checked by :func:`check_samples`.
+
+    Parameters
+    ----------
+    path : str or Path
+        A .npy file holding a 1-D array, or a .csv / .txt file with one
+        number per line.
+    key : str
+        The scene key named in errors.
+
+    Raises
+    ------
+    SceneError
+        Missing or unreadable file, another type, more than one column,
+        a value that is not a number, or samples :func:`check_samples` refuses.
+    """
+    path = Path(path)
+    shown = str(path)
+    suffix = path.suffix.lower()
+    if suffix not in SUFFIXES:
+        raise SceneError(key, f"{shown}: expected a {', '.join(SUFFIXES)} file of samples, got {suffix or 'no suffix'!r}")
+    if not path.is_file():
+        raise SceneError(key, f"{shown}: no such file (paths are relative to the scene file)")
+    if path.stat().st_size > _MAX_BYTES:
+        raise SceneError(key, f"{shown}: larger than {_MAX_BYTES >> 20} MiB; is it an instrument response?")
+    try:
+        if suffix == ".npy":
+            with open(path, "rb") as stream:
+                values = np.load(stream, allow_pickle=False)
+        else:
+            values = _read_text(path, key)
+    except (OSError, ValueError, EOFError) as error:
+        if isinstance(error, SceneError):
+            raise
+        raise SceneError(key, f"{shown}: cannot read it ({error})") from None
+    values = np.asarray(values)
+    if values.ndim != 1:
+        raise SceneError(key, f"{shown}: expected a 1-D array of samples, got shape {values.shape}")
+    if not (np.issubdtype(values.dtype, np.floating) or np.issubdtype(values.dtype, np.integer)):
+        raise SceneError(key, f"{shown}: expected numbers, got dtype {values.dtype}")
+    return check_samples(values.astype(np.float64), key)
+
+
+def _read_text(path: Path, key: str) -> np.ndarray:
+    values = []
+    with open(path, encoding="utf-8") as stream:
+        for number, line in enumerate(stream, 1):
+            text = line.strip()
+            if not text or text.startswith("#"):
+                continue
+            if "," in text.rstrip(",") or len(text.split()) > 1:
+                raise SceneError(key, f"{path}: line {number} has more than one column ({text[:40]!r}); "
+                                      f"give one sample per line")
+            try:
+                values.append(float(text.rstrip(",")))
+            except ValueError:
+                raise SceneError(key, f"{path}: line {number} is not a number ({text[:40]!r})") from None
+    return np.array(values, dtype=np.float64)
+
+
+def check_samples(values, key: str = "illumination.samples") -> np.ndarray:
+    """The samples as a read-only float64 array, or a SceneError naming ``key`` and the problem.
+
+    Samples must be finite and >= 0 (an expected count cannot be
+    negative: clip a background-subtracted response first), at least two,
+    at most :data:`MAX_SAMPLES`, with a largest sample > 0 (they are divided
+    by it).
+    """
+    try:
+        array = np.array(values, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError):
+        raise SceneError(key, "expected a list of numbers") from None
+    if array.ndim != 1:
+        raise SceneError(key, f"expected a 1-D list of samples, got shape {array.shape}")
+    if not 2 <= array.size <= MAX_SAMPLES:
+        raise SceneError(key, f"needs 2 to {MAX_SAMPLES} samples, got {array.size}")
+    bad = np.flatnonzero(~np.isfinite(array) | (array < 0))
+    if bad.size:
+        raise SceneError(key, f"sample {bad[0]} is {array[bad[0]]:g}; every sample must be finite and >= 0 "
+                              f"(clip a background-subtracted response at 0)")
+    if not array.max() > 0:
+        raise SceneError(key, "every sample is 0; the response is divided by its largest sample")
+    array.setflags(write=False)
+    return array
+
+
+def sample_width_metres(sample_width: float | None, sample_width_ps: float | None) -> float:
+    """The sample spacing in metres of path from whichever of the two keys is given."""
+    if sample_width is not None:
+        return float(sample_width)
+    return float(sample_width_ps) * METRES_PER_PICOSECOND
+
+
+def finite_span(count: int, width: float, start: float, limit: float, resolution: float) -> None:
+    """Refuse samples whose span leaves ±limit metres, or whose spacing float64 cannot resolve there.
+
+    Parameters
+    ----------
+    count : int
+        Samples n.
+    width, start : float
+        Spacing and first sample's path length, metres.
+    limit : float
+        Largest |path length| supported, metres.
+    resolution : float
+        Smallest spacing / largest |path length| (as the bins' own bound).
+    """
+    end = start + (count - 1) * width
+    key = "illumination.sample_width"
+    if not (math.isfinite(end) and abs(end) <= limit):
+        raise SceneError(key, f"{count} samples of {width:g} m from {start:g} m end at {end:g} m, beyond the "
+                              f"±{limit:g} m this tool resolves")
+    if width < resolution * max(abs(start), abs(end)):
+        raise SceneError(key, f"samples {width:g} m apart cannot be told apart at path lengths of "
+                              f"{max(abs(start), abs(end)):g} m in float64 (need sample_width >= {resolution:g} x "
+                              f"the largest |path length|)")

@@ -27,6 +27,7 @@ __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "binning": ["bin_index"],
     "attenuation": ["attenuation"],
     "noise": ["add_noise"],
+    "detector": ["Detector", "expected_counts", "draw_counts", "coates_estimate"],
     "system": ["system_matrix", "forward", "count_entries", "QuadratureWarning"],
     "response": ["impulse_response", "binned_contour_model"],
     "window": ["response_range", "covering_sampling", "window_share", "WindowWarning"],

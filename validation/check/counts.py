@@ -88,20 +88,25 @@ class CountsVerdict:
         return asdict(self)
 
 
-def _categories(counts: np.ndarray, expected: np.ndarray, detector: Detector) -> tuple[np.ndarray, np.ndarray]:
-    """(c, μ) with each row's "no detection" appended under dead time (its count: C minus the row's sum)."""
+def _categories(counts: np.ndarray, expected: np.ndarray, detector: Detector,
+                floor: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """(c, μ) with each row's "no detection" appended under dead time (its count: C minus the row's sum).
+
+    ``floor``: every μ raised to it (a fit's objective stays finite where a trial model forbids a count).
+    """
+    expected = np.maximum(expected, floor)
     if detector.dead_time == "none":
         return counts, expected
     rows_c = counts.reshape(-1, counts.shape[-1])
     rows_m = expected.reshape(-1, expected.shape[-1])
     missed_c = detector.cycles - rows_c.sum(axis=1, keepdims=True)
     missed_m = detector.cycles - rows_m.sum(axis=1, keepdims=True)
-    return np.hstack([rows_c, missed_c]), np.hstack([rows_m, np.maximum(missed_m, 0.0)])
+    return np.hstack([rows_c, missed_c]), np.hstack([rows_m, np.maximum(missed_m, floor)])
 
 
 def _saturated_terms(c: np.ndarray, m: np.ndarray) -> np.ndarray:
     """2 [c log(c/μ) - (c - μ)] elementwise (0 log 0 = 0; inf where c > 0 = μ)."""
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         log_ratio = np.where(c > 0, c * np.log(np.where(c > 0, c, 1.0) / m), 0.0)
     return 2.0 * (log_ratio - (c - m))
 
@@ -125,6 +130,12 @@ def deviance(counts, expected, detector: Detector) -> float:
         D >= 0; inf where a bin holds counts that its expectation 0 forbids.
     """
     c, m = _categories(np.asarray(counts, dtype=np.float64), np.asarray(expected, dtype=np.float64), detector)
+    return float(np.sum(_saturated_terms(c, m)))
+
+
+def _fit_deviance(counts, expected, detector: Detector) -> float:
+    """D with every expected count floored at 1e-300: finite (huge) where a trial model forbids a count."""
+    c, m = _categories(counts, np.asarray(expected, dtype=np.float64), detector, floor=1e-300)
     return float(np.sum(_saturated_terms(c, m)))
 
 
@@ -390,9 +401,9 @@ def fit_counts(counts, model: SceneModel, detector: Detector, *, fit=("scale", "
     def statistic_of(y, scale=None):
         if scale is not None or "scale" not in names:
             scale = 1.0 if scale is None else scale
-            return deviance(counts, expected_counts(scale * y, detector), detector), scale
-        return _profile_scale(lambda s: deviance(counts, expected_counts(s * y, detector), detector), y, detector,
-                              counts)
+            return _fit_deviance(counts, expected_counts(scale * y, detector), detector), scale
+        return _profile_scale(lambda s: _fit_deviance(counts, expected_counts(s * y, detector), detector), y,
+                              detector, counts)
 
     parameters, value, history = _fit(statistic_of, model, names, values, steps)
 

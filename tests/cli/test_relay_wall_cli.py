@@ -25,7 +25,7 @@ def test_the_commands_refuse_a_relay_wall_scene_in_one_line(tmp_path, capsys):
 
     path = _write(tmp_path, SCENE)
     for command in (["forward", str(path)], ["run", str(path)], ["render", str(path), "--spp", "64"],
-                    ["validate", str(path)], ["check", str(path), "--data", str(path)]):
+                    ["validate", str(path)]):
         out = tmp_path / "out"
         assert main([*command, "--out", str(out)]) == 2, command
         lines = capsys.readouterr().err.strip().splitlines()

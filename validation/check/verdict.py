@@ -110,6 +110,9 @@ class CheckResult:
         Its full verdict (None by shape only or without a stated convention).
     shape_tolerance : float or None
         The relative L2 tolerance when judged by shape only.
+    replica_data : numpy.ndarray or None
+        ``(R, K, N)`` the replicas judged (None for one transient): sums over
+        bins take their error from them.
     """
 
     agrees: bool
@@ -134,6 +137,7 @@ class CheckResult:
     relative_l2_as_expected: float | None = None
     as_expected: Agreement | None = field(default=None, repr=False)
     shape_tolerance: float | None = None
+    replica_data: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def chi2_per_dof(self) -> float | None:
@@ -384,8 +388,16 @@ def check_transient(scene: Scene, data, *, stderr=None, dof: int | None = None, 
 
 
 def _expected_model(model_at, expect: Convention | None) -> np.ndarray | None:
-    """scale · y_model(start_opl + offset_opl) of the stated convention (None without one)."""
-    return None if expect is None else expect.scale * model_at(expect.offset_opl)
+    """scale · y_model(start_opl + offset_opl) (+ added) of the stated convention (None without one)."""
+    if expect is None:
+        return None
+    expected = expect.scale * model_at(expect.offset_opl)
+    if expect.added is not None:
+        if expect.added.shape != expected.shape:
+            raise DataError(f"expect: the stated difference has shape {expect.added.shape}, the model "
+                            f"{expected.shape}")
+        expected = expected + expect.added
+    return expected
 
 
 def _judge_with_errors(scene, data, error, dof, replica_data, model_at, expect, false_alarm) -> CheckResult:
@@ -425,7 +437,7 @@ def _judge_with_errors(scene, data, error, dof, replica_data, model_at, expect, 
         relative_l2_after_fit=None if fit is None else _relative_l2(data, fitted), after_fit=after,
         expected=expect, agrees_as_expected=None if as_expected is None else bool(as_expected.agrees),
         relative_l2_as_expected=None if expected_model is None else _relative_l2(data, expected_model),
-        as_expected=as_expected)
+        as_expected=as_expected, replica_data=replica_data)
 
 
 def _judge_by_shape(scene, data, model_at, expect, shape_tolerance) -> CheckResult:

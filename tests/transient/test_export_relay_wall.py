@@ -203,7 +203,7 @@ def test_mitransient_renders_of_the_export_agree_once_its_ray_offsets_are_stated
     fit = metrics["fit"]                                                    # against the model as given
     assert 5e-5 < fit["offset_opl"] < 3e-4 and fit["offset_opl"] > 3 * fit["offset_stderr"]
     replicas = np.stack([read_data(path, scene) for path in films])
-    stated = check_transient(scene, replicas, model=offset_model(scene))
+    stated = check_transient(scene, replicas, evaluate=offset_model)     # judged and fitted against it
     assert abs(stated.fit.scale - 1) < 3 * stated.fit.scale_stderr
     assert abs(stated.fit.offset_opl) < 3 * stated.fit.offset_stderr
     assert stated.agrees

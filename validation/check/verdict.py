@@ -304,7 +304,7 @@ def _fit_skipped(bins: int, scene: Scene, what: str) -> str | None:
 
 def check_transient(scene: Scene, data, *, stderr=None, dof: int | None = None, shape_only: bool = False,
                     model=None, false_alarm: float = 1e-3, shape_tolerance: float = 1e-2,
-                    expect: Convention | None = None) -> CheckResult:
+                    expect: Convention | None = None, evaluate=None) -> CheckResult:
     """Judge a transient against the exact model of ``scene`` and fit its conventions.
 
     Parameters
@@ -332,7 +332,7 @@ def check_transient(scene: Scene, data, *, stderr=None, dof: int | None = None, 
         L2 error against ``shape_tolerance``, unweighted fit. Refused
         together with ``stderr`` or replicas.
     model : array_like, optional
-        ``forward(scene)`` if already computed.
+        ``forward(scene)`` (or ``evaluate(scene)``) if already computed.
     false_alarm : float
         α: probability that data consistent with the model fail (docs/design.md section 6).
     shape_tolerance : float
@@ -342,6 +342,10 @@ def check_transient(scene: Scene, data, *, stderr=None, dof: int | None = None, 
         :func:`irradiancemeter`): they are judged against
         scale · y_model(start_opl + offset_opl) as well
         (:attr:`CheckResult.agrees_as_expected`).
+    evaluate : callable, optional
+        scene -> ``(K, N)``: judge and fit against this instead of the model
+        (:class:`ShiftedModel`; e.g. :func:`validation.check.offset_model`,
+        mitransient's estimator in closed form).
 
     Returns
     -------
@@ -371,7 +375,7 @@ def check_transient(scene: Scene, data, *, stderr=None, dof: int | None = None, 
     data = _checked_data(data, shape)
     replicas = 1 if data.ndim == 2 else data.shape[0]
     _check_options(replicas, stderr, shape_only)
-    model_at = ShiftedModel(scene, model)
+    model_at = ShiftedModel(scene, model, evaluate)
     y_model = model_at(0.0)
     if y_model.shape != shape:
         raise DataError(f"model: shape {y_model.shape}, expected {shape}")

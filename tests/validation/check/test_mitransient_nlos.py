@@ -44,7 +44,7 @@ def test_moved_read_points_follow_mitsubas_offset_p():
 
 def test_the_emulated_estimator_without_offsets_is_the_model():
     scene = scene_of()
-    exact, _ = emulated_estimates(scene, samples=2**18, seed=1)
+    exact, _ = emulated_estimates(scene, samples=2**16, seed=1)
     model = forward(scene)
     assert np.allclose(exact.sum(axis=1), model.sum(axis=1), rtol=2e-5)      # stratified: far below 1e-4
     # without an offset the ray meets x itself (to rounding): nothing is added
@@ -55,8 +55,8 @@ def test_the_closed_form_is_mitransients_estimator():
     scene = scene_of()
     model = forward(scene)
     closed = moments(offset_model(scene, ray_epsilon=EPSILON) - model, scene)
-    runs = np.stack([moments(spawn_offset_difference(scene, samples=2**18, seed=seed, ray_epsilon=EPSILON), scene)
-                     for seed in range(6)])
+    runs = np.stack([moments(spawn_offset_difference(scene, samples=2**16, seed=seed, ray_epsilon=EPSILON), scene)
+                     for seed in range(5)])
     mean, error = runs.mean(axis=0), runs.std(axis=0, ddof=1) / np.sqrt(len(runs))
     assert np.all(np.abs(closed - mean) < 5 * error + 1e-9 * np.abs(model).sum()), (closed, mean, error)
     assert np.all(np.abs(closed[:, 1]) > 20 * error[:, 1])                  # the effect is resolved

@@ -245,9 +245,13 @@ then judge the films against the exact model:
 
     diffuse-imaging check SCENE.toml --data render_*.npy --out check
 
-Expect a small disagreement as given from mitransient's own float32 ray offsets (path lengths short
-by about 1e-4 m, a scale about 2e-4 low near the origin; docs/interop.md "mitransient's NLOS renders"
-measures and explains them), which the fit reports as an offset and a scale.
+Expect a small disagreement as given: mitransient's float32 ray offsets make its path lengths short
+by about 1.5e-4 m near the origin (more far from it). Stating what mitransient computes, with no
+fitted parameter, it agrees:
+
+    diffuse-imaging check SCENE.toml --data render_*.npy --expect transient_nlos_path --out stated
+
+(docs/interop.md, "What mitransient does differently, and by how much").
 """,
 }
 

@@ -107,7 +107,7 @@ def test_the_photon_counts_the_headers_state():
 def test_the_images_are_what_make_image_writes(tmp_path):
     subprocess.run([sys.executable, str(EXAMPLES / "make_image.py"), str(tmp_path)], check=True,
                    capture_output=True)
-    for name, pixels in (("pattern.png", 50), ("shapes.png", 32)):
+    for name, pixels in (("pattern.png", 50), ("hidden.png", 16), ("shapes.png", 32)):
         shipped = analytic.read_reflectance(EXAMPLES / name, pixels)
         made = analytic.read_reflectance(tmp_path / name, pixels)
         np.testing.assert_array_equal(shipped, made)

@@ -15,7 +15,7 @@ from analytic.errors import UserError
 
 __all__ = ["UsageError", "OneLineParser", "seed_type", "samples_type", "positive_float_type",
            "load_scene_argument", "load_plane_scene", "show_progress", "MAX_SAMPLES", "add_quiet",
-           "check_samples_type", "add_window_option", "apply_window", "announce_window"]
+           "check_samples_type", "add_window_option", "apply_window", "announce_window", "rows_text"]
 
 #: Most samples a render may be asked for: 2^44, about two days at 1e8 samples/s.
 MAX_SAMPLES = 2**44
@@ -117,6 +117,15 @@ def load_plane_scene(path):
                                        f"yet; model it from Python (analytic.load_scene, analytic.system_matrix) "
                                        f"or render it with transient_opl_nlos (docs/model.md)")
     return scene
+
+
+def rows_text(scene) -> str:
+    """A transient's rows in words: "16 sensors", or "64 pairs (confocal scan)" of a relay-wall capture."""
+    from analytic.relay_wall import RelayWallScene
+
+    if isinstance(scene, RelayWallScene):
+        return f"{scene.sensor_count} pairs ({scene.scan.type} scan)"
+    return f"{scene.sensor_count} sensors"
 
 
 def show_progress(args) -> bool:

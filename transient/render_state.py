@@ -301,9 +301,7 @@ class SavedRender:
 def _scene_differences(started: Scene, given: Scene) -> list[str]:
     """The scene keys ("[sampling] start", ...) in which ``given`` differs from the scene a render was
     started with, among those the renderer reads (not its name, noise or tolerance)."""
-    from analytic.scene_file import scene_to_tables
-
-    old, new = scene_to_tables(started), scene_to_tables(given)
+    old, new = _renderer_tables(started), _renderer_tables(given)
     if ("relay_wall" in old) != ("relay_wall" in new):
         kinds = {True: "a relay-wall capture", False: "a plane scene"}
         return [f"its kind ({kinds['relay_wall' in new]}; the state's: {kinds['relay_wall' in old]})"]
@@ -311,25 +309,18 @@ def _scene_differences(started: Scene, given: Scene) -> list[str]:
     found = []
     for table in sorted(set(old) | set(new)):
         first, second = old.get(table, {}), new.get(table, {})
-        if table in ("name", "noise") or not isinstance(first, dict) or not isinstance(second, dict):
-            continue
         for key in sorted(set(first) | set(second)):
-            if (table, key) == ("model", "tolerance"):
-                continue
+            first_value, second_value = first.get(key), second.get(key)
             if (table, key) == (image, "reflectance"):
                 same = np.array_equal(started.reflectance, given.reflectance)
+                # a constant as itself, an image by its shape
+                first_value = started.reflectance if first_value == "image" else first_value
+                second_value = given.reflectance if second_value == "image" else second_value
             else:
-                same = _equal(first.get(key), second.get(key))
+                same = first_value == second_value
             if not same:
-                found.append(f"[{table}] {key} {_shown(second.get(key))} (the state's: {_shown(first.get(key))})")
+                found.append(f"[{table}] {key} {_shown(second_value)} (the state's: {_shown(first_value)})")
     return found
-
-
-def _equal(first, second) -> bool:
-    """Two scene-table values equal (lists of numbers and NumPy arrays by their values)."""
-    if isinstance(first, np.ndarray) or isinstance(second, np.ndarray):
-        return first is not None and second is not None and np.array_equal(first, second)
-    return first == second
 
 
 def _shown(value) -> str:

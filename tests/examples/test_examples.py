@@ -28,7 +28,7 @@ SCENES = sorted(EXAMPLES.glob("*.toml"))
 
 def test_the_examples_cover_each_feature():
     names = {path.stem for path in SCENES}
-    assert {"paper", "square", "butterworth", "image", "counts", "far"} <= names
+    assert {"paper", "square", "butterworth", "image", "counts", "far", "nlos"} <= names
 
 
 @pytest.mark.parametrize("path", SCENES, ids=lambda path: path.name)
@@ -61,6 +61,18 @@ def test_paper_is_the_built_in_scene_as_a_file():
     assert paper.sampling == built_in.sampling and paper.illumination == built_in.illumination
     assert paper.noise == built_in.noise and paper.attenuation == built_in.attenuation
     assert np.abs(paper.reflectance - built_in.reflectance).max() <= 0.5 / 65535 + 1e-12
+
+
+def test_nlos_is_a_confocal_capture_of_the_built_in_pattern():
+    """A relay-wall capture, confocal 8 x 8, whose hidden image is the built-in pattern (to its 16-bit PNG's
+    rounding), with the noise its header states: sigma 0.3 % of the brightest bin."""
+    scene = analytic.load_scene(EXAMPLES / "nlos.toml")
+    assert isinstance(scene, analytic.RelayWallScene)
+    assert scene.scan.type == "confocal" and scene.scan.grid == (8, 8) and scene.sensor_count == 64
+    pattern = analytic.builtin_reflectance(scene.pixels)
+    assert np.abs(scene.reflectance - pattern).max() <= 0.5 / 65535 + 1e-12
+    peak = analytic.forward(scene).max()
+    assert 0.002 <= scene.noise.sigma / peak <= 0.004, scene.noise.sigma / peak
 
 
 def test_the_pulses_and_the_noise_are_the_ones_named():

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .axes import time_axis
+from .axes import power_of_ten, relay_wall_label, time_axis
 from .captures import _traced
 from .common import new_figure, plain_text
 from .transients import finish_time_figure
@@ -98,11 +98,6 @@ class WallScan:
                      for size, count in zip(self.wall_size, self.grid))
 
 
-def _scaled_label(label: str) -> str:
-    """The time axis's y label (y_k[n], maybe with a power of ten) as H's."""
-    return label.replace("y_k[n] (", "H[n] (").replace("W m⁻¹", "W sr⁻¹ m⁻¹")
-
-
 def _norm(values: np.ndarray):
     """A square-root colour scale for light that is nowhere negative (a few pairs near the laser outshine the
     rest by orders of magnitude), else a linear one (a Butterworth pulse undershoots)."""
@@ -124,7 +119,7 @@ def _pairs_panel(figure, axis, y, time, scan: WallScan) -> None:
     image = axis.imshow(shown, aspect="auto", interpolation="nearest", norm=norm,
                         extent=(time.edges[0], time.edges[-1], pairs - 0.5, -0.5), cmap="viridis")
     bar = figure.colorbar(image, ax=axis, pad=0.02)
-    bar.set_label(_scaled_label(time.y_label), fontsize=7)
+    bar.set_label(relay_wall_label(time.y_label), fontsize=7)
     bar.ax.tick_params(labelsize=7)
     if scan.type == "exhaustive":
         for laser in range(1, scan.lasers):          # one block of W H read points per lit point
@@ -141,6 +136,9 @@ def _pairs_panel(figure, axis, y, time, scan: WallScan) -> None:
 def _wall_panel(figure, axis, totals, scan: WallScan, chosen) -> None:
     """The light summed over the window: over the read grid on the wall (single, confocal), or per
     (lit point, read point) (exhaustive); the traced pairs numbered."""
+    power = power_of_ten(totals)
+    totals = totals * 10.0**-power
+    unit = "W sr⁻¹ m⁻¹ · m" if power == 0 else f"1e{power} W sr⁻¹ m⁻¹ · m"
     norm, note = _norm(totals)
     if scan.type == "exhaustive":
         matrix = totals.reshape(scan.lasers, scan.reads)
@@ -149,7 +147,7 @@ def _wall_panel(figure, axis, totals, scan: WallScan, chosen) -> None:
         axis.set_xlabel("read point (row-major over the grid)", fontsize=8)
         axis.set_ylabel("lit point (row-major over the laser grid)", fontsize=8)
         places = [(p % scan.reads, p // scan.reads) for p in chosen]
-        axis.set_title("light per (lit, read) pair, summed over time (W sr⁻¹ m⁻¹ · m)", fontsize=8, loc="left")
+        axis.set_title(f"light per (lit, read) pair, summed over time ({unit})", fontsize=8, loc="left")
     else:
         column_edges, row_edges = scan.cell_edges()
         shown = axis.pcolormesh(column_edges, row_edges, totals.reshape(scan.grid[1], scan.grid[0]),
@@ -166,7 +164,7 @@ def _wall_panel(figure, axis, totals, scan: WallScan, chosen) -> None:
             what = "light per read point s (one lit point l)"
         else:
             what = "light per point (lit and read there: l = s)"
-        axis.set_title(f"{what}, summed over time (W sr⁻¹ m⁻¹ · m)", fontsize=8, loc="left")
+        axis.set_title(f"{what}, summed over time ({unit})", fontsize=8, loc="left")
     for number, place in enumerate(places, start=1):
         colour = f"C{number - 1}"
         axis.annotate(str(number), place, color=colour, fontsize=7, fontweight="bold", ha="center", va="center",
@@ -241,7 +239,7 @@ def relay_wall_figure(sampling, y: np.ndarray, scan: WallScan, *, stderr: np.nda
         + (" and model + noise (points)" if noisy is not None else "")
     trace_axis.set_title(plain_text(f"{label}{band}; pairs by brightness, 1 the brightest"),
                          fontsize=8, loc="left", parse_math=False)
-    trace_axis.set_ylabel(_scaled_label(time.y_label), fontsize=8)
+    trace_axis.set_ylabel(relay_wall_label(time.y_label), fontsize=8)
     trace_axis.set_xlabel(time.x_label, fontsize=8)
     trace_axis.legend(fontsize=7, loc="upper right")
     for axis in (pairs_axis, wall_axis, trace_axis):

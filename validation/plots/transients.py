@@ -7,7 +7,7 @@ import textwrap
 
 import numpy as np
 
-from .axes import nanosecond_axis, round_origin, time_axis, window_edges, window_edges_in_view
+from .axes import nanosecond_axis, relay_wall_label, round_origin, time_axis, window_edges, window_edges_in_view
 from .common import columns_for_legend, new_figure, plain_text, suptitle
 
 __all__ = ["transients_figure", "transient_figure", "model_figure", "z_map_figure", "finish_time_figure"]
@@ -79,7 +79,7 @@ def transients_figure(sampling, transients: dict[str, np.ndarray], *,
     time = time_axis(sampling, list(transients.values()))
     first, last, origin, scale, edges, centres = (time.first, time.last, time.origin, time.scale, time.edges,
                                                    time.centres)
-    x_label, y_label = time.x_label, time.y_label
+    x_label, y_label = time.x_label, time.y_label if row_kind == "sensor" else relay_wall_label(time.y_label)
     dense = last - first > _MOST_ERROR_BARS
     if dense:
         note = f"±1 se not drawn over {last - first} bins: see z"

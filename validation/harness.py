@@ -57,6 +57,7 @@ class SceneCheck:
     stderr: np.ndarray
     agreement: Agreement
     metrics: dict = field(default_factory=dict)
+    replicas: int = 0           # the render's R independent replicas (its stderr has R - 1 degrees of freedom)
     render_convergence: list = field(default_factory=list)
     model_convergence: list = field(default_factory=list)
     reconstructions: dict = field(default_factory=dict)
@@ -265,7 +266,8 @@ def check_scene(scene: Scene, *, spp: int, seed: int = 0, convergence: bool = Tr
     # the replicas give the null of χ² and max |z| whatever the correlation between bins
     agreement = compare_transients(result.mean, result.stderr, model, dof=result.dof,
                                    replicas=result.replica_means)
-    check = SceneCheck(scene.name, scene, spp, seed, model, result.mean, result.stderr, agreement)
+    check = SceneCheck(scene.name, scene, spp, seed, model, result.mean, result.stderr, agreement,
+                       replicas=result.replicas)
     check.metrics.update(timings)
     check.metrics["window_share"] = share
     check.metrics["agreement"] = agreement.as_dict()

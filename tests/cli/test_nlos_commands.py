@@ -211,6 +211,7 @@ def test_run_does_the_whole_job_on_a_relay_wall_capture(ran):
     assert recon["rule"] == "discrepancy" and recon["noise"]["sigma"] == 2e-5
     for data in ("model", "render"):
         assert recon[data]["psnr"] <= recon["oracle"]["psnr"] + 0.5 and np.isfinite(recon[data]["lambda"])
+    assert json.loads((ran / "render" / "meta.json").read_text())["replicas"] == 32      # its error's source
     for folder in ("model", "render"):
         meta = json.loads((ran / folder / "meta.json").read_text())
         assert meta["geometry"] == "relay_wall" and np.load(ran / folder / "transient.npy").shape == (9, 120)

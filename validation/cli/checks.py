@@ -141,7 +141,8 @@ def command_run(args) -> int:
             write_transient(out / "model", check.model, build_meta(scene, kind="model", window_share=share))
             write_transient(out / "render", check.render,
                             build_meta(scene, kind="render", samples=args.spp, seed=args.seed,
-                                       window_share=share), stderr=check.stderr)
+                                       window_share=share, replicas=check.replicas, dof=check.replicas - 1),
+                            stderr=check.stderr)
             write_report(out, [check], headline=True)
     if not args.quiet:
         print(check.agreement.summary())

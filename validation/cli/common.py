@@ -15,7 +15,8 @@ from analytic.errors import UserError
 
 __all__ = ["UsageError", "OneLineParser", "seed_type", "samples_type", "positive_float_type",
            "load_scene_argument", "load_plane_scene", "show_progress", "MAX_SAMPLES", "add_quiet",
-           "check_samples_type", "add_window_option", "apply_window", "announce_window", "rows_text"]
+           "check_samples_type", "add_window_option", "apply_window", "announce_window", "rows_text",
+           "refuse_relay_wall_capture"]
 
 #: Most samples a render may be asked for: 2^44, about two days at 1e8 samples/s.
 MAX_SAMPLES = 2**44
@@ -117,6 +118,24 @@ def load_plane_scene(path):
                                        f"yet; model it from Python (analytic.load_scene, analytic.system_matrix) "
                                        f"or render it with transient_opl_nlos (docs/model.md)")
     return scene
+
+
+def refuse_relay_wall_capture(path, scene) -> None:
+    """A tal capture given as a relay-wall scene's data: refused in one line.
+
+    tal's NLOS layouts (H_format T_Sx_Sy, T_Lx_Ly_Sx_Sy) are read by ``check``'s readers once they
+    take relay-wall scenes; until then ``reconstruct`` and ``plot --scene`` take our
+    ``transient.npy``/``.exr`` (or any (P, N) array in the pair order). The lead removes this refusal
+    when the reader is merged.
+    """
+    from analytic.errors import DataError
+    from analytic.files import transient_format
+    from analytic.relay_wall import RelayWallScene
+
+    if isinstance(scene, RelayWallScene) and transient_format(path) == "capture":
+        raise DataError(f"{path}: a tal capture of a relay-wall scene is not read here yet; give our "
+                        f"transient.npy or .exr, or a (pairs, bins) .npy in the pair order of docs/design.md "
+                        f"section 7")
 
 
 def rows_text(scene) -> str:

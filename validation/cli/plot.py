@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .common import add_quiet, load_scene_argument
+from .common import add_quiet, load_scene_argument, refuse_relay_wall_capture
 
 __all__ = ["add_commands", "command_plot", "read_for_plot", "Drawable", "render_title", "FIGURE_NAME"]
 
@@ -250,8 +250,6 @@ def _with_scene(path: Path, scene) -> Drawable:
     from analytic.relay_wall import RelayWallScene
     from validation.check import read_data, stderr_beside
     from validation.plots import WallScan
-
-    from .reconstruct import refuse_relay_wall_capture
 
     refuse_relay_wall_capture(path, scene)
     transient = read_data(path, scene)

@@ -8,10 +8,11 @@ import warnings
 
 import numpy as np
 
-from .common import UsageError, add_quiet, load_scene_argument, positive_float_type, rows_text, show_progress
+from .common import (UsageError, add_quiet, load_scene_argument, positive_float_type, refuse_relay_wall_capture,
+                     rows_text, show_progress)
 
 __all__ = ["add_commands", "command_reconstruct", "command_reproduce", "lambda_argument", "lambda_grid_of",
-           "add_lambda_options", "refuse_relay_wall_capture"]
+           "add_lambda_options"]
 
 
 def lambda_argument(text: str):
@@ -206,23 +207,6 @@ def _read_data(path: str, scene) -> np.ndarray:
 
     refuse_relay_wall_capture(path, scene)
     return read_data(path, scene)
-
-
-def refuse_relay_wall_capture(path, scene) -> None:
-    """A tal capture given as a relay-wall scene's data: refused in one line.
-
-    tal's NLOS layouts (H_format T_Sx_Sy, T_Lx_Ly_Sx_Sy) are read by ``check``'s readers once they
-    take relay-wall scenes; until then this command takes our ``transient.npy``/``.exr`` (or any
-    (P, N) array in the pair order). The lead removes this refusal when the reader is merged.
-    """
-    from analytic.errors import DataError
-    from analytic.files import transient_format
-    from analytic.relay_wall import RelayWallScene
-
-    if isinstance(scene, RelayWallScene) and transient_format(path) == "capture":
-        raise DataError(f"{path}: a tal capture of a relay-wall scene is not read here yet; give our "
-                        f"transient.npy or .exr, or a (pairs, bins) .npy in the pair order of docs/design.md "
-                        f"section 7")
 
 
 def command_reproduce(args) -> int:

@@ -293,10 +293,23 @@ class _Outputs:
                            variant=identity["variant"], seconds=0.0)
         target = self.folder if complete else self.folder / PARTIAL_FOLDER
         with staged_writes():
-            write_transient(target, estimate.mean, meta, stderr=estimate.stderr)
+            write_transient(target, estimate.mean, meta, scene=self.scene, stderr=estimate.stderr)
             save_npy(target / REPLICAS_FILE, estimate.replica_means)
         if complete:
             _remove_partial(self.folder)
+
+
+def _load(scene, estimator: dict):
+    """The loaded Mitsuba scene of a plane (``transient_opl``) or a relay-wall capture (``transient_opl_nlos``)."""
+    from .mitsuba_scene import load_scene
+
+    if isinstance(scene, Scene):
+        return load_scene(scene, **estimator)
+    import mitsuba as mi
+
+    from .mitsuba_scene import relay_wall_scene_dict
+
+    return mi.load_dict(relay_wall_scene_dict(scene, **estimator))
 
 
 def render(scene: Scene, *, spp: int, seed: int = 0, out_dir: str | Path | None = None,
@@ -307,12 +320,13 @@ def render(scene: Scene, *, spp: int, seed: int = 0, out_dir: str | Path | None 
 
     Parameters
     ----------
-    scene : Scene
+    scene : Scene or analytic.relay_wall.RelayWallScene
         The scene, rendered with its ``attenuation`` (``lambertian`` or
         ``paper``) and intensity (float64); its ``tolerance`` and ``noise``
-        belong to the model and are not read.
+        belong to the model and are not read. A relay-wall capture renders
+        with ``transient_opl_nlos`` (third bounce, its pairs as the rows).
     spp : int
-        Samples (points on the plane; each serves all K sensors),
+        Samples (points on the plane or the hidden rectangle; each serves all K sensors or P pairs),
         2 <= spp <= 2^48. The render draws R ⌈spp / R⌉, up to R - 1 more.
     seed : int
         Seed, 0 <= seed < 2^32; sample g depends on (seed, g) only.
@@ -391,9 +405,7 @@ def render(scene: Scene, *, spp: int, seed: int = 0, out_dir: str | Path | None 
     bar = None
     try:
         with sigterm_as_interrupt():
-            from .mitsuba_scene import load_scene
-
-            loaded = load_scene(scene, **estimator)
+            loaded = _load(scene, estimator)
             integrator = loaded.integrator()
             if progress:
                 from tqdm import tqdm

@@ -30,6 +30,6 @@ __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "capture": ["Capture", "CaptureError", "write_capture", "read_capture", "H_FORMATS", "GRID_FORMATS",
                 "VOLUME_FORMATS", "ACCOUNTS_FIRST_AND_LAST_BOUNCES"],
     "relay_wall_capture": ["write_relay_wall_capture", "relay_wall_layout"],
-    "transients": ["build_meta", "write_transient", "read_transient", "transient_format",
-                   "transient_in_folder", "UNITS", "TRANSIENT_FILES"],
+    "transients": ["build_meta", "relay_wall_meta", "write_transient", "read_transient", "transient_format",
+                   "transient_in_folder", "UNITS", "RELAY_WALL_UNITS", "RELAY_WALL_KEYS", "TRANSIENT_FILES"],
 })

@@ -27,7 +27,7 @@ def scene_of(**changes) -> RelayWallScene:
     image = np.arange(16, dtype=np.float64).reshape(4, 4) / 20.0 + 0.1           # asymmetric: catches flips
     values = dict(name="nlos", pixels=4, reflectance=image, center=(0.1, 0.05, 0.9), u=(0.8, 0.0, 0.0),
                   v=(0.0, -0.7, 0.0), scan=Scan(type="single", grid=(3, 3), laser_point=(0.4, -0.3, 0.0)),
-                  sampling=Sampling(bin_width_opl=0.04, start_opl=1.6, count=30))
+                  sampling=Sampling(bin_width_opl=0.04, start_opl=1.84, count=30))
     return RelayWallScene(**(values | changes))
 
 

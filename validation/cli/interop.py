@@ -93,10 +93,9 @@ def command_check(args) -> int:
     when one is; 1 when not.
     """
     from analytic.files import output_folder
-    from analytic.relay_wall import RelayWallScene
     from validation.check import check_transient, write_check_report
 
-    scene = load_scene_argument(args.scene, relay_wall=True)
+    scene = load_scene_argument(args.scene)
     if args.stderr is not None and len(args.data) > 1:
         raise UsageError("--stderr: give it with one --data file; several files are replicas whose "
                          "spread is their error")
@@ -107,9 +106,7 @@ def command_check(args) -> int:
     expect = _convention(args, scene)    # after the data are read: transient_nlos_path's emulation takes a while
     result = check_transient(scene, data, stderr=stderr, dof=dof, shape_only=args.shape_only, expect=expect)
     with output_folder(args.out) as out:
-        if not isinstance(scene, RelayWallScene):
-            # analytic.window's light range is the plane's here; the relay wall's comes with wip-nlos's window.py
-            announce_window(args, scene)
+        announce_window(args, scene)
         write_check_report(out, result, scene_name=scene.name, data_paths=args.data, scene=scene)
     if not args.quiet:
         print(result.summary())
@@ -124,7 +121,7 @@ def command_export(args) -> int:
 
     from analytic.relay_wall import RelayWallScene
 
-    scene = load_scene_argument(args.scene, relay_wall=True)
+    scene = load_scene_argument(args.scene)
     if args.format != "mitransient" and (args.radius is not None or args.spp is not None):
         raise UsageError("--radius/--spp: apply to --format mitransient only")
     if isinstance(scene, RelayWallScene) and args.radius is not None:

@@ -170,3 +170,33 @@ def test_mis_without_the_balance_heuristic_fails(monkeypatch):
 def test_unknown_strategy_is_refused():
     with pytest.raises(RuntimeError, match="strategy must be one of"):
         _loaded(CASES["confocal"], strategy="solid_angle")
+
+
+def test_chunks_add_up_to_the_whole_render_and_share_one_kernel():
+    """Sample g's numbers depend on (seed, g) only; seeds, offsets and technique blocks are opaque."""
+    import drjit as dr
+
+    from transient.chunks import ReplicaLayout
+
+    loaded = _loaded(_covering(NEAR_WALL_SINGLE))
+    integrator = loaded.integrator()
+    layout = ReplicaLayout.for_samples(2**14)                  # 32 replicas of 512 samples
+
+    def chunk(first, count, seed=2):
+        return integrator.render_chunk_per_unit_intensity(loaded, seed=seed, layout=layout, first=first, count=count)
+
+    whole = chunk(0, layout.samples)
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        dr.kernel_history()
+        head, tail = chunk(0, 1000), chunk(1000, layout.samples - 1000)     # cut inside replica 1
+        chunk(700, 3000, seed=9)
+        launches = [k for k in dr.kernel_history()
+                    if k["type"] == dr.KernelType.JIT and k["size"] in (1000, layout.samples - 1000, 3000)]
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    combined = np.zeros_like(whole)
+    combined[:2] += head
+    combined[1:] += tail
+    assert np.allclose(combined, whole, rtol=1e-12, atol=1e-15 * np.abs(whole).max())
+    assert len(launches) == 3 and len({k["hash"] for k in launches}) == 1

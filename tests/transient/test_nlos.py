@@ -200,3 +200,22 @@ def test_chunks_add_up_to_the_whole_render_and_share_one_kernel():
     combined[1:] += tail
     assert np.allclose(combined, whole, rtol=1e-12, atol=1e-15 * np.abs(whole).max())
     assert len(launches) == 3 and len({k["hash"] for k in launches}) == 1
+
+
+def test_render_loaded_refuses_a_capture_it_cannot_scale():
+    """transient_opl_nlos holds no laser intensity: render_loaded names what to call instead."""
+    from transient.render import render_loaded
+
+    with pytest.raises(ValueError, match="per unit laser intensity"):
+        render_loaded(_loaded(CASES["confocal"]), spp=64)
+
+
+def test_default_chunks_shrink_with_the_pairs_so_that_checkpoints_stay_frequent():
+    """Every sample serves every pair: a chunk is sized in (sample, pair) evaluations, 2^26 on a CPU."""
+    from transient.render import DEFAULT_CHUNK, DEFAULT_CHUNK_GPU, default_chunk
+
+    assert default_chunk(1, False) == default_chunk(16, False) == DEFAULT_CHUNK
+    assert default_chunk(64, False) == DEFAULT_CHUNK // 4 and default_chunk(1024, False) == 2**16
+    assert default_chunk(100, False) == 2**19          # a power of two at or below 2^26 / 100
+    assert default_chunk(2**20, False) == 64 and default_chunk(2**40, False) == 1
+    assert default_chunk(1024, True) == DEFAULT_CHUNK_GPU // 64

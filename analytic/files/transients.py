@@ -64,7 +64,8 @@ def build_meta(scene, *, kind: str, samples: int = 0, seed: int | None = None,
         ``sensor_positions``, ``attenuation``, ``illumination`` (the
         waveform's name) and ``illumination_parameters``, ``tolerance``
         (the model's; None for a render), ``window_share``, ``noise`` (the
-        scene's, None when noiseless), ``start_opl``, ``bin_width_opl``,
+        scene's, None when noiseless), ``detector`` (the scene's
+        ``[detector]`` table, None without one: docs/design.md section 8), ``start_opl``, ``bin_width_opl``,
         ``bins``, ``sensors`` (the transient's rows: sensors, or the
         capture's (laser point, read point) pairs), ``units``, and the
         relay-wall tables ``relay_wall``, ``hidden``, ``laser``, ``sensor``
@@ -101,6 +102,7 @@ def build_meta(scene, *, kind: str, samples: int = 0, seed: int | None = None,
         "window_share": None if window_share is None else float(window_share),
         "noise": None if noise is None else {"kind": noise.kind, "sigma": noise.sigma,
                                              "photons": noise.photons, "seed": noise.seed},
+        "detector": None if scene.detector is None else scene.detector.as_dict(),
         "start_opl": float(scene.sampling.start_opl),
         "bin_width_opl": float(scene.sampling.bin_width_opl),
         "bins": int(scene.sampling.count),

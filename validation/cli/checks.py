@@ -8,6 +8,7 @@ from pathlib import Path
 
 from .common import (UsageError, add_quiet, add_window_option, announce_window, apply_window, check_samples_type,
                      load_scene_argument, seed_type, show_progress)
+from .counts import draw_scene_counts, write_counts
 from .reconstruct import add_lambda_options
 
 __all__ = ["add_commands", "command_validate", "command_run", "show_reconstruction_warnings"]
@@ -137,6 +138,7 @@ def command_run(args) -> int:
                             lambdas=grid)
         show_reconstruction_warnings(check.reconstructions)
         share = check.metrics["window_share"]
+        counts = {part: draw_scene_counts(scene, y) for part, y in (("model", check.model), ("render", check.render))}
         with staged_writes():
             write_transient(out / "model", check.model, build_meta(scene, kind="model", window_share=share),
                             scene=scene)
@@ -144,6 +146,8 @@ def command_run(args) -> int:
                             build_meta(scene, kind="render", samples=args.spp, seed=args.seed,
                                        window_share=share, replicas=check.replicas, dof=check.replicas - 1),
                             scene=scene, stderr=check.stderr)
+            for part, drawn in counts.items():
+                write_counts(out / part, scene, drawn, label=part)
             write_report(out, [check], headline=True)
     if not args.quiet:
         print(check.agreement.summary())

@@ -8,6 +8,7 @@ import math
 from pathlib import Path
 
 from .common import UsageError, add_quiet, announce_window, load_scene_argument, positive_float_type
+from .counts import add_counts_options, check_counts_options, command_check_counts
 
 __all__ = ["add_commands", "command_check", "command_export"]
 
@@ -96,6 +97,9 @@ def command_check(args) -> int:
     from validation.check import check_transient, write_check_report
 
     scene = load_scene_argument(args.scene)
+    if args.counts:
+        return command_check_counts(args, scene)
+    check_counts_options(args, scene)       # --fit / --false-alarm without --counts are refused
     if args.stderr is not None and len(args.data) > 1:
         raise UsageError("--stderr: give it with one --data file; several files are replicas whose "
                          "spread is their error")
@@ -194,6 +198,7 @@ def add_commands(commands) -> None:
     check.add_argument("--expect-offset", type=_finite_float("--expect-offset"), metavar="M",
                        help="judge against the model with its start_opl moved by +M metres (positive when "
                             "the data read path lengths short; default 0 with --expect-scale)")
+    add_counts_options(check)
     check.add_argument("--out", required=True, help="output folder (report.md, metrics.json, figures)")
     add_quiet(check)
     check.set_defaults(run=command_check)

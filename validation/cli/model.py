@@ -7,6 +7,7 @@ from pathlib import Path
 
 from .common import (add_quiet, add_window_option, announce_window, apply_window, load_scene_argument,
                      positive_float_type, rows_text, show_progress)
+from .counts import draw_scene_counts, write_counts
 
 __all__ = ["add_commands", "command_forward", "model_title"]
 
@@ -36,6 +37,7 @@ def command_forward(args) -> int:
         assembly = time.perf_counter() - started
         y = forward(scene, matrix)
         noisy = add_noise(y, scene.noise) if scene.noise is not None else None
+        counts = draw_scene_counts(scene, y)         # before any file: a refused draw leaves the folder as it was
         meta = build_meta(scene, kind="model",
                           seed=scene.noise.seed if scene.noise is not None else None,
                           window_share=share, nonzeros=int(matrix.nnz), assembly_seconds=assembly)
@@ -43,6 +45,7 @@ def command_forward(args) -> int:
         with staged_writes():
             write_transient(out, y, meta, scene=scene, noisy=noisy)
             save_figure(figure, out / "transient.png")
+            write_counts(out, scene, counts)
     if not args.quiet:
         print(f"forward: {rows_text(scene)} x {scene.sampling.count} bins, "
               f"A {matrix.shape[0]} x {matrix.shape[1]} with {matrix.nnz:,} non-zeros "

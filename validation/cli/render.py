@@ -8,6 +8,7 @@ from pathlib import Path
 
 from .common import (UsageError, add_quiet, add_window_option, announce_window, apply_window, load_scene_argument,
                      samples_type, seed_type, show_progress)
+from .counts import discard_counts, write_render_counts
 
 __all__ = ["add_commands", "command_render"]
 
@@ -66,9 +67,11 @@ def command_render(args) -> int:
                 result = resume(out, scene=given, spp=args.spp, seed=args.seed, variant=args.variant,
                                 progress=progress)
             else:
+                discard_counts(out)
                 result = render(scene, spp=args.spp, seed=0 if args.seed is None else args.seed, out_dir=out,
                                 variant=args.variant, progress=progress)
             _draw(out / FIGURE_FILE, scene, result)
+            write_render_counts(out, scene, result.mean)
     except KeyboardInterrupt as interrupted:
         # a RenderInterrupted names the folder its state was saved in; a resume's folder holds one anyway
         resumable = args.resume or getattr(interrupted, "folder", None) is not None

@@ -1,0 +1,182 @@
+"""Photon counts on the command line: forward/render/run write them beside y, check --counts judges them.
+
+The expected histogram is held to Coates' formula written here; the captures that must fail are drawn here
+with NumPy's own generator from a model that differs from the scene's claim (a wider pulse, no dead time).
+"""
+
+import json
+
+import numpy as np
+import pytest
+
+import analytic
+from analytic.scene_file import load_scene
+from scene_files import GOOD, write_scene
+from validation.cli import main
+
+CYCLES = 100_000
+# photons: about half a photon per cycle over the window, so that pile-up shapes the dead-time histogram
+DETECTOR = f"""
+[detector]
+photons = 35.0
+background = 1e-4
+cycles = {CYCLES}
+dead_time = "cycle"
+seed = 3
+"""
+GAUSSIAN = (GOOD.replace('waveform = "impulse"', 'waveform = "gaussian"\nfwhm = 0.15')
+            .replace("start = 0.0", "start = 1.4").replace("count = 40", "count = 19"))
+
+
+def _coates(y, photons=35.0, background=1e-4, cycles=CYCLES):
+    """C e^{-Λ_n} (1 - e^{-λ_n}), written out here (docs/design.md section 8)."""
+    lam = photons * np.maximum(y, 0.0) + background
+    before = np.concatenate([np.zeros((lam.shape[0], 1)), np.cumsum(lam, axis=1)[:, :-1]], axis=1)
+    return cycles * np.exp(-before) * (1.0 - np.exp(-lam))
+
+
+def _multinomial(expected, rng):
+    p = expected / CYCLES
+    return np.array([rng.multinomial(CYCLES, np.append(row, 1.0 - row.sum()))[:-1] for row in p])
+
+
+@pytest.fixture(scope="module")
+def spad(tmp_path_factory):
+    """A Gaussian-pulse scene with a dead-time detector, and forward's folder of it."""
+    folder = tmp_path_factory.mktemp("counts")
+    path = write_scene(folder, GAUSSIAN + DETECTOR)
+    assert main(["forward", str(path), "--out", str(folder / "forward"), "--quiet"]) == 0
+    return path, folder / "forward"
+
+
+def test_forward_writes_the_expected_counts_and_a_draw_beside_y(spad):
+    _, out = spad
+    y = np.load(out / "transient.npy")
+    expected = np.load(out / "counts_expected.npy")
+    counts = np.load(out / "counts.npy")
+    np.testing.assert_allclose(expected, _coates(y), rtol=1e-12, atol=0)
+    assert counts.dtype == np.int64 and counts.shape == y.shape and counts.sum() <= CYCLES
+    # the draw is the expected histogram's: its total within 5 binomial standard errors
+    total = expected.sum()
+    assert abs(counts.sum() - total) < 5 * np.sqrt(total * (1 - total / CYCLES))
+    meta = json.loads((out / "meta.json").read_text())
+    assert meta["detector"] == {"photons": 35.0, "background": 1e-4, "cycles": CYCLES, "dead_time": "cycle",
+                                "seed": 3}
+    assert (out / "counts.png").is_file()
+
+
+def test_check_counts_passes_the_draw_and_fails_a_wider_pulse_or_no_dead_time(spad, tmp_path, capsys):
+    path, out = spad
+    assert main(["check", str(path), "--data", str(out / "counts.npy"), "--counts", "--out", str(tmp_path / "good"),
+                 "--quiet"]) == 0
+    metrics = json.loads((tmp_path / "good" / "metrics.json").read_text())
+    assert metrics["agrees"] and metrics["counts"]["statistic"] == "multinomial"
+    assert metrics["counts"]["false_alarm"] == 0.01 and metrics["fit"] is None
+    assert (tmp_path / "good" / "check_counts.png").is_file()
+
+    rng = np.random.default_rng(11)
+    scene = load_scene(path)
+    wide = analytic.forward(scene.replace(illumination=analytic.Illumination(waveform="gaussian", fwhm=0.25)))
+    np.save(tmp_path / "wide.npy", _multinomial(_coates(wide), rng))
+    # every photon counted (no dead time), from the scene's own y
+    y = np.load(out / "transient.npy")
+    np.save(tmp_path / "free.npy", rng.poisson(CYCLES * (35.0 * y + 1e-4)))
+    capsys.readouterr()
+    for name in ("wide", "free"):
+        assert main(["check", str(path), "--data", str(tmp_path / f"{name}.npy"), "--counts",
+                     "--out", str(tmp_path / name)]) == 1, name
+        assert "DISAGREES: multinomial deviance" in capsys.readouterr().out
+        assert json.loads((tmp_path / name / "metrics.json").read_text())["counts"]["p_value"] < 0.01
+
+
+@pytest.mark.parametrize("arguments, message", [
+    (["--fit", "scale"], "--fit/--false-alarm: apply to --counts only"),
+    (["--counts", "--fit", "scale,width"], "--fit: width is not one of"),
+    (["--counts", "--fit", "offset,offset_opl"], "--fit: each name once"),
+    (["--counts", "--fit", "tail"], "--fit tail: the scene's pulse ('gaussian') has no tail"),
+    (["--counts", "--expect-scale", "2"], "--expect-scale: does not apply to --counts"),
+    (["--counts", "--false-alarm", "0.7"], "--false-alarm: must be in (0, 0.5]"),
+])
+def test_check_counts_refuses_bad_options_in_one_line(spad, tmp_path, capsys, arguments, message):
+    path, out = spad
+    try:
+        status = main(["check", str(path), "--data", str(out / "counts.npy"), *arguments,
+                       "--out", str(tmp_path / "out")])
+    except SystemExit as exit:      # argparse's own refusals
+        status = exit.code
+    assert status == 2
+    error = capsys.readouterr().err.strip().splitlines()
+    assert len(error) == 1 and message in error[0], error
+    assert not (tmp_path / "out").exists()
+
+
+def test_check_counts_refuses_bad_data_and_scenes_without_a_detector(spad, tmp_path, capsys):
+    path, out = spad
+    cases = {"no detector": (write_scene(tmp_path, GAUSSIAN, name="plain.toml"), out / "counts.npy",
+                             "has no [detector] table"),
+             "shape": (path, tmp_path / "short.npy", "the scene's rows x bins are (1, 19)"),
+             "fraction": (path, tmp_path / "fraction.npy", "every count must be a finite whole number"),
+             "too many": (path, tmp_path / "many.npy", "more counts than the 100000 cycles")}
+    np.save(tmp_path / "short.npy", np.zeros((1, 18), dtype=np.int64))
+    np.save(tmp_path / "fraction.npy", np.full((1, 19), 0.5))
+    np.save(tmp_path / "many.npy", np.full((1, 19), 6000))
+    for name, (scene, data, message) in cases.items():
+        assert main(["check", str(scene), "--data", str(data), "--counts", "--out", str(tmp_path / name)]) == 2
+        error = capsys.readouterr().err.strip().splitlines()
+        assert len(error) == 1 and message in error[0], (name, error)
+        assert not (tmp_path / name).exists()
+
+
+@pytest.mark.parametrize("change, key", [('dead_time = "cycle"', "detector.dead_time"),
+                                         ("photons = 35.0", "detector.photons"),
+                                         (f"cycles = {CYCLES}", "detector.cycles")])
+def test_a_bad_detector_is_refused_before_any_file(tmp_path, capsys, change, key):
+    bad = {"dead_time": 'dead_time = "sometimes"', "photons": "photons = -1", "cycles": "cycles = 2.5"}
+    text = (GAUSSIAN + DETECTOR).replace(change, bad[key.split(".")[1]])
+    path = write_scene(tmp_path, text)
+    assert main(["forward", str(path), "--out", str(tmp_path / "out")]) == 2
+    error = capsys.readouterr().err.strip().splitlines()
+    assert len(error) == 1 and key in error[0] and "Traceback" not in error[0], error
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_folder_rewritten_without_a_detector_loses_its_counts(spad, tmp_path):
+    path, _ = spad
+    out = tmp_path / "out"
+    assert main(["forward", str(path), "--out", str(out), "--quiet"]) == 0
+    assert (out / "counts.npy").is_file()
+    assert main(["forward", str(write_scene(tmp_path, GAUSSIAN, name="plain.toml")), "--out", str(out),
+                 "--quiet"]) == 0
+    assert not any((out / name).exists() for name in ("counts.npy", "counts_expected.npy", "counts.png"))
+    assert json.loads((out / "meta.json").read_text())["detector"] is None
+
+
+@pytest.mark.slow
+def test_check_counts_fit_finds_the_width_a_capture_was_drawn_with(spad, tmp_path, capsys):
+    path, _ = spad
+    scene = load_scene(path)
+    wide = analytic.forward(scene.replace(illumination=analytic.Illumination(waveform="gaussian", fwhm=0.25)))
+    np.save(tmp_path / "wide.npy", _multinomial(_coates(0.8 * wide), np.random.default_rng(5)))
+    assert main(["check", str(path), "--data", str(tmp_path / "wide.npy"), "--counts", "--fit",
+                 "scale,offset,fwhm", "--out", str(tmp_path / "fit")]) == 1
+    metrics = json.loads((tmp_path / "fit" / "metrics.json").read_text())
+    found, stderr = metrics["fit"]["parameters"], metrics["fit"]["stderr"]
+    assert not metrics["agrees"] and metrics["agrees_after_fit"]
+    assert abs(found["fwhm"] - 0.25) < 4 * stderr["fwhm"] and abs(found["fwhm"] - 0.15) > 5 * stderr["fwhm"]
+    assert abs(found["scale"] - 0.8) < 4 * stderr["scale"] and abs(found["offset_opl"]) < 4 * stderr["offset_opl"]
+    assert "fit: scale" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_render_and_run_write_counts_of_their_y(spad, tmp_path):
+    path, _ = spad
+    assert main(["render", str(path), "--spp", "65536", "--out", str(tmp_path / "render"), "--quiet"]) == 0
+    mean = np.load(tmp_path / "render" / "transient.npy")
+    np.testing.assert_allclose(np.load(tmp_path / "render" / "counts_expected.npy"), _coates(mean), rtol=1e-12)
+    assert json.loads((tmp_path / "render" / "meta.json").read_text())["detector"]["cycles"] == CYCLES
+    assert main(["run", str(path), "--spp", "65536", "--out", str(tmp_path / "run"), "--quiet"]) in (0, 1)
+    for part in ("model", "render"):
+        y = np.load(tmp_path / "run" / part / "transient.npy")
+        np.testing.assert_allclose(np.load(tmp_path / "run" / part / "counts_expected.npy"), _coates(y),
+                                   rtol=1e-12)
+        assert np.load(tmp_path / "run" / part / "counts.npy").sum() <= CYCLES

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import analytic
+from analytic.files import read_transient
 from analytic.scene_file import load_scene
 from scene_files import GOOD, write_scene
 from validation.cli import main
@@ -63,6 +64,7 @@ def test_forward_writes_the_expected_counts_and_a_draw_beside_y(spad):
     assert meta["detector"] == {"photons": 35.0, "background": 1e-4, "cycles": CYCLES, "dead_time": "cycle",
                                 "seed": 3}
     assert (out / "counts.png").is_file()
+    np.testing.assert_array_equal(read_transient(out / "counts.h5"), counts)      # tal's layout, as transient.h5
 
 
 def test_check_counts_passes_the_draw_and_fails_a_wider_pulse_or_no_dead_time(spad, tmp_path, capsys):
@@ -147,7 +149,7 @@ def test_a_folder_rewritten_without_a_detector_loses_its_counts(spad, tmp_path):
     assert (out / "counts.npy").is_file()
     assert main(["forward", str(write_scene(tmp_path, GAUSSIAN, name="plain.toml")), "--out", str(out),
                  "--quiet"]) == 0
-    assert not any((out / name).exists() for name in ("counts.npy", "counts_expected.npy", "counts.png"))
+    assert not any((out / name).exists() for name in ("counts.npy", "counts_expected.npy", "counts.h5", "counts.png"))
     assert json.loads((out / "meta.json").read_text())["detector"] is None
 
 
@@ -168,6 +170,8 @@ def test_check_counts_fit_finds_the_width_a_capture_was_drawn_with(spad, tmp_pat
 
 
 @pytest.mark.slow
+@pytest.mark.filterwarnings("ignore::analytic.inversion.RankDeficiencyWarning")   # one sensor cannot image
+@pytest.mark.filterwarnings("ignore::analytic.inversion.RegularizationWarning")
 def test_render_and_run_write_counts_of_their_y(spad, tmp_path):
     path, _ = spad
     assert main(["render", str(path), "--spp", "65536", "--out", str(tmp_path / "render"), "--quiet"]) == 0
@@ -180,3 +184,25 @@ def test_render_and_run_write_counts_of_their_y(spad, tmp_path):
         np.testing.assert_allclose(np.load(tmp_path / "run" / part / "counts_expected.npy"), _coates(y),
                                    rtol=1e-12)
         assert np.load(tmp_path / "run" / part / "counts.npy").sum() <= CYCLES
+
+
+def test_a_relay_wall_capture_gets_counts_in_tal_nlos_layout(tmp_path):
+    from analytic.detector import Detector
+    from analytic.relay_wall import RelayWallScene, Scan
+    from analytic.scene import Sampling
+    from scene_files import write_relay_wall_file
+
+    scene = RelayWallScene(name="nlos", pixels=4, center=(0.1, 0.05, 0.9), u=(0.8, 0.0, 0.0), v=(0.0, -0.7, 0.0),
+                           scan=Scan(type="single", grid=(3, 2), laser_point=(0.4, -0.3, 0.0)),
+                           sampling=Sampling(bin_width_opl=0.04, start_opl=1.84, count=30),
+                           detector=Detector(photons=2e3, background=1e-3, cycles=1e4, dead_time="none", seed=1))
+    path = write_relay_wall_file(tmp_path, scene)
+    assert main(["forward", str(path), "--out", str(tmp_path / "out"), "--quiet"]) == 0
+    out = tmp_path / "out"
+    y = np.load(out / "transient.npy")
+    np.testing.assert_allclose(np.load(out / "counts_expected.npy"), 1e4 * (2e3 * np.maximum(y, 0) + 1e-3),
+                               rtol=1e-12)
+    counts = np.load(out / "counts.npy")
+    assert counts.shape == (6, 30) and counts.sum() > 0
+    np.testing.assert_array_equal(read_transient(out / "counts.h5"), counts)    # tal's NLOS layout, our pair order
+    assert json.loads((out / "meta.json").read_text())["detector"]["dead_time"] == "none"

@@ -4,7 +4,9 @@ A scene with a ``[detector]`` table makes ``forward``, ``render`` and
 ``run`` write ``counts_expected.npy`` (float64, the expected histogram
 :func:`analytic.detector.expected_counts` of the folder's y) and
 ``counts.npy`` (int64, one draw of it, :func:`analytic.detector.draw_counts`
-with the detector's seed) beside ``transient.npy``, with the figure
+with the detector's seed) beside ``transient.npy``, the draw again as
+``counts.h5`` in tal's capture layout (the layout of the folder's
+``transient.h5``, read by ``tal.io.read_capture``), and the figure
 ``counts.png``; meta.json's ``detector`` records the table. A folder
 written for a scene without one has none of the three (an earlier
 command's are removed). A render's counts are those of its estimate of y.
@@ -22,12 +24,14 @@ from pathlib import Path
 
 from .common import UsageError
 
-__all__ = ["COUNTS_FILES", "COUNTS_FIGURE", "draw_scene_counts", "write_counts", "write_render_counts",
+__all__ = ["COUNTS_FILES", "COUNTS_CAPTURE", "COUNTS_FIGURE", "draw_scene_counts", "write_counts", "write_render_counts",
            "discard_counts", "add_counts_options",
            "check_counts_options", "command_check_counts", "counts_figure"]
 
 #: The expected histogram and its draw, beside transient.npy (docs/design.md section 8).
 COUNTS_FILES = ("counts_expected.npy", "counts.npy")
+#: The draw in tal's capture layout (as transient.h5: a plane's, or a relay-wall capture's NLOS layout).
+COUNTS_CAPTURE = "counts.h5"
 #: The figure of both, beside them.
 COUNTS_FIGURE = "counts.png"
 # --fit's names (offset is offset_opl, as check's fit names it).
@@ -49,7 +53,7 @@ def draw_scene_counts(scene, y) -> tuple[np.ndarray, np.ndarray] | None:
 
 def write_counts(out: str | Path, scene, counts: tuple[np.ndarray, np.ndarray] | None, *, label: str = "model"
                  ) -> None:
-    """Write ``counts_expected.npy``, ``counts.npy`` and ``counts.png`` into ``out`` (inside the caller's
+    """Write ``counts_expected.npy``, ``counts.npy``, ``counts.h5`` and ``counts.png`` into ``out`` (inside the caller's
     :func:`analytic.files.staged_writes`), or remove an earlier command's when ``counts`` is None.
 
     Parameters
@@ -74,15 +78,36 @@ def write_counts(out: str | Path, scene, counts: tuple[np.ndarray, np.ndarray] |
     expected, drawn = counts
     save_npy(out / COUNTS_FILES[0], np.asarray(expected, dtype=np.float64))
     save_npy(out / COUNTS_FILES[1], np.asarray(drawn, dtype=np.int64))
+    _write_counts_capture(out / COUNTS_CAPTURE, scene, drawn)
     save_figure(counts_figure(scene, expected, drawn, title=f"{scene.name}: counts of the {label}'s y"),
                 out / COUNTS_FIGURE)
+
+
+def _write_counts_capture(path: Path, scene, drawn) -> None:
+    """The drawn counts as a tal capture (H = counts, float64), laid out as the folder's transient.h5."""
+    import numpy as np
+
+    from analytic.files import write_capture, write_relay_wall_capture
+    from analytic.relay_wall import RelayWallScene
+
+    sampling = scene.sampling
+    info = {"quantity": "photon counts (a draw; counts.npy)", "scene": scene.name,
+            "detector": scene.detector.as_dict(), "start_opl": sampling.start_opl,
+            "bin_width_opl": sampling.bin_width_opl}
+    counts = np.asarray(drawn, dtype=np.float64)
+    if isinstance(scene, RelayWallScene):
+        write_relay_wall_capture(path, counts, scene, scene_info=info)
+    else:
+        write_capture(path, counts, start_opl=sampling.start_opl, bin_width_opl=sampling.bin_width_opl,
+                      source=[float(v) for v in scene.source],
+                      sensors=np.asarray(scene.sensors, dtype=np.float64).tolist(), scene_info=info)
 
 
 def discard_counts(out: str | Path) -> None:
     """Remove an earlier command's counts from ``out`` (a new render starts: they are not of its y)."""
     from analytic.files import discard
 
-    for name in (*COUNTS_FILES, COUNTS_FIGURE):
+    for name in (*COUNTS_FILES, COUNTS_CAPTURE, COUNTS_FIGURE):
         discard(Path(out) / name)
 
 

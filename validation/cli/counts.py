@@ -79,8 +79,8 @@ def write_counts(out: str | Path, scene, counts: tuple[np.ndarray, np.ndarray] |
     save_npy(out / COUNTS_FILES[0], np.asarray(expected, dtype=np.float64))
     save_npy(out / COUNTS_FILES[1], np.asarray(drawn, dtype=np.int64))
     _write_counts_capture(out / COUNTS_CAPTURE, scene, drawn)
-    save_figure(counts_figure(scene, expected, drawn, title=f"{scene.name}: counts of the {label}'s y"),
-                out / COUNTS_FIGURE)
+    save_figure(counts_figure(scene, expected, drawn, title=f"{scene.name}: counts of the {label}'s y",
+                              expected_label=f"expected (of the {label}'s y)"), out / COUNTS_FIGURE)
 
 
 def _write_counts_capture(path: Path, scene, drawn) -> None:
@@ -121,7 +121,7 @@ def write_render_counts(out: str | Path, scene, mean) -> None:
         write_counts(out, scene, counts, label="render")
 
 
-def counts_figure(scene, expected, drawn, *, fitted=None, title: str = ""):
+def counts_figure(scene, expected, drawn, *, fitted=None, title: str = "", expected_label: str = "expected (model)"):
     """Drawn (or measured) counts against the expected histogram, for the row with the most expected counts.
 
     Parameters
@@ -133,6 +133,8 @@ def counts_figure(scene, expected, drawn, *, fitted=None, title: str = ""):
     fitted : numpy.ndarray, optional
         ``(K, N)`` the fitted model's expected counts.
     title : str
+    expected_label : str
+        The legend's name of ``expected``.
     """
     import numpy as np
 
@@ -145,7 +147,7 @@ def counts_figure(scene, expected, drawn, *, fitted=None, title: str = ""):
     figure = new_figure(7, 3.6)
     axes = figure.subplots()
     axes.stairs(np.asarray(drawn)[row], edges, color="0.6", fill=True, label="counts")
-    axes.stairs(expected[row], edges, color="C3", linewidth=1.5, label="expected (model)")
+    axes.stairs(expected[row], edges, color="C3", linewidth=1.5, label=expected_label)
     if fitted is not None:
         axes.stairs(np.asarray(fitted)[row], edges, color="C0", linewidth=1.2, linestyle="--",
                     label="expected (fitted)")

@@ -16,7 +16,9 @@ point x* (there the isochrones turn inside the pixel, and the routes of
 :mod:`analytic.kernels` take over). Each entry is the G_4 x G_4 rule,
 accepted when G_3 x G_3 agrees with it within the tolerance (for a smooth
 integrand the difference far exceeds G_4's own error); otherwise nothing is
-kept and the caller integrates the pixel its other way.
+kept and the caller integrates the pixel its other way. For a step-function S
+(the impulse) every κ_n is constant on a slab, so the rules integrate a_k alone
+and the kernels are taken once per slab.
 """
 
 from __future__ import annotations
@@ -195,10 +197,18 @@ def _region_rows(frame, lower, upper, tau_a, tau_b, has_lower, has_upper, swap, 
 
 @njit(cache=True, error_model="numpy", inline="always")
 def _slab_rule(frame, kernel, lower, upper, tau_a, tau_b, has_lower, has_upper, swap, ua, ub, w0, w1, order,
-               values, noise, total, magnitude, rounding):
-    """G_order x G_order of a_k κ_n(d) over the slab's region for u in [ua, ub], added to total (per bin)."""
+               values, noise, total, magnitude, rounding, judged, steps):
+    """G_order x G_order of a_k κ_n(d) over the slab's region for u in [ua, ub], added to total (per bin).
+
+    ``judged``: also add ∫ |f| and f's rounding to magnitude and rounding (the rule that is kept;
+    the rule that only judges it needs neither). ``steps``: the kernels are constant on the slab
+    (a step-function S): the rule integrates a_k alone and returns (∫ a_k, ∫ |a_k|), adding nothing,
+    and its caller multiplies by the kernels once; else it returns (0, 0).
+    """
     cu = 0.5 * (ua + ub)
     hu = 0.5 * (ub - ua)
+    scalar = 0.0
+    scalar_magnitude = 0.0
     for ju in range(order):
         u = cu + hu * GAUSS_NODES[order, ju]
         wu = hu * GAUSS_WEIGHTS[order, ju]
@@ -215,11 +225,18 @@ def _slab_rule(frame, kernel, lower, upper, tau_a, tau_b, has_lower, has_upper, 
                 ds2 = (x - frame.source_x) ** 2 + (y - frame.source_y) ** 2 + frame.source_height ** 2
                 dk2 = (x - frame.sensor_x) ** 2 + (y - frame.sensor_y) ** 2 + frame.sensor_height ** 2
                 weight = wu * hw * GAUSS_WEIGHTS[order, jw] * attenuation_of_distances(frame, x, y, ds2, dk2)
+                if steps:
+                    scalar += weight
+                    scalar_magnitude += abs(weight)
+                    continue
                 kernel_values(kernel, math.sqrt(ds2) + math.sqrt(dk2), weight, values, noise)
                 for i in range(kernel.run.bins):
                     total[i] += values[i]
-                    magnitude[i] += abs(values[i])
-                    rounding[i] += noise[i]
+                if judged:
+                    for i in range(kernel.run.bins):
+                        magnitude[i] += abs(values[i])
+                        rounding[i] += noise[i]
+    return scalar, scalar_magnitude
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -240,9 +257,11 @@ def _slab_kinks(low, high, terms, axis, run, points):
     return used
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy")
 def strip_entries(frame, box, low, high, terms, axis, run, rtol, out, work):
     """Add one (pair, pixel)'s entries to out[:run.bins] by strips; False (out zeroed) when the route does not serve.
+
+    A real call (compiled once for every caller); its cost per call is small beside a cut pair's rules.
 
     Parameters
     ----------
@@ -280,12 +299,12 @@ def strip_entries(frame, box, low, high, terms, axis, run, rtol, out, work):
     taus = np.empty(2 + kinks * (run.bins + 1))
     slabs = _slab_kinks(low, high, terms, axis, run, taus)
     points = np.empty(10)
+    steps = terms.degree == 0
     low_order, magnitude, rounding = work.lower, work.magnitude, work.rounding
     for i in range(run.bins):
         low_order[i] = 0.0
         magnitude[i] = 0.0
         rounding[i] = 0.0
-    scratch_magnitude, scratch_rounding = work.previous, work.before
     for slab in range(slabs - 1):
         tau_a, tau_b = taus[slab], taus[slab + 1]
         if not tau_b > tau_a:
@@ -303,15 +322,26 @@ def strip_entries(frame, box, low, high, terms, axis, run, rtol, out, work):
         pieces = _slab_pieces(frame, box, lower, upper, tau_a, tau_b, has_lower, has_upper, swap, points)
         if pieces < 0:
             return _discard(out, run.bins)
+        high_sum, low_sum, size = 0.0, 0.0, 0.0       # ∫ a_k over the slab (step-function S)
         for piece in range(pieces - 1):
             ua, ub = points[piece], points[piece + 1]
             if not ub > ua:
                 continue
-            _slab_rule(frame, kernel, lower, upper, tau_a, tau_b, has_lower, has_upper, swap, ua, ub, w0, w1,
-                       HIGH_ORDER, work.values, work.noise, out[offset:], magnitude[offset:], rounding[offset:])
-            _slab_rule(frame, kernel, lower, upper, tau_a, tau_b, has_lower, has_upper, swap, ua, ub, w0, w1,
-                       LOW_ORDER, work.values, work.noise, low_order[offset:], scratch_magnitude[offset:],
-                       scratch_rounding[offset:])
+            value, value_size = _slab_rule(frame, kernel, lower, upper, tau_a, tau_b, has_lower, has_upper, swap, ua,
+                                           ub, w0, w1, HIGH_ORDER, work.values, work.noise, out[offset:],
+                                           magnitude[offset:], rounding[offset:], True, steps)
+            high_sum += value
+            size += value_size
+            low_sum += _slab_rule(frame, kernel, lower, upper, tau_a, tau_b, has_lower, has_upper, swap, ua, ub, w0,
+                                  w1, LOW_ORDER, work.values, work.noise, low_order[offset:], magnitude, rounding,
+                                  False, steps)[0]
+        if steps:       # κ_n is constant on the slab: its value at the middle, times ∫ a_k
+            kernel_values(kernel, 0.5 * (tau_a + tau_b), 1.0, work.values, work.noise)
+            for i in range(kernel.run.bins):
+                out[offset + i] += work.values[i] * high_sum
+                low_order[offset + i] += work.values[i] * low_sum
+                magnitude[offset + i] += abs(work.values[i]) * size
+                rounding[offset + i] += work.noise[i] * size
     for i in range(run.bins):
         if not abs(out[i] - low_order[i]) <= rtol * abs(out[i]) + 4.0 * (rounding[i] + ROUNDING * magnitude[i]):
             return _discard(out, run.bins)

@@ -9,15 +9,19 @@ writes every entry in its final place, in increasing column order, with
 no conversion from CSC and no second copy of A.
 
 Which bins a (pixel, pair) reaches and how its entries are computed is
-decided once, here, for both passes: :func:`pixel_run` takes the interval
+decided here, alike for both passes. :func:`settled_run` takes the interval
 of path length that :func:`analytic.isochrone.range_bound` gives from d and
-∇d at the pixel's centre, and only where that interval's bins are not
-settled (a bin edge, shifted by the waveform's support, may fall inside
-it) the exact range of :func:`analytic.isochrone.rectangle_range`. Both
-give the same run of bins, the exact range's. A pixel whose bound crosses
-no kernel breakpoint and lies clear of the feet is a smooth pixel, served
-through its moments over the bound (:func:`analytic.moments.smooth_by_moments`,
-a few nodes for a small pixel); every other pair goes to
+∇d at a box's centre: where its ends fall in one bin (shifted by the
+waveform's support), that bin is the run of every pixel inside the box, the
+exact range's. Boxes are first segments of up to :data:`SEGMENT` pixels of
+one image row, then single pixels; only where neither settles does a pixel
+take the exact range of :func:`analytic.isochrone.rectangle_range`. A pixel
+whose bound crosses no kernel breakpoint and lies clear of the feet is a
+smooth pixel: for a step-function S (the impulse) its entries are the
+kernels' constant values (one set per settled segment) times ∫_pixel a
+(:func:`analytic.moments.pixel_integral`, a few nodes for a small pixel),
+otherwise its moments over the bound
+(:func:`analytic.moments.smooth_by_moments`); every other pair goes to
 :func:`analytic.kernels.pair_entries` (a real call) with its exact range.
 """
 
@@ -34,7 +38,7 @@ from .kernel_cache import njit
 from .kernels import clear_of_feet, make_scratch, pair_entries, scratch_failures
 from .moments import pixel_integral, smooth_by_moments
 
-__all__ = ["ImageGrid", "pixel_box", "pixel_run", "auto_entries", "block_bounds", "dealt", "count", "fill"]
+__all__ = ["ImageGrid", "pixel_box", "settled_run", "pixel_run", "SEGMENT", "auto_entries", "block_bounds", "dealt", "count", "fill"]
 
 
 class ImageGrid(NamedTuple):
@@ -56,25 +60,59 @@ def pixel_box(grid, p):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
+def settled_run(frame, box, axis, lead, duration):
+    """(run, low, high, settled): the bins of every range of d inside the box's bound, when they are one run.
+
+    [low, high] is :func:`analytic.isochrone.range_bound`'s interval. Where its ends fall in the same
+    bin (shifted by the waveform's lead, and by its duration), every range inside it gives that
+    bin, the exact range of the box and of any pixel inside it included: the run is settled
+    (``settled``). Otherwise ``run`` is meaningless.
+    """
+    low, high = range_bound(frame, 0.5 * (box.x0 + box.x1), 0.5 * (box.y0 + box.y1), 0.5 * (box.x1 - box.x0),
+                            0.5 * (box.y1 - box.y0))
+    first = bin_of(low + lead, axis)
+    if first == bin_of(high + lead, axis):
+        last = bin_of(low + duration, axis)
+        if last == bin_of(high + duration, axis):
+            first = max(0, first)
+            last = min(axis.count - 1, last)
+            return (BinRun(first, last - first + 1) if last >= first else BinRun(0, 0)), low, high, True
+    return BinRun(0, 0), low, high, False
+
+
+@njit(cache=True, error_model="numpy", inline="always")
 def pixel_run(frame, box, axis, lead, duration):
     """(run, low, high, exact): the bins a (pixel, pair) reaches and a range of d holding the pixel's.
 
-    The run is the one :func:`analytic.bins.pixel_bins` gives on the exact range: where the
-    bound's ends fall in the same bin (shifted by the waveform's lead, and by its duration),
-    every range inside the bound gives that bin, so the bound settles the run (``exact`` False,
-    [low, high] the bound); otherwise [low, high] is the exact range (``exact`` True).
+    The run is the one :func:`analytic.bins.pixel_bins` gives on the exact range, settled by the
+    bound where it can be (:func:`settled_run`; ``exact`` False, [low, high] the bound); otherwise
+    [low, high] is the exact range (``exact`` True).
     """
-    lo, hi = range_bound(frame, 0.5 * (box.x0 + box.x1), 0.5 * (box.y0 + box.y1), 0.5 * (box.x1 - box.x0),
-                         0.5 * (box.y1 - box.y0))
-    first = bin_of(lo + lead, axis)
-    if first == bin_of(hi + lead, axis):
-        last = bin_of(lo + duration, axis)
-        if last == bin_of(hi + duration, axis):
-            first = max(0, first)
-            last = min(axis.count - 1, last)
-            return (BinRun(first, last - first + 1) if last >= first else BinRun(0, 0)), lo, hi, False
+    run, low, high, settled = settled_run(frame, box, axis, lead, duration)
+    if settled:
+        return run, low, high, False
     low, high = rectangle_range(frame, box)
     return pixel_bins(low, high, axis, lead, duration), low, high, True
+
+
+#: Most pixels of one image row whose runs are settled together (:func:`settled_run` of their union);
+#: fewer where a bin is under eight segments long (d changes by up to twice their length over them),
+#: as then many would not settle.
+SEGMENT = 8
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _segment_length(grid, axis):
+    side = max(grid.width, grid.height) / grid.pixels
+    return max(1, min(SEGMENT, int(axis.bin_width_opl / (8.0 * side))))
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _segment(grid, p, end, length):
+    """(stop, box): pixels p ... stop - 1, at most ``length`` of one image row before ``end``, and their union."""
+    stop = min(p + length, end, (p // grid.pixels + 1) * grid.pixels)
+    first = pixel_box(grid, p)
+    return stop, PixelBox(first.x0, pixel_box(grid, stop - 1).x1, first.y0, first.y1)
 
 
 # What the smooth path of a (pixel, pair) did: wrote its entries, or left them to its moments or the other routes.
@@ -179,19 +217,26 @@ def count(pairs, mode, grid, axis, lead, duration, bounds, threads, per_pixel, c
 @njit(cache=True, error_model="numpy")
 def _count_block(pairs, mode, grid, axis, lead, duration, begin, end, per_pixel, row_counts):
     frames, offsets = _frames(pairs, mode)
+    length = _segment_length(grid, axis)
     most = 0
     for p in range(begin, end):
-        box = pixel_box(grid, p)
-        total = 0
+        per_pixel[p] = 0
+    p = begin
+    while p < end:
+        stop, whole = _segment(grid, p, end, length)
         for k in range(len(frames)):
             pair_axis = TimeAxis(axis.start_opl - offsets[k], axis.bin_width_opl, axis.count)
-            run = pixel_run(frames[k], box, pair_axis, lead, duration)[0]
-            row = k * axis.count + run.first
-            for i in range(run.bins):
-                row_counts[row + i] += 1
-            total += run.bins
-            most = max(most, run.bins)
-        per_pixel[p] = total
+            shared, settled = BinRun(0, 0), False
+            if stop - p > 1:
+                shared, _, _, settled = settled_run(frames[k], whole, pair_axis, lead, duration)
+            for q in range(p, stop):
+                run = shared if settled else pixel_run(frames[k], pixel_box(grid, q), pair_axis, lead, duration)[0]
+                row = k * axis.count + run.first
+                for i in range(run.bins):
+                    row_counts[row + i] += 1
+                per_pixel[q] += run.bins
+                most = max(most, run.bins)
+        p = stop
     return most
 
 
@@ -225,32 +270,55 @@ def _fill_block(pairs, mode, grid, axis, terms, rtol, begin, end, width, scales,
     """
     scratch = make_scratch(width)
     values = np.empty(max(width, 1))
+    kernels = np.empty(max(width, 1))
     frames, offsets = _frames(pairs, mode)
     table = step_table(terms)
     kinked, steps, starts, constants, forms = table.kinked, table.steps, table.starts, table.constants, table.forms
     lead, duration = terms.lead, terms.duration
+    length = _segment_length(grid, axis) if steps else 1
     served = 0
     reached = 0
-    for p in range(begin, end):
-        box = pixel_box(grid, p)
+    p = begin
+    while p < end:
+        stop, whole = _segment(grid, p, end, length)
         for k in range(len(frames)):
             frame = frames[k]
             pair_axis = TimeAxis(axis.start_opl - offsets[k], axis.bin_width_opl, axis.count)
-            run, outcome, low, high, exact = _step_column(frame, box, lead, duration, kinked, steps, starts, constants,
-                                                          forms, pair_axis, rtol, values)
-            if run.bins == 0:
-                continue
-            reached += 1
-            smooth = outcome == _SERVED
-            if not smooth:
-                smooth = _finish(outcome, frame, box, low, high, exact, terms, pair_axis, run, rtol, values, scratch)
-            if smooth:
-                served += 1
-            row = k * axis.count + run.first
-            scale = scales[k]
-            for i in range(run.bins):
-                slot = cursor[row + i]
-                indices[slot] = p
-                data[slot] = values[i] * scale
-                cursor[row + i] = slot + 1
+            # a segment whose run is settled and crossed by no breakpoint: one set of constant kernels
+            shared, low, high, settled = BinRun(0, 0), 0.0, 0.0, False
+            if stop - p > 1:
+                shared, low, high, settled = settled_run(frame, whole, pair_axis, lead, duration)
+                if settled and shared.bins == 0:
+                    continue
+                settled = settled and not step_cut(kinked, low, high, pair_axis, shared)
+                if settled:
+                    step_kernels(starts, constants, forms, pair_axis, shared, 0.5 * (low + high), 1.0, kernels)
+            for q in range(p, stop):
+                box = pixel_box(grid, q)
+                smooth = False
+                if settled and clear_of_feet(frame, box):
+                    value, smooth = pixel_integral(frame, box, rtol)
+                    run = shared
+                    for i in range(run.bins):
+                        values[i] = kernels[i] * value
+                if not smooth:
+                    run, outcome, low, high, exact = _step_column(frame, box, lead, duration, kinked, steps, starts,
+                                                                  constants, forms, pair_axis, rtol, values)
+                    if run.bins == 0:
+                        continue
+                    smooth = outcome == _SERVED
+                    if not smooth:
+                        smooth = _finish(outcome, frame, box, low, high, exact, terms, pair_axis, run, rtol, values,
+                                         scratch)
+                reached += 1
+                if smooth:
+                    served += 1
+                row = k * axis.count + run.first
+                scale = scales[k]
+                for i in range(run.bins):
+                    slot = cursor[row + i]
+                    indices[slot] = q
+                    data[slot] = values[i] * scale
+                    cursor[row + i] = slot + 1
+        p = stop
     return scratch_failures(scratch), served, reached

@@ -106,6 +106,9 @@ def _polish(frame, tau, u, w, swap, along_w):
             w -= step
         else:
             u -= step
+        # Newton converges quadratically: after a step this small the next is below rounding
+        if abs(step) <= 1e-14 * (tau + abs(u) + abs(w)):
+            break
     return w if along_w else u
 
 

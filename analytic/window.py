@@ -3,6 +3,9 @@
 Path length d(x) = |x − p_s| + |x − p_k| is convex on the plane, so its
 range over the plane is exact: the maximum at a corner, the minimum at the
 first-arrival point or on an edge (:func:`analytic.isochrone.rectangle_range`).
+The same holds for any scene's geometry (:meth:`analytic.scene.Scene.geometry`): a relay-wall
+capture's hidden rectangle with the lit and read wall points as the foci, each
+pair's counted laser and sensor legs added (docs/design.md section 7).
 A window [t0, t0 + N T) holds all the light when it covers
 [min d, max d + pulse duration]; otherwise the share it holds is the ratio of
 two one-bin models, since the box prefilter is additive over adjacent bins:
@@ -23,7 +26,7 @@ import warnings
 
 import numpy as np
 
-from .geometry import PointPairs, Rectangle, pair_table, plane_geometry
+from .geometry import PointPairs, Rectangle, pair_table
 from .isochrone import LAMBERTIAN, PixelBox, pair_frame, rectangle_range
 from .scene import Sampling, Scene, SceneError
 
@@ -39,9 +42,12 @@ class WindowWarning(UserWarning):
 
 
 def response_range(scene: Scene) -> tuple[float, float]:
-    """(first, last) path length from the source over the plane to any sensor, metres (exact)."""
-    rectangle, pairs = plane_geometry(scene)
-    return pairs_range(rectangle, pairs)
+    """(first, last) path length from the source over the plane to any sensor, metres (exact).
+
+    For a relay-wall capture (:class:`analytic.relay_wall.RelayWallScene`): from a lit point over the
+    hidden rectangle to a read point, plus |o_l - l| + |s - o_s| when the scan counts those legs.
+    """
+    return pairs_range(*scene.geometry())
 
 
 def pairs_range(rectangle: Rectangle, pairs: PointPairs) -> tuple[float, float]:

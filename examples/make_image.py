@@ -1,8 +1,9 @@
-"""Write the example scenes' reflectance images: ``pattern.png`` and ``shapes.png``.
+"""Write the example scenes' reflectance images: ``pattern.png``, ``hidden.png`` and ``shapes.png``.
 
 ``pattern.png`` is the built-in scene's pattern (:func:`analytic.builtin_reflectance`)
 at M = 50 as a 16-bit grey PNG, so that ``paper.toml`` is the built-in scene
 as a file (to the PNG's rounding, 1/131070 of the reflectance range).
+``hidden.png`` is the same pattern at M = 16, the hidden image of ``nlos.toml``.
 ``shapes.png`` is a 32 x 32 8-bit grey image for ``image.toml``: a bright
 ring, a dark square and a ramp, drawn at pixel centres.
 
@@ -24,6 +25,9 @@ import analytic
 
 #: Image side of ``pattern.png``: the built-in scene's M.
 PATTERN_PIXELS = 50
+
+#: Image side of ``hidden.png``: ``nlos.toml``'s hidden M.
+HIDDEN_PIXELS = 16
 
 #: Image side of ``shapes.png``: ``image.toml``'s M.
 SHAPES_PIXELS = 32
@@ -59,8 +63,10 @@ def write_grey_png(path: Path, image: np.ndarray, bit_depth: int) -> None:
 def main(folder: Path) -> None:
     folder.mkdir(parents=True, exist_ok=True)
     write_grey_png(folder / "pattern.png", analytic.builtin_reflectance(PATTERN_PIXELS), 16)
+    write_grey_png(folder / "hidden.png", analytic.builtin_reflectance(HIDDEN_PIXELS), 16)
     write_grey_png(folder / "shapes.png", shapes(SHAPES_PIXELS), 8)
-    print(f"wrote {folder / 'pattern.png'} ({PATTERN_PIXELS} x {PATTERN_PIXELS}, 16-bit) and "
+    print(f"wrote {folder / 'pattern.png'} ({PATTERN_PIXELS} x {PATTERN_PIXELS}, 16-bit), "
+          f"{folder / 'hidden.png'} ({HIDDEN_PIXELS} x {HIDDEN_PIXELS}, 16-bit) and "
           f"{folder / 'shapes.png'} ({SHAPES_PIXELS} x {SHAPES_PIXELS}, 8-bit)")
 
 

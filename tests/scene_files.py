@@ -71,3 +71,42 @@ def write_scene_file(folder, scene, name=None):
     path = folder / (name or f"{scene.name}.toml")
     path.write_text("\n".join(lines) + "\n")
     return path
+
+
+def _toml_value(value) -> str:
+    import numpy as np
+
+    if isinstance(value, (bool, np.bool_)):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    return repr(float(value))
+
+
+def write_relay_wall_file(folder, scene, name=None):
+    """A relay-wall scene as a scene file in ``folder`` (``<scene.name>.toml``); returns its path.
+
+    Written from :func:`analytic.scene_file.scene_to_tables`; a hidden image that is not uniform goes into
+    ``hidden.exr`` beside the file (float32, as a user's would).
+    """
+    from analytic.files import save_exr
+    from analytic.scene_file import scene_to_tables
+
+    if scene.noise is not None:
+        raise ValueError("write_relay_wall_file: scenes with noise are not supported")
+    tables = scene_to_tables(scene)
+    lines = [f"name = {json.dumps(tables.pop('name'))}"]
+    for table, entries in tables.items():
+        lines.append(f"[{table}]")
+        for key, value in entries.items():
+            if table == "hidden" and key == "reflectance" and not isinstance(value, float):
+                save_exr(folder / "hidden.exr", value)
+                value = "hidden.exr"
+            lines.append(f"{key} = {_toml_value(value)}")
+    path = folder / (name or f"{scene.name}.toml")
+    path.write_text("\n".join(lines) + "\n")
+    return path

@@ -33,23 +33,29 @@ along the ray, so path lengths come out short by 2r/3 (the mean of r cos θ
 over cosine-distributed directions) + 8.94e-5 m. ``diffuse-imaging check``
 finds exactly these as scale 1/4 and a positive offset.
 
+A relay-wall (NLOS) scene is written by :mod:`transient.export_relay_wall`
+(our ``transient_opl_nlos``, or mitransient's ``transient_nlos_path``).
+
 No Mitsuba import is needed to write the files.
 """
 
 from __future__ import annotations
 
-import re
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
 
-from analytic.files import float32_problem, save_exr, save_text, staged_writes
+from analytic.files import float32_problem
+from analytic.relay_wall import RelayWallScene
 from analytic.scene import Scene, SceneError
 
 from .intensity import emitter_intensity
+from .scene_xml import add as _add, add_entries, number as _number, point as _point, scene_text, \
+    textured_diffuse, transform as _transform, waveform_entries, write_scene_files
 
-__all__ = ["export_scene", "FORMATS", "RADIUS", "SPP", "plane_to_world_matrix", "MITRANSIENT_IMPULSE_ONLY"]
+__all__ = ["export_scene", "FORMATS", "RADIUS", "SPP", "SPP_RELAY_WALL", "plane_to_world_matrix",
+           "MITRANSIENT_IMPULSE_ONLY"]
 
 FORMATS = ("mitsuba", "mitransient")
 
@@ -58,6 +64,9 @@ RADIUS = 1e-3
 
 #: Default samples per irradiancemeter for mitransient (``$spp`` in the XML).
 SPP = 2**20
+
+#: Default samples per film pixel of a relay-wall capture for mitransient (``$spp`` in the XML).
+SPP_RELAY_WALL = 2**18
 
 #: Why a pulse (square, Butterworth, ...) is not exported for mitransient (the README quotes it). Its
 #: point emitter emits a Dirac pulse and its film bins each path by floor((length - start_opl) /
@@ -91,36 +100,10 @@ def plane_to_world_matrix(size: float) -> np.ndarray:
                      [0.0, 0.0, 0.0, 1.0]])
 
 
-def _number(value) -> str:
-    """Shortest text that reads back as the same double."""
-    return repr(float(value))
-
-
-def _add(parent, tag: str, name: str | None = None, **attributes) -> ET.Element:
-    if name is not None:
-        attributes = {"name": name, **attributes}
-    return ET.SubElement(parent, tag, {key: str(value) for key, value in attributes.items()})
-
-
-def _point(parent, name: str, point) -> ET.Element:
-    return _add(parent, "point", name, value=", ".join(_number(v) for v in point))
-
-
-def _transform(parent, name: str, matrix: np.ndarray) -> ET.Element:
-    element = _add(parent, "transform", name)
-    _add(element, "matrix", value=" ".join(_number(v) for v in np.asarray(matrix).ravel()))
-    return element
-
-
 def _plane(root, scene: Scene) -> None:
     shape = _add(root, "shape", type="rectangle", id="plane")
     _transform(shape, "to_world", plane_to_world_matrix(scene.size))
-    bsdf = _add(shape, "bsdf", type="diffuse")
-    texture = _add(bsdf, "texture", "reflectance", type="bitmap")
-    _add(texture, "string", "filename", value="reflectance.exr")
-    _add(texture, "boolean", "raw", value="true")
-    _add(texture, "string", "filter_type", value="nearest")
-    _add(texture, "string", "wrap_mode", value="clamp")
+    textured_diffuse(shape)
 
 
 def _source(root, scene: Scene, format: str) -> None:
@@ -138,21 +121,7 @@ def _our_integrator(root, scene: Scene) -> None:
     _add(integrator, "integer", "bins", value=int(sampling.count))
     _add(integrator, "float", "start_opl", value=_number(sampling.start_opl))
     _add(integrator, "float", "bin_width_opl", value=_number(sampling.bin_width_opl))
-    _add(integrator, "string", "waveform", value=illumination.waveform)
-    # The plugin resolves defaults against bin_width_opl as the scene does
-    # (make_waveform), so the scene's own fields give the same pulse.
-    if illumination.waveform == "square":
-        from analytic.waveforms import make_waveform
-
-        width = make_waveform(illumination, sampling.bin_width_opl).duration
-        _add(integrator, "float", "pulse_width", value=_number(width))
-    elif illumination.waveform == "butterworth":
-        for name in ("cutoff", "duration"):
-            value = getattr(illumination, name)
-            if value is not None:
-                _add(integrator, "float", name, value=_number(value))
-        if illumination.order is not None:
-            _add(integrator, "integer", "order", value=int(illumination.order))
+    add_entries(integrator, waveform_entries(illumination, sampling.bin_width_opl))
     _transform(integrator, "plane_to_world", plane_to_world_matrix(scene.size))
     _point(integrator, "source_position", scene.source)
     _add(integrator, "float", "source_intensity", value=repr(float(scene.intensity)))
@@ -191,37 +160,6 @@ def _mitransient(root, scene: Scene, radius: float) -> None:
         _add(film, "float", "start_opl", value=_number(sampling.start_opl))
         _add(film, "float", "bin_width_opl", value=_number(sampling.bin_width_opl))
         _add(film, "rfilter", type="box")
-
-
-# Characters XML 1.0 cannot hold at all (C0 controls but tab, newline and carriage return; surrogates,
-# which file names that are not UTF-8 decode to; U+FFFE and U+FFFF), and "-" where a comment forbids it:
-# in "--" and before the closing "-->".
-_NOT_XML = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ud800-\udfff\ufffe\uffff]")
-
-
-def _comment_text(text: str) -> str:
-    """``text`` made safe inside an XML comment: what XML cannot hold as ``\\uXXXX``, "--" as "- -".
-
-    Parameters
-    ----------
-    text : str
-        Any text (a scene's name: a file name may hold anything but "/").
-
-    Returns
-    -------
-    str
-        Text a conforming parser reads inside ``<!-- ... -->``, readable as
-        the original: every character XML allows is kept, non-ASCII included.
-    """
-    text = _NOT_XML.sub(lambda match: f"\\u{ord(match.group()):04x}", text)
-    while "--" in text:
-        text = text.replace("--", "- -")
-    return text + " " if text.endswith("-") else text
-
-
-def _verify_xml(temporary: str) -> None:
-    """The written scene parses as XML (a torn or malformed file is not renamed into place)."""
-    ET.parse(temporary)
 
 
 def _check_float32(scene: Scene, format: str) -> None:
@@ -289,10 +227,11 @@ def export_scene(scene: Scene, out_dir: str | Path, format: str, *, radius: floa
 
     Parameters
     ----------
-    scene : Scene
+    scene : Scene or RelayWallScene
         The scene. Our integrator renders either attenuation (written as its
         ``attenuation``); mitransient renders physical (``lambertian``)
-        transport only, so ``paper`` is refused for it.
+        transport only, so ``paper`` is refused for it. A relay-wall scene
+        goes to :func:`transient.export_relay_wall.export_relay_wall`.
     out_dir : str or Path
         Output folder (created).
     format : {"mitsuba", "mitransient"}
@@ -304,7 +243,8 @@ def export_scene(scene: Scene, out_dir: str | Path, format: str, *, radius: floa
     spp : int, optional
         ``mitransient`` only (refused otherwise): default samples per
         sensor (``$spp``, overridden by ``mi.load_file(path, spp=...)``).
-        Default :data:`SPP`.
+        Default :data:`SPP` (:data:`SPP_RELAY_WALL` per film pixel of a
+        relay-wall capture).
 
     Returns
     -------
@@ -333,6 +273,19 @@ def export_scene(scene: Scene, out_dir: str | Path, format: str, *, radius: floa
     """
     if format not in FORMATS:
         raise ValueError(f"format: must be one of {', '.join(FORMATS)}, got {format!r}")
+    if isinstance(scene, RelayWallScene):
+        from .export_relay_wall import export_relay_wall
+
+        if radius is not None:
+            raise ValueError("radius: applies to a plane scene's irradiancemeter spheres; a relay-wall scene's "
+                             "nlos_capture_meter reads wall points")
+        if format == "mitsuba" and spp is not None:
+            raise ValueError("spp: applies to format 'mitransient' only (render_chunk_per_unit_intensity takes "
+                             "the sample count)")
+        spp = SPP_RELAY_WALL if spp is None else int(spp)
+        if spp < 1:
+            raise ValueError(f"spp: must be >= 1, got {spp}")
+        return export_relay_wall(scene, out_dir, format, spp=spp)
     if format == "mitsuba" and (radius is not None or spp is not None):
         raise ValueError("radius, spp: apply to format 'mitransient' only (our omni_point sensors are "
                          "points; render_loaded takes the sample count)")
@@ -363,20 +316,10 @@ def export_scene(scene: Scene, out_dir: str | Path, format: str, *, radius: floa
     _source(root, scene, format)
     if format == "mitsuba":
         _our_sensors(root, scene)
-    ET.indent(root)
-    text = ('<?xml version="1.0" encoding="utf-8"?>\n'
-            f"<!-- {_comment_text(scene.name)}: exported by diffuse-imaging for {format}; lengths in "
-            f"metres, time as optical path length (c = 1) -->\n"
-            + ET.tostring(root, encoding="unicode") + "\n")
-    written = {}
-    # Image row 0 is the top (y = L); a bitmap's row 0 is v = 0 (y = 0).
-    texture = np.ascontiguousarray(np.flipud(scene.reflectance), dtype=np.float32)
-    with staged_writes():
-        written["reflectance.exr"] = save_exr(out_dir / "reflectance.exr", texture)
-        written["scene.xml"] = save_text(out_dir / "scene.xml", text, verify=_verify_xml)
-        sampling = scene.sampling
-        readme = _README[format].format(name=scene.name, sensors=scene.sensor_count, bins=sampling.count,
-                                        width=sampling.bin_width_opl, start=sampling.start_opl, radius=radius,
-                                        offset=2 * radius / 3 + 1500 * 2.0**-24, two_thirds=2 * radius / 3)
-        written["README.md"] = save_text(out_dir / "README.md", readme)
-    return written
+    text = scene_text(root, scene.name, format)
+    sampling = scene.sampling
+    readme = _README[format].format(name=scene.name, sensors=scene.sensor_count, bins=sampling.count,
+                                    width=sampling.bin_width_opl, start=sampling.start_opl, radius=radius,
+                                    offset=2 * radius / 3 + 1500 * 2.0**-24, two_thirds=2 * radius / 3)
+    # Image row 0 is the top (y = L); a bitmap's row 0 is v = 0 (y = 0): write_scene_files flips it.
+    return write_scene_files(out_dir, scene.reflectance, text, readme)

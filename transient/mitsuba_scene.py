@@ -24,10 +24,9 @@ import mitsuba as mi
 import numpy as np
 
 from analytic.scene import Sampling, Scene
-from analytic.waveforms import make_waveform
-
 from .constants import RAY_EPSILON
 from .intensity import emitter_intensity
+from .scene_xml import waveform_entries
 
 __all__ = ["plane_to_world", "scene_dict", "load_scene", "corner_scene_dict", "wall_to_world",
            "mitransient_scene_dict", "mitransient_planes", "irradiancemeter_correction", "METER_RADIUS",
@@ -71,20 +70,9 @@ def _bitmap_bsdf(reflectance: np.ndarray) -> dict:
                             "filter_type": "nearest", "wrap_mode": "clamp"}}
 
 
-def _illumination_entries(scene: Scene) -> dict:
+def _illumination_entries(scene) -> dict:
     """The integrator's waveform keys: the scene's own fields, defaults left to the plugin."""
-    illumination = scene.illumination
-    entries = {"waveform": illumination.waveform}
-    # The plugin builds its waveform with the same make_waveform and period, so
-    # passing the scene's own fields (defaults left unset) gives the same pulse.
-    if illumination.waveform == "square":
-        entries["pulse_width"] = float(make_waveform(illumination, scene.sampling.bin_width_opl).duration)
-    elif illumination.waveform == "butterworth":
-        for name in ("cutoff", "duration", "order"):
-            value = getattr(illumination, name)
-            if value is not None:
-                entries[name] = int(value) if name == "order" else float(value)
-    return entries
+    return waveform_entries(scene.illumination, scene.sampling.bin_width_opl)
 
 
 def _sampling_entries(sampling: Sampling) -> dict:
@@ -264,12 +252,9 @@ def hidden_to_world(scene) -> "mi.ScalarTransform4d":
 
     Local x runs along u, local y along v, local +z (Mitsuba's normal) along u x v, the lit face.
     """
-    rectangle = scene.rectangle()
-    centre = rectangle.corner + 0.5 * (rectangle.u + rectangle.v)
-    matrix = np.eye(4)
-    matrix[:3, 0], matrix[:3, 1], matrix[:3, 2], matrix[:3, 3] = (0.5 * rectangle.u, 0.5 * rectangle.v,
-                                                                   rectangle.normal, centre)
-    return mi.ScalarTransform4d(matrix)
+    from .export_relay_wall import hidden_to_world_matrix
+
+    return mi.ScalarTransform4d(hidden_to_world_matrix(scene))
 
 
 def relay_wall_scene_dict(scene, **estimator) -> dict:

@@ -53,9 +53,18 @@ def scene_fingerprint(scene: Scene, estimator: dict | None = None) -> str:
     """SHA-256 of everything in a scene (and estimator options) that changes what the renderer computes.
 
     Every field but ``tolerance`` (the model's quadrature accuracy),
-    ``noise`` (the model's; a render is noiseless) and ``name``.
+    ``noise`` (the model's; a render is noiseless) and ``name``. A
+    relay-wall capture (:class:`analytic.relay_wall.RelayWallScene`) is
+    described by its scene-file tables (wall, hidden rectangle, laser,
+    sensor, scan, sampling, illumination) and its hidden image.
     """
     waveform = make_waveform(scene.illumination, scene.sampling.bin_width_opl)
+    if not isinstance(scene, Scene):
+        description = {"geometry": "relay_wall", "tables": _renderer_tables(scene),
+                       "waveform": waveform.description, "estimator": _estimator_record(estimator)}
+        digest = hashlib.sha256(json.dumps(description, sort_keys=True, default=_python_number).encode())
+        digest.update(np.ascontiguousarray(scene.reflectance, dtype=np.float64).tobytes())
+        return digest.hexdigest()
     description = {
         "size": repr(float(scene.size)), "pixels": int(scene.pixels),
         "source": [repr(float(v)) for v in scene.source],
@@ -72,6 +81,32 @@ def scene_fingerprint(scene: Scene, estimator: dict | None = None) -> str:
     return digest.hexdigest()
 
 
+#: Scene-file keys the renderer does not read: (table, key); a whole table when key is None.
+_MODEL_ONLY = (("name", None), ("noise", None), ("model", "tolerance"))
+
+
+def _renderer_tables(scene) -> dict:
+    """The scene's tables without what only the model reads (name, noise, tolerance) and without its image
+    (a reflectance key holds the constant, or the image's place: the image itself is hashed apart)."""
+    from analytic.scene_file import scene_to_tables
+
+    tables = scene_to_tables(scene)
+    for table, key in _MODEL_ONLY:
+        if key is None:
+            tables.pop(table, None)
+        elif isinstance(tables.get(table), dict):
+            tables[table].pop(key, None)
+    image_table = tables[_image_table(tables)]
+    if isinstance(image_table.get("reflectance"), np.ndarray):
+        image_table["reflectance"] = "image"
+    return tables
+
+
+def _image_table(tables: dict) -> str:
+    """The table whose ``reflectance`` is the image: ``hidden`` of a relay-wall capture, else ``plane``."""
+    return "hidden" if "relay_wall" in tables else "plane"
+
+
 def _estimator_record(estimator: dict | None) -> dict:
     return {str(k): str(v) for k, v in sorted((estimator or {}).items())}
 
@@ -84,7 +119,8 @@ def save_scene(folder: Path, scene: Scene) -> None:
     from analytic.scene_file import scene_to_tables
 
     tables = scene_to_tables(scene)
-    tables["plane"] = {key: value for key, value in tables["plane"].items() if key != "reflectance"}
+    image = _image_table(tables)
+    tables[image] = {key: value for key, value in tables[image].items() if key != "reflectance"}
     # JSON writes a float's repr: the scene reads back bit for bit.
     text = json.dumps(tables, sort_keys=True, allow_nan=False, default=_python_number)
 
@@ -115,7 +151,7 @@ def _load_saved_scene(folder: Path) -> Scene:
             if str(saved["format"]) != _SCENE_FORMAT:
                 raise ValueError("written by another version of the renderer")
             tables = json.loads(str(saved["tables"]))
-            tables["plane"]["reflectance"] = np.array(saved["reflectance"], dtype=np.float64)
+            tables[_image_table(tables)]["reflectance"] = np.array(saved["reflectance"], dtype=np.float64)
         return scene_from_dict(tables, folder)
     except (OSError, ValueError, KeyError, TypeError, AttributeError, EOFError, zipfile.BadZipFile,
             UserError) as error:
@@ -265,21 +301,25 @@ class SavedRender:
 def _scene_differences(started: Scene, given: Scene) -> list[str]:
     """The scene keys ("[sampling] start", ...) in which ``given`` differs from the scene a render was
     started with, among those the renderer reads (not its name, noise or tolerance)."""
-    from analytic.scene_file import scene_to_tables
-
-    old, new = scene_to_tables(started), scene_to_tables(given)
+    old, new = _renderer_tables(started), _renderer_tables(given)
+    if ("relay_wall" in old) != ("relay_wall" in new):
+        kinds = {True: "a relay-wall capture", False: "a plane scene"}
+        return [f"its kind ({kinds['relay_wall' in new]}; the state's: {kinds['relay_wall' in old]})"]
+    image = _image_table(old)
     found = []
-    for table in ("plane", "source", "illumination", "sensors", "sampling", "model"):
+    for table in sorted(set(old) | set(new)):
         first, second = old.get(table, {}), new.get(table, {})
         for key in sorted(set(first) | set(second)):
-            if (table, key) == ("model", "tolerance"):
-                continue
-            if (table, key) == ("plane", "reflectance"):
+            first_value, second_value = first.get(key), second.get(key)
+            if (table, key) == (image, "reflectance"):
                 same = np.array_equal(started.reflectance, given.reflectance)
+                # a constant as itself, an image by its shape
+                first_value = started.reflectance if first_value == "image" else first_value
+                second_value = given.reflectance if second_value == "image" else second_value
             else:
-                same = first.get(key) == second.get(key)
+                same = first_value == second_value
             if not same:
-                found.append(f"[{table}] {key} {_shown(second.get(key))} (the state's: {_shown(first.get(key))})")
+                found.append(f"[{table}] {key} {_shown(second_value)} (the state's: {_shown(first_value)})")
     return found
 
 

@@ -14,7 +14,8 @@ For a scene, :func:`check_scene`
    relative L2 error;
 5. measures the paper's simplifications as relative differences: eq. (1)'s
    attenuation against physical transport, and eq. (3)'s contour integral
-   without the coarea factor against the correct one;
+   without the coarea factor against the correct one (a plane's: a capture
+   through a relay wall has no paper attenuation to compare);
 6. reconstructs the image from the modelled and from the rendered data, each
    with the scene's noise added (the same draw) and λ chosen by a
    data-driven rule (:func:`data_driven_rule`), and reports both errors
@@ -56,6 +57,7 @@ class SceneCheck:
     stderr: np.ndarray
     agreement: Agreement
     metrics: dict = field(default_factory=dict)
+    replicas: int = 0           # the render's R independent replicas (its stderr has R - 1 degrees of freedom)
     render_convergence: list = field(default_factory=list)
     model_convergence: list = field(default_factory=list)
     reconstructions: dict = field(default_factory=dict)
@@ -229,8 +231,9 @@ def check_scene(scene: Scene, *, spp: int, seed: int = 0, convergence: bool = Tr
 
     Parameters
     ----------
-    scene : Scene
-        A one-plane scene.
+    scene : Scene or analytic.relay_wall.RelayWallScene
+        A one-plane scene, or a capture through a relay wall (its pairs as
+        the sensors, the hidden image as the image).
     spp : int
         Samples of the main render.
     seed : int
@@ -263,7 +266,8 @@ def check_scene(scene: Scene, *, spp: int, seed: int = 0, convergence: bool = Tr
     # the replicas give the null of χ² and max |z| whatever the correlation between bins
     agreement = compare_transients(result.mean, result.stderr, model, dof=result.dof,
                                    replicas=result.replica_means)
-    check = SceneCheck(scene.name, scene, spp, seed, model, result.mean, result.stderr, agreement)
+    check = SceneCheck(scene.name, scene, spp, seed, model, result.mean, result.stderr, agreement,
+                       replicas=result.replicas)
     check.metrics.update(timings)
     check.metrics["window_share"] = share
     check.metrics["agreement"] = agreement.as_dict()
@@ -284,7 +288,8 @@ def check_scene(scene: Scene, *, spp: int, seed: int = 0, convergence: bool = Tr
         check.metrics["render_slope"] = float(np.polyfit(x, y, 1)[0])
         check.metrics["model_convergence"] = check.model_convergence
         check.metrics["render_convergence"] = rows
-    check.metrics["simplifications"] = simplification_costs(scene, model)
+    if isinstance(scene, Scene):
+        check.metrics["simplifications"] = simplification_costs(scene, model)
     if reconstruction:
         check.reconstructions = reconstruct_from_noisy_data(matrix, scene, model, result.mean, rule=rule,
                                                             lambdas=lambdas)

@@ -5,12 +5,16 @@ Layout of the output folder
 One scene (``run``, ``write_report(..., headline=True)``): everything at the
 top of the folder::
 
-    report.md  metrics.json  transients.png  z_map.png  [convergence.png]  [reconstructions.png]
+    report.md  metrics.json  transients.png  z_map.png  [wall.png]  [convergence.png]  [reconstructions.png]
 
 Several scenes (``validate``): the report at the top, each scene's figures
 in a folder of its own, and the corner's in ``corner/``::
 
     report.md  metrics.json  <folder>/transients.png  <folder>/z_map.png  ...  corner/transients.png
+
+``wall.png`` is drawn for a capture through a relay wall (docs/design.md
+section 7): the model's transient per pair as an image, its light over the
+scan, and the render's traces beside the model's.
 
 A scene's folder is its name made safe by :func:`scene_folder_names`;
 metrics.json's ``scenes`` is keyed by that folder and keeps the scene's own
@@ -25,14 +29,15 @@ from pathlib import Path
 
 from analytic.files import save_json, save_text
 from analytic.window import FULL_SHARE
-from validation.plots import (convergence_figure, reconstructions_figure, save_figure, transients_figure,
-                              z_map_figure)
+from analytic.relay_wall import RelayWallScene
+from validation.plots import (WallScan, convergence_figure, reconstructions_figure, relay_wall_figure, save_figure,
+                              transients_figure, z_map_figure)
 
 __all__ = ["write_report", "write_markdown", "scene_folder_names", "FIGURE_FILES", "RESERVED_NAMES",
            "MAX_FOLDER_NAME"]
 
 #: The figures drawn for one scene, in its folder (or, for ``run``, at the top).
-FIGURE_FILES = ("transients.png", "z_map.png", "convergence.png", "reconstructions.png")
+FIGURE_FILES = ("transients.png", "z_map.png", "wall.png", "convergence.png", "reconstructions.png")
 #: Names the report itself uses at the top of its folder: a scene folder never takes one.
 RESERVED_NAMES = frozenset({"report.md", "metrics.json", "model", "render", "corner", *FIGURE_FILES})
 #: Longest scene folder name, in characters (all ASCII, so also bytes), before a "-2" suffix.
@@ -180,16 +185,28 @@ def _draw_scene(check, folder: Path, link: str, heading: str) -> list[str]:
     """One scene's figures in ``folder`` (linked as ``link`` + file name) and its report section."""
     sampling = check.scene.sampling
     agreement = check.agreement
+    relay_wall = isinstance(check.scene, RelayWallScene)
+    row_kind = "pair" if relay_wall else "sensor"      # what the transient's rows are
     save_figure(transients_figure(sampling, {"model": check.model, "render": check.render},
                                   errors={"render": check.stderr}, z_limit=agreement.z_threshold,
-                                  title=f"{check.name}: the model (steps) against the render (points)"),
-                folder / "transients.png")
-    save_figure(z_map_figure(agreement.z, agreement.z_threshold, sampling, f"{check.name}: z over sensors x bins"),
-                folder / "z_map.png")
+                                  title=f"{check.name}: the model (steps) against the render (points)",
+                                  row_kind=row_kind), folder / "transients.png")
+    save_figure(z_map_figure(agreement.z, agreement.z_threshold, sampling,
+                             f"{check.name}: z over {row_kind}s x bins", row_kind=row_kind), folder / "z_map.png")
     lines = ["", heading, "", agreement.summary(), "",
-             "Transients of up to 8 sensors (named in the figure) with z below each; the z map shows "
-             "every sensor.", "",
+             f"Transients of up to 8 {row_kind}s (named in the figure) with z below each; the z map shows "
+             f"every {row_kind}.", "",
              f"![transients]({link}transients.png)", "", f"![z map]({link}z_map.png)"]
+    if relay_wall:
+        scan = check.scene.scan
+        save_figure(relay_wall_figure(sampling, check.model, WallScan.of_scene(check.scene),
+                                      title=f"{check.name}: {scan.type} scan through a relay wall, the model"),
+                    folder / "wall.png")
+        lines += ["", f"The model's transient of every (laser point, read point) pair as an image (time "
+                      f"across, pairs down: p = j W + i over the {scan.grid[0]} x {scan.grid[1]} read grid"
+                      + (", laser-major" if scan.type == "exhaustive" else "") + "), its light summed over "
+                      "time over the scan, and the traces of the numbered pairs.", "",
+                  f"![every pair's transient]({link}wall.png)"]
     if check.render_convergence:
         save_figure(convergence_figure(check.name, check.render_convergence, check.metrics.get("render_slope"),
                                        check.model_convergence), folder / "convergence.png")

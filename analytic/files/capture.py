@@ -81,25 +81,41 @@ class CaptureError(DataError):
 
 @dataclass(frozen=True)
 class Capture:
-    """A transient read from a tal HDF5 capture.
+    """A transient read from a tal HDF5 capture, one column per (lit point, read point) pair.
+
+    Columns are in the pair order of docs/design.md section 7, whatever the
+    layout: laser points first, then read points, each grid with x fastest
+    (grid cell (x index i, y index j) of an Sx x Sy grid is column j Sx + i);
+    a plane capture (T_Si) keeps its sensors' order.
 
     Attributes
     ----------
     transient : numpy.ndarray
-        ``(K, N)`` float64 y_k[n], sensors in the file's order (T_Sx_Sy
-        grids flattened row-major, as ``sensor_grid_xyz.reshape(-1, 3)``).
+        ``(K, N)`` float64: column k's samples y_k[n].
     start_opl : float
         ``t_start``: lower edge of bin 0, metres of path length.
     bin_width_opl : float
         ``delta_t``: bin width, metres of path length.
     sensors : numpy.ndarray or None
-        ``(K, 3)`` sensor grid positions, metres, in the order of ``transient``.
+        ``(K, 3)`` the read (sensor grid) point of each column, metres.
     source : numpy.ndarray or None
         ``(3,)`` ``laser_xyz``, metres.
     accounts_first_and_last_bounces : bool or None
         The file's ``t_accounts_first_and_last_bounces``.
     scene_info : Any
         The file's ``scene_info``: a dict when it is JSON, else its text.
+    lasers : numpy.ndarray or None
+        ``(K, 3)`` the lit (laser grid) point of each column, metres; None
+        when the file has no ``laser_grid_xyz`` (or one that does not match H).
+    laser_count : int
+        Laser points in H's laser axes (1 for T_Si and for T_Sx_Sy, whose one
+        laser axis is the scan itself when it is confocal).
+    sensor_position : numpy.ndarray or None
+        ``(3,)`` ``sensor_xyz``, metres.
+    layout : str
+        The ``H_format`` read (UNKNOWN resolved from H's rank).
+    grid : tuple
+        H's read-point axes: ``(Sx, Sy)`` for the grid layouts, ``(K,)`` else.
     """
 
     transient: np.ndarray
@@ -109,6 +125,11 @@ class Capture:
     source: np.ndarray | None
     accounts_first_and_last_bounces: bool | None
     scene_info: Any
+    lasers: np.ndarray | None = None
+    laser_count: int = 1
+    sensor_position: np.ndarray | None = None
+    layout: str = "T_Si"
+    grid: tuple = ()
 
 
 def _enum(handle, key: str, names: dict[str, int], value: str) -> None:
@@ -216,6 +237,10 @@ _EXPECTED = {
                           f"({', '.join(f'{v} {k}' for k, v in GRID_FORMATS.items())})",
     "sensor_grid_xyz": "the sensor points in metres, (sensors, 3) in N_3 or (Sx, Sy, 3) in X_Y_3",
     "laser_xyz": "3 numbers, the laser's (the source's) position in metres",
+    "sensor_xyz": "3 numbers, the sensor's position in metres",
+    "laser_grid_format": f"one of tal's GridFormat values "
+                         f"({', '.join(f'{v} {k}' for k, v in GRID_FORMATS.items())})",
+    "laser_grid_xyz": "the lit points in metres, (points, 3) in N_3 or (Lx, Ly, 3) in X_Y_3",
     "t_start": "one finite number, the lower edge of bin 0 in metres of path length",
     "delta_t": "one finite number > 0, the bin width in metres of path length",
     "t_accounts_first_and_last_bounces": "true or false",
@@ -294,57 +319,84 @@ def _flag(value: np.ndarray | None, name: str, key: str) -> bool | None:
 
 
 def _transient(H: np.ndarray | None, layout: str, name: str) -> tuple[np.ndarray, str]:
-    """H as ``(K, N)`` and its layout (UNKNOWN resolved from H's rank)."""
+    """H as ``(K, N)`` columns in pair order, and its layout (UNKNOWN resolved from H's rank)."""
     if H is None:
         raise CaptureError(f"{name}: no H dataset (not a tal capture)")
     if H.dtype == bool or not (np.issubdtype(H.dtype, np.floating) or np.issubdtype(H.dtype, np.integer)):
         raise CaptureError(f"{name}: H holds {_kind(H.dtype)}, not real numbers; expected {_EXPECTED['H']}")
     if layout == "UNKNOWN":
-        layout = {2: "T_Si", 3: "T_Sx_Sy"}.get(H.ndim, "UNKNOWN")
+        layout = {2: "T_Si", 3: "T_Sx_Sy", 5: "T_Lx_Ly_Sx_Sy"}.get(H.ndim, "UNKNOWN")
     if layout not in _H_RANK or H.ndim != _H_RANK[layout]:
         raise CaptureError(f"{name}: H of shape {H.shape} with H_format {layout} is not a time x sensors "
-                           f"capture; expected rank {_H_RANK.get(layout, '2 (T_Si) or 3 (T_Sx_Sy)')}")
+                           f"capture; expected rank {_H_RANK.get(layout, '2 (T_Si), 3 (T_Sx_Sy) or 5 (T_Lx_Ly_Sx_Sy)')}")
     if H.size == 0:
         raise CaptureError(f"{name}: H is empty (shape {H.shape}); expected at least one bin and one sensor")
     H = _real(H, name, "H")
-    if layout == "T_Lx_Ly_Sx_Sy":
-        if H.shape[1] * H.shape[2] != 1:
-            raise CaptureError(f"{name}: H holds {H.shape[1]} x {H.shape[2]} laser points; "
-                               f"one source is needed")
-        H = H[:, 0, 0]
-    elif layout == "T_Li_Si":
-        if H.shape[1] != 1:
-            raise CaptureError(f"{name}: H holds {H.shape[1]} laser points; one source is needed")
-        H = H[:, 0]
+    # grids to x fastest: (T, Sx, Sy) -> (T, Sy, Sx), (T, Lx, Ly, Sx, Sy) -> (T, Ly, Lx, Sy, Sx)
+    if layout == "T_Sx_Sy":
+        H = H.transpose(0, 2, 1)
+    elif layout == "T_Lx_Ly_Sx_Sy":
+        H = H.transpose(0, 2, 1, 4, 3)
     return np.ascontiguousarray(H.reshape(H.shape[0], -1).T), layout
 
 
-def _sensor_axes(H_shape: tuple[int, ...], layout: str) -> tuple[int, ...]:
-    """H's sensor axes: (K,) for T_Si and T_Li_Si, (Sx, Sy) for the grid layouts."""
-    return tuple(H_shape[3:]) if layout == "T_Lx_Ly_Sx_Sy" else tuple(H_shape[-2:]) if layout == "T_Sx_Sy" \
-        else tuple(H_shape[-1:])
+def _axes(H_shape: tuple[int, ...], layout: str) -> tuple[tuple[int, ...], tuple[int, ...]]:
+    """H's (laser axes, read-point axes): ((Lx, Ly), (Sx, Sy)), ((L,), (K,)), ((), (Sx, Sy)) or ((), (K,))."""
+    if layout == "T_Lx_Ly_Sx_Sy":
+        return tuple(H_shape[1:3]), tuple(H_shape[3:])
+    if layout == "T_Li_Si":
+        return tuple(H_shape[1:2]), tuple(H_shape[2:])
+    return (), tuple(H_shape[1:])
 
 
-def _sensors(grid: np.ndarray | None, grid_format: str, axes: tuple[int, ...],
-             name: str) -> np.ndarray | None:
-    """The ``(K, 3)`` sensor points in H's order, checked against H's sensor axes."""
+def _points(grid: np.ndarray | None, grid_format: str, axes: tuple[int, ...], name: str,
+            key: str) -> np.ndarray | None:
+    """A grid of points ``(n, 3)`` in pair order (x fastest), checked against the H axes it belongs to."""
     if grid is None:
         return None
-    key = "sensor_grid_xyz"
     grid = _real(grid, name, key)
     if grid_format == "UNKNOWN":
         grid_format = {2: "N_3", 3: "X_Y_3"}.get(grid.ndim, "UNKNOWN")
     rank = {"N_3": 2, "X_Y_3": 3}.get(grid_format)
     if rank is None or grid.ndim != rank or grid.shape[-1] != 3:
-        raise _refuse(name, key, f"has shape {grid.shape} (sensor_grid_format {grid_format})")
+        raise _refuse(name, key, f"has shape {grid.shape} ({key.replace('_xyz', '_format')} {grid_format})")
     count = int(np.prod(axes))
     if grid_format == "X_Y_3" and len(axes) == 2 and grid.shape[:2] != axes:
+        what = "sensors" if key.startswith("sensor") else "lit points"
         raise _refuse(name, key, f"is a {grid.shape[0]} x {grid.shape[1]} grid for H's {axes[0]} x {axes[1]} "
-                                 f"sensors")
+                                 f"{what}")
     points = grid.reshape(-1, 3)
     if len(points) != count:
-        raise _refuse(name, key, f"holds {len(points)} points for {count} sensors in H")
+        what = "sensors" if key.startswith("sensor") else "lit points"
+        raise _refuse(name, key, f"holds {len(points)} points for {count} {what} in H")
+    if len(axes) == 2:      # (Sx, Sy) flattened row-major: x index slowest -> x fastest
+        points = points.reshape(axes[0], axes[1], 3).transpose(1, 0, 2).reshape(-1, 3)
     return points
+
+
+def _lasers(grid: np.ndarray | None, grid_format: str, laser_axes: tuple[int, ...], read: tuple[int, ...],
+            name: str) -> np.ndarray | None:
+    """The lit point of every column, ``(L R, 3)``, or None when the file states none that fits."""
+    if grid is None:
+        return None
+    key = "laser_grid_xyz"
+    if laser_axes:                                        # one lit point per laser axis entry
+        points = _points(grid, grid_format, laser_axes, name, key)
+        return np.repeat(points, int(np.prod(read)), axis=0)
+    values = _real(grid, name, key)
+    if values.size == 3:                                  # one lit point (a single scan, or the source)
+        return np.repeat(values.reshape(1, 3), int(np.prod(read)), axis=0)
+    # a confocal scan: the laser grid lights each read point in turn
+    return _points(grid, grid_format, read, name, key)
+
+
+def _vector3(value: np.ndarray | None, name: str, key: str) -> np.ndarray | None:
+    if value is None:
+        return None
+    vector = _real(value, name, key)
+    if vector.size != 3:
+        raise _refuse(name, key, f"holds {vector.size} number(s)")
+    return vector.reshape(3)
 
 
 def read_capture(path: str | Path) -> Capture:
@@ -358,7 +410,8 @@ def read_capture(path: str | Path) -> Capture:
     Returns
     -------
     Capture
-        H as ``(K, N)`` float64 with its time axis and sensor positions.
+        H as ``(K, N)`` float64 columns in pair order, with its time axis and
+        each column's read and lit points.
 
     Raises
     ------
@@ -366,22 +419,24 @@ def read_capture(path: str | Path) -> Capture:
         No such file.
     CaptureError
         One line naming the file, the dataset and what it must hold: not
-        HDF5; no H, or H not finite real numbers, empty, of the wrong rank
-        for its H_format, or with several laser points; an H_format or
-        sensor_grid_format that is not one of tal's values; a missing or
-        non-finite time axis; a sensor_grid_xyz that does not match H's
-        sensor axes; a laser_xyz that is not 3 finite numbers; a
+        HDF5; no H, or H not finite real numbers, empty or of the wrong rank
+        for its H_format; an H_format or grid format that is not one of
+        tal's values; a missing or non-finite time axis; a sensor_grid_xyz
+        or laser_grid_xyz that does not match H's axes; a laser_xyz or
+        sensor_xyz that is not 3 finite numbers; a
         t_accounts_first_and_last_bounces that is not true or false.
 
     Notes
     -----
-    Accepted ``H_format``: T_Si ``(N, K)``; T_Sx_Sy ``(N, Sx, Sy)``,
-    flattened to K = Sx Sy sensors in row-major order; T_Lx_Ly_Sx_Sy and
-    T_Li_Si when the laser dimensions hold one point. A missing or UNKNOWN
-    format is taken from H's rank (2: T_Si, 3: T_Sx_Sy), and a missing
-    sensor_grid_format from the grid's (2: N_3, 3: X_Y_3). Datasets that
-    the transient does not need (normals, laser grid, volume format) are
-    not read.
+    Accepted ``H_format``: T_Si ``(N, K)``; T_Li_Si ``(N, L, K)``; T_Sx_Sy
+    ``(N, Sx, Sy)`` (a single scan when ``laser_grid_xyz`` is one point, a
+    confocal one when it is the sensor grid); T_Lx_Ly_Sx_Sy
+    ``(N, Lx, Ly, Sx, Sy)``. Grids are flattened x fastest (cell (i, j) is
+    j Sx + i, tal's X_Y_3 grids indexed [i, j]), laser points before read
+    points: docs/design.md section 7's pair order. A missing or UNKNOWN
+    format is taken from H's rank (2: T_Si, 3: T_Sx_Sy, 5: T_Lx_Ly_Sx_Sy),
+    and a missing grid format from the grid's (2: N_3, 3: X_Y_3). Normals
+    and the volume format are not read.
     """
     import h5py
 
@@ -404,18 +459,20 @@ def read_capture(path: str | Path) -> Capture:
     start, width = _number(start, name, "t_start"), _number(width, name, "delta_t")
     if not width > 0:
         raise _refuse(name, "delta_t", f"is {width:g}")
+    laser_axes, read_axes = _axes(H.shape, layout)
     grid_format = _enum_name(values["sensor_grid_format"], name, "sensor_grid_format", GRID_FORMATS)
-    sensors = _sensors(values["sensor_grid_xyz"], grid_format, _sensor_axes(H.shape, layout), name)
-    laser = values["laser_xyz"]
-    source = None
-    if laser is not None:
-        source = _real(laser, name, "laser_xyz")
-        if source.size != 3:
-            raise _refuse(name, "laser_xyz", f"holds {source.size} number(s)")
-        source = source.reshape(3)
+    read = _points(values["sensor_grid_xyz"], grid_format, read_axes, name, "sensor_grid_xyz")
+    laser_count = int(np.prod(laser_axes))
+    sensors = None if read is None else np.tile(read, (laser_count, 1))
+    lasers = _lasers(values["laser_grid_xyz"],
+                     _enum_name(values["laser_grid_format"], name, "laser_grid_format", GRID_FORMATS),
+                     laser_axes, read_axes, name)
     accounts = _flag(values["t_accounts_first_and_last_bounces"], name, "t_accounts_first_and_last_bounces")
-    return Capture(transient=transient, start_opl=start, bin_width_opl=width, sensors=sensors, source=source,
-                   accounts_first_and_last_bounces=accounts, scene_info=_scene_info(info))
+    return Capture(transient=transient, start_opl=start, bin_width_opl=width, sensors=sensors,
+                   source=_vector3(values["laser_xyz"], name, "laser_xyz"),
+                   accounts_first_and_last_bounces=accounts, scene_info=_scene_info(info), lasers=lasers,
+                   laser_count=laser_count, sensor_position=_vector3(values["sensor_xyz"], name, "sensor_xyz"),
+                   layout=layout, grid=read_axes)
 
 
 def _scene_info(info):

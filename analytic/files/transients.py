@@ -21,11 +21,12 @@ from analytic.errors import DataError
 
 from .atomic import discard, staged_writes
 from .capture import read_capture, write_capture
+from .relay_wall_capture import write_relay_wall_capture
 from .formats import (PrecisionWarning, float32_problem, json_ready, read_exr, read_npy, save_exr, save_json,
                       save_npy)
 
-__all__ = ["build_meta", "write_transient", "read_transient", "transient_format", "transient_in_folder",
-           "UNITS", "TRANSIENT_FILES"]
+__all__ = ["build_meta", "relay_wall_meta", "write_transient", "read_transient", "transient_format",
+           "transient_in_folder", "UNITS", "RELAY_WALL_UNITS", "RELAY_WALL_KEYS", "TRANSIENT_FILES"]
 
 #: How y's units follow from the source's intensity (docs/design.md section 1).
 UNITS = ("lengths in metres; time as optical path length in metres (c = 1); y in W/sr x m^-2 x m "
@@ -36,12 +37,12 @@ UNITS = ("lengths in metres; time as optical path length in metres (c = 1); y in
 
 def build_meta(scene, *, kind: str, samples: int = 0, seed: int | None = None,
                window_share: float | None = None, **extra) -> dict:
-    """The one metadata record of every command (docs/design.md section 5).
+    """The one metadata record of every command (docs/design.md sections 5 and 7).
 
     Parameters
     ----------
-    scene : analytic.Scene
-        The scene the transient belongs to.
+    scene : analytic.Scene or analytic.relay_wall.RelayWallScene
+        The scene the transient belongs to: a plane, or a capture through a relay wall.
     kind : {"model", "render"}
         Who computed it.
     samples : int
@@ -57,30 +58,43 @@ def build_meta(scene, *, kind: str, samples: int = 0, seed: int | None = None,
     Returns
     -------
     dict
-        ``kind``, ``samples``, ``seed``, ``scene``, ``plane_size``, ``pixels``,
-        ``source``, ``intensity``, ``sensor_positions``, ``attenuation``,
-        ``illumination`` (the waveform's name) and ``illumination_parameters``,
-        ``tolerance`` (the model's; None for a render), ``window_share``,
-        ``noise`` (the scene's, None when noiseless), ``start_opl``,
-        ``bin_width_opl``, ``bins``, ``sensors``, ``units``.
+        Every record has the same keys: ``kind``, ``samples``, ``seed``,
+        ``scene``, ``geometry`` (``"plane"`` or ``"relay_wall"``),
+        ``plane_size``, ``pixels``, ``source``, ``intensity``,
+        ``sensor_positions``, ``attenuation``, ``illumination`` (the
+        waveform's name) and ``illumination_parameters``, ``tolerance``
+        (the model's; None for a render), ``window_share``, ``noise`` (the
+        scene's, None when noiseless), ``start_opl``, ``bin_width_opl``,
+        ``bins``, ``sensors`` (the transient's rows: sensors, or the
+        capture's (laser point, read point) pairs), ``units``, and the
+        relay-wall tables ``relay_wall``, ``hidden``, ``laser``, ``sensor``
+        and ``scan`` (:func:`relay_wall_meta`). The keys of the other
+        geometry are None: a plane has no relay wall, and a relay-wall
+        capture has no plane, point source or sensor array (its hidden
+        image's M is ``pixels``, its laser's I ``intensity``, and its
+        third bounce is Lambertian at every vertex: ``attenuation`` is
+        ``lambertian``).
     """
+    from analytic.relay_wall import RelayWallScene
     from analytic.waveforms import make_waveform   # here: the waveforms load Numba, files need not
 
     if kind not in ("model", "render"):
         raise ValueError(f"kind: 'model' or 'render', got {kind!r}")
     waveform = make_waveform(scene.illumination, scene.sampling.bin_width_opl)
     noise = scene.noise
+    relay_wall = isinstance(scene, RelayWallScene)
     meta = {
         "kind": kind,
         "samples": int(samples),
         "seed": None if seed is None else int(seed),
         "scene": scene.name,
-        "plane_size": float(scene.size),
+        "geometry": "relay_wall" if relay_wall else "plane",
+        "plane_size": None if relay_wall else float(scene.size),
         "pixels": int(scene.pixels),
-        "source": [float(v) for v in scene.source],
+        "source": None if relay_wall else [float(v) for v in scene.source],
         "intensity": float(scene.intensity),
-        "sensor_positions": np.asarray(scene.sensors, dtype=np.float64).tolist(),
-        "attenuation": scene.attenuation,
+        "sensor_positions": None if relay_wall else np.asarray(scene.sensors, dtype=np.float64).tolist(),
+        "attenuation": "lambertian" if relay_wall else scene.attenuation,
         "illumination": waveform.name,
         "illumination_parameters": dict(waveform.parameters),
         "tolerance": float(scene.tolerance) if kind == "model" else None,
@@ -91,7 +105,8 @@ def build_meta(scene, *, kind: str, samples: int = 0, seed: int | None = None,
         "bin_width_opl": float(scene.sampling.bin_width_opl),
         "bins": int(scene.sampling.count),
         "sensors": int(scene.sensor_count),
-        "units": UNITS,
+        "units": RELAY_WALL_UNITS if relay_wall else UNITS,
+        **(relay_wall_meta(scene) if relay_wall else dict.fromkeys(RELAY_WALL_KEYS)),
     }
     clash = sorted(set(extra) & set(meta))
     if clash:
@@ -100,17 +115,73 @@ def build_meta(scene, *, kind: str, samples: int = 0, seed: int | None = None,
     return meta
 
 
+#: The relay-wall tables of the metadata (docs/design.md section 7), None for a plane.
+RELAY_WALL_KEYS = ("relay_wall", "hidden", "laser", "sensor", "scan")
+
+#: A relay-wall capture's units (docs/design.md section 7: mitransient's).
+RELAY_WALL_UNITS = ("lengths in metres; time as optical path length in metres (c = 1); each row a (laser point, "
+                    "read point) pair; H(l, s)[n] is the radiance leaving the read point s toward the sensor "
+                    "(W sr^-1 m^-2) integrated over the bin (m of path length), for the laser's radiant "
+                    "intensity I (W/sr) toward the wall: W sr^-1 m^-1, mitransient's nlos_capture_meter units; "
+                    "noise sigma in the units of H")
+
+
+def relay_wall_meta(scene) -> dict:
+    """A relay-wall capture's tables in the metadata, named as in its scene file (docs/design.md section 7).
+
+    Returns
+    -------
+    dict
+        ``relay_wall``: {``size`` (metres along x and y), ``reflectance`` (ρ_w)};
+        ``hidden``: {``center``, ``u``, ``v`` (metres), ``pixels`` (M),
+        ``reflectance`` (ρ_h when uniform, else None: an image),
+        ``reflectance_mean``}; ``laser``: {``position`` (o_l), ``intensity``
+        (I, W/sr)}; ``sensor``: {``position`` (o_s)}; ``scan``: {``type``,
+        ``grid`` ([W, H] read points), ``laser_point`` (single: l),
+        ``laser_grid`` (exhaustive: the lit points' [W, H]),
+        ``account_first_and_last_bounces``, ``pairs`` (P)}. A key of another
+        scan type is None.
+    """
+    scan = scene.scan
+    image = np.asarray(scene.reflectance, dtype=np.float64)
+    uniform = bool(np.all(image == image.flat[0]))
+    laser_point = None
+    if scan.type == "single":
+        laser_point = [float(v) for v in scene.laser_points[0]]
+    laser_grid = None
+    if scan.type == "exhaustive":
+        laser_grid = [int(g) for g in (scan.laser_grid or scan.grid)]
+
+    def vector(value):
+        return [float(v) for v in value]
+
+    return {
+        "relay_wall": {"size": vector(scene.wall_size), "reflectance": float(scene.wall_reflectance)},
+        "hidden": {"center": vector(scene.center), "u": vector(scene.u), "v": vector(scene.v),
+                   "pixels": int(scene.pixels), "reflectance": float(image.flat[0]) if uniform else None,
+                   "reflectance_mean": float(image.mean())},
+        "laser": {"position": vector(scene.laser_position), "intensity": float(scene.intensity)},
+        "sensor": {"position": vector(scene.sensor_position)},
+        "scan": {"type": scan.type, "grid": [int(g) for g in scan.grid], "laser_point": laser_point,
+                 "laser_grid": laser_grid,
+                 "account_first_and_last_bounces": bool(scan.account_first_and_last_bounces),
+                 "pairs": int(scene.sensor_count)},
+    }
+
+
 #: meta.json's ``exr`` when transient.exr is written.
 _EXR_WRITTEN = ("written: float32, every value within float32's rounding (2^-24 of the largest) "
                 "of transient.npy")
 
 
-def write_transient(out_dir: str | Path, transient: np.ndarray, meta: dict[str, Any], *,
+def write_transient(out_dir: str | Path, transient: np.ndarray, meta: dict[str, Any], *, scene=None,
                     stderr: np.ndarray | None = None, noisy: np.ndarray | None = None) -> dict[str, Path]:
     """Write ``transient.{npy,exr,h5}``, ``meta.json`` (+ ``stderr.npy``, ``transient_noisy.npy``), together.
 
-    ``transient.h5`` is tal's HDF5 capture (:mod:`analytic.files.capture`), readable
-    by ``tal.io.read_capture``, with the metadata as its ``scene_info``.
+    ``transient.h5`` is tal's HDF5 capture, readable by ``tal.io.read_capture``,
+    with the metadata as its ``scene_info``: a plane's in the layout of
+    :mod:`analytic.files.capture`, a relay-wall capture's in tal's NLOS layout
+    (:mod:`analytic.files.relay_wall_capture`).
 
     Parameters
     ----------
@@ -126,6 +197,10 @@ def write_transient(out_dir: str | Path, transient: np.ndarray, meta: dict[str, 
         ``transient.exr`` was written, and why not (float32 cannot hold the
         values: then a :class:`PrecisionWarning` says so, and an earlier
         ``transient.exr`` in the folder is removed).
+    scene : RelayWallScene, optional
+        The scene of a relay-wall capture (``meta["geometry"] == "relay_wall"``,
+        where it is required): its scan's points and grids lay out
+        ``transient.h5``. A plane's file needs only ``meta``.
     stderr : numpy.ndarray, optional
         ``(K, N)`` per-bin standard error (renders).
     noisy : numpy.ndarray, optional
@@ -158,11 +233,17 @@ def write_transient(out_dir: str | Path, transient: np.ndarray, meta: dict[str, 
             written["transient.exr"] = save_exr(out_dir / "transient.exr", transient, meta)
         else:
             discard(out_dir / "transient.exr")   # an earlier command's: it is not this transient
-        written["transient.h5"] = write_capture(out_dir / "transient.h5", transient,
-                                                start_opl=meta["start_opl"],
-                                                bin_width_opl=meta["bin_width_opl"], source=meta["source"],
-                                                sensors=meta["sensor_positions"],
-                                                scene_info=json_ready(meta))
+        if meta.get("geometry") == "relay_wall":
+            if scene is None:
+                raise ValueError("write_transient: a relay-wall capture's transient.h5 needs its scene")
+            written["transient.h5"] = write_relay_wall_capture(out_dir / "transient.h5", transient, scene,
+                                                               scene_info=json_ready(meta))
+        else:
+            written["transient.h5"] = write_capture(out_dir / "transient.h5", transient,
+                                                    start_opl=meta["start_opl"],
+                                                    bin_width_opl=meta["bin_width_opl"], source=meta["source"],
+                                                    sensors=meta["sensor_positions"],
+                                                    scene_info=json_ready(meta))
         written["meta.json"] = save_json(out_dir / "meta.json", meta)
     if problem is not None:
         warnings.warn(f"{out_dir / 'transient.exr'}: not written, {problem}; transient.npy (float64) is "

@@ -1,16 +1,16 @@
 """Captures through a relay wall: the third bounce against an independent quadrature of docs/design.md section 7.
 
-The reference writes the formula out again in world coordinates (its own
-frame of the hidden rectangle, its own cosines at the wall and on the hidden
-plane) and integrates it with tests/reference.py's nested QUADPACK, which
-shares nothing with the model.
+The reference (tests/relay_wall_reference.py) writes the formula out again in
+world coordinates (its own frame of the hidden rectangle, its own cosines at
+the wall and on the hidden plane) and integrates it with tests/reference.py's
+nested QUADPACK, which shares nothing with the model.
 """
 
 import math
 
 import numpy as np
 import pytest
-from reference import bin_kernel, pixel_entry
+from relay_wall_reference import pixel_region, reference_bin
 
 from analytic.errors import SceneError
 from analytic.relay_wall import RelayWallScene, Scan, grid_points
@@ -21,44 +21,9 @@ from analytic.window import pairs_range
 TOLERANCE = 1e-6
 
 
-def _frame(scene):
-    """Orthonormal axes of the hidden rectangle and its corner, computed here (not by the model)."""
-    u, v = np.asarray(scene.u, float), np.asarray(scene.v, float)
-    x_axis, y_axis = u / np.linalg.norm(u), v / np.linalg.norm(v)
-    normal = np.cross(x_axis, y_axis)
-    corner = np.asarray(scene.center, float) - 0.5 * (u + v)
-    return corner, np.array([x_axis, y_axis, normal])
-
-
 def _reference_entry(scene, pair, pixel, n):
     """A[(pair, n), pixel]: H(l, s)[n] of one hidden pixel of unit reflectance, by nested QUADPACK."""
-    corner, axes = _frame(scene)
-    lit, read = (np.asarray(a)[pair] for a in scene.pair_points)
-    local_l, local_s = (axes @ (point - corner) for point in (lit, read))
-    wall = np.array([0.0, 0.0, 1.0])
-
-    def weight(x, y):
-        world = corner + x * axes[0] + y * axes[1]
-        to_l, to_s = world - lit, world - read
-        d_l, d_s = np.linalg.norm(to_l), np.linalg.norm(to_s)
-        cos_x_l, cos_x_s = local_l[2] / d_l, local_s[2] / d_s            # at x, toward l and s
-        cos_l_x, cos_s_x = (wall @ to_l) / d_l, (wall @ to_s) / d_s       # at l and s, toward x
-        return cos_x_l * cos_x_s * cos_l_x * cos_s_x / (math.pi * d_l**2 * d_s**2)
-
-    to_laser = np.asarray(scene.laser_position) - lit
-    leg = (scene.intensity * (to_laser[2] / np.linalg.norm(to_laser)) / (to_laser @ to_laser)
-           * (scene.wall_reflectance / math.pi) ** 2)
-    offset = 0.0
-    if scene.scan.account_first_and_last_bounces:
-        offset = np.linalg.norm(to_laser) + np.linalg.norm(read - np.asarray(scene.sensor_position))
-    kernel, breakpoints = bin_kernel(scene.illumination, scene.sampling.start_opl - offset,
-                                     scene.sampling.bin_width_opl, n)
-    m = scene.pixels
-    r, c = divmod(pixel, m)
-    du, dv = np.linalg.norm(scene.u) / m, np.linalg.norm(scene.v) / m
-    box = (c * du, (c + 1) * du, (m - r - 1) * dv, (m - r) * dv)
-    value = pixel_entry(box, local_l, local_s, kernel, breakpoints, weight=weight)
-    return leg * value
+    return reference_bin(scene, pair, n, pixel_region(scene, pixel))
 
 
 def _covering(scene, count=40):

@@ -115,8 +115,8 @@ def test_plot_draws_a_tal_capture_as_a_map_of_the_wall_and_traces(tmp_path):
     drawn = read_for_plot(tmp_path / "scan.h5")
     assert drawn.sampling.start_opl == start and drawn.sampling.bin_width_opl == width
     assert drawn.sampling.count == bins and drawn.positions.shape == (30, 3)
-    # point k of the flattened grid holds its own bin, at its own place
-    k = 2 * 5 + 3
+    # point k of the flattened grid (x fastest, as a relay-wall scan's pairs) holds its own bin, at its own place
+    k = 3 * 6 + 2
     np.testing.assert_array_equal(drawn.positions[k], grid[2, 3])
     assert np.argmax(drawn.transient[k]) == index[2, 3]
 

@@ -1,4 +1,5 @@
-"""The commands and relay-wall (NLOS) scene files: refused in one line until they take them."""
+"""The one command that does not take relay-wall (NLOS) scene files, ``sweep``, refuses them in one line
+(tests/cli/test_nlos_commands.py and tests/cli/test_check_relay_wall.py hold the commands that take them)."""
 
 from validation.cli import main
 
@@ -13,21 +14,12 @@ grid = [2, 2]
 """
 
 
-def _write(folder, text):
-    path = folder / "wall.toml"
-    path.write_text(text)
-    return path
-
-
-def test_the_commands_refuse_a_relay_wall_scene_in_one_line(tmp_path, capsys):
-    """Until the commands take NLOS captures, each refuses one by name before writing anything."""
-    from validation.cli import main
-
-    path = _write(tmp_path, SCENE)
-    for command in (["forward", str(path)], ["run", str(path)], ["render", str(path), "--spp", "64"],
-                    ["validate", str(path)], ["check", str(path), "--data", str(path)]):
-        out = tmp_path / "out"
-        assert main([*command, "--out", str(out)]) == 2, command
-        lines = capsys.readouterr().err.strip().splitlines()
-        assert len(lines) == 1 and "relay-wall (NLOS)" in lines[0], (command, lines)
-        assert not out.exists()
+def test_sweep_refuses_a_relay_wall_base_scene_in_one_line(tmp_path, capsys):
+    (tmp_path / "wall.toml").write_text(SCENE)
+    sweep = tmp_path / "sweep.toml"
+    sweep.write_text('scene = "wall.toml"\nsamples = 64\n\n[grid]\n"hidden.pixels" = [4, 8]\n')
+    out = tmp_path / "out"
+    assert main(["sweep", str(sweep), "--out", str(out)]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "relay-wall (NLOS)" in lines[0], lines
+    assert not out.exists()

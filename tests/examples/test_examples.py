@@ -10,6 +10,7 @@ named, every window holds all the light, the images are what
 
 from __future__ import annotations
 
+import functools
 import re
 import subprocess
 import sys
@@ -28,13 +29,19 @@ SCENES = sorted(EXAMPLES.glob("*.toml"))
 
 def test_the_examples_cover_each_feature():
     names = {path.stem for path in SCENES}
-    assert {"paper", "square", "butterworth", "image", "counts", "far"} <= names
+    assert {"paper", "square", "butterworth", "image", "counts", "far", "nlos"} <= names
+
+
+@functools.lru_cache(maxsize=None)
+def modelled(path: Path):
+    """(scene, y) of an example, modelled once per test session."""
+    scene = analytic.load_scene(path)
+    return scene, analytic.forward(scene)
 
 
 @pytest.mark.parametrize("path", SCENES, ids=lambda path: path.name)
 def test_each_example_loads_and_models_a_finite_nonzero_transient(path):
-    scene = analytic.load_scene(path)
-    y = analytic.forward(scene)
+    scene, y = modelled(path)
     assert y.shape == (scene.sensor_count, scene.sampling.count)
     assert np.all(np.isfinite(y))
     if scene.illumination.waveform != "butterworth":   # the Butterworth pulse undershoots, so y may too
@@ -61,6 +68,17 @@ def test_paper_is_the_built_in_scene_as_a_file():
     assert paper.sampling == built_in.sampling and paper.illumination == built_in.illumination
     assert paper.noise == built_in.noise and paper.attenuation == built_in.attenuation
     assert np.abs(paper.reflectance - built_in.reflectance).max() <= 0.5 / 65535 + 1e-12
+
+
+def test_nlos_is_a_confocal_capture_of_the_built_in_pattern():
+    """A relay-wall capture, confocal 8 x 8, whose hidden image is the built-in pattern (to its 16-bit PNG's
+    rounding), with the noise its header states: sigma 0.3 % of the brightest bin."""
+    scene, y = modelled(EXAMPLES / "nlos.toml")
+    assert isinstance(scene, analytic.RelayWallScene)
+    assert scene.scan.type == "confocal" and scene.scan.grid == (8, 8) and scene.sensor_count == 64
+    pattern = analytic.builtin_reflectance(scene.pixels)
+    assert np.abs(scene.reflectance - pattern).max() <= 0.5 / 65535 + 1e-12
+    assert 0.002 <= scene.noise.sigma / y.max() <= 0.004, scene.noise.sigma / y.max()
 
 
 def test_the_pulses_and_the_noise_are_the_ones_named():
@@ -107,7 +125,7 @@ def test_the_photon_counts_the_headers_state():
 def test_the_images_are_what_make_image_writes(tmp_path):
     subprocess.run([sys.executable, str(EXAMPLES / "make_image.py"), str(tmp_path)], check=True,
                    capture_output=True)
-    for name, pixels in (("pattern.png", 50), ("shapes.png", 32)):
+    for name, pixels in (("pattern.png", 50), ("hidden.png", 16), ("shapes.png", 32)):
         shipped = analytic.read_reflectance(EXAMPLES / name, pixels)
         made = analytic.read_reflectance(tmp_path / name, pixels)
         np.testing.assert_array_equal(shipped, made)

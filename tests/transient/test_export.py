@@ -237,10 +237,10 @@ def test_a_scene_file_named_with_dashes_exports_well_formed_xml(tmp_path):
 
 
 def test_xml_that_does_not_parse_is_never_renamed_into_place(tmp_path, monkeypatch):
-    import transient.export as export_module
+    import transient.scene_xml as scene_xml
     from analytic.errors import ResourceError
 
-    monkeypatch.setattr(export_module, "_comment_text", lambda text: text)   # the old, unescaped comment
+    monkeypatch.setattr(scene_xml, "comment_text", lambda text: text)   # the old, unescaped comment
     with pytest.raises(ResourceError, match="scene.xml: the written file does not read back"):
         export_scene(small_scene(name="a--b"), tmp_path, "mitsuba")
     assert list(tmp_path.iterdir()) == []                      # nor the texture: the writes are staged

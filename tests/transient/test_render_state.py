@@ -317,3 +317,38 @@ def test_fingerprint_covers_scene_and_estimator(scene):
     assert base != scene_fingerprint(scene.replace(attenuation="paper"))       # the renderer renders it
     assert base != scene_fingerprint(scene.replace(intensity=2.0))
     assert base == scene_fingerprint(scene.replace(tolerance=1e-4, name="other"))   # the model's alone
+
+
+def test_a_relay_wall_fingerprint_covers_what_the_renderer_reads():
+    """A capture through a relay wall: every key of its wall, hidden rectangle, laser, sensor, scan and image
+    changes the fingerprint; its name, tolerance and noise do not."""
+    from analytic.relay_wall import RelayWallScene, Scan
+    from analytic.scene import Noise
+
+    image = np.random.default_rng(3).uniform(0.1, 0.9, (4, 4))
+    scene = RelayWallScene(pixels=4, reflectance=image, scan=Scan(type="single", grid=(2, 2)))
+    base = scene_fingerprint(scene)
+    other = image.copy()
+    other[1, 2] += 1e-9
+    for changes in (dict(wall_size=(2.0, 2.5)), dict(wall_reflectance=0.5), dict(center=(0.0, 0.0, 1.0000001)),
+                    dict(laser_position=(-0.5, 0.0, 0.3)), dict(sensor_position=(-0.4, 0.0, 0.25)),
+                    dict(intensity=2.0), dict(reflectance=other), dict(scan=Scan(type="confocal", grid=(2, 2))),
+                    dict(scan=Scan(type="single", grid=(2, 2), account_first_and_last_bounces=True)),
+                    dict(scan=Scan(type="single", grid=(2, 2), laser_point=(0.1, 0.0, 0.0))),
+                    dict(sampling=Sampling(bin_width_opl=0.02, start_opl=1.0, count=40))):
+        assert scene_fingerprint(scene.replace(**changes)) != base, changes
+    assert scene_fingerprint(scene.replace(name="x", tolerance=1e-4, noise=Noise(sigma=1e-3))) == base
+
+
+def test_a_relay_wall_render_folder_holds_its_scene(tmp_path):
+    """The saved scene of a capture reads back to the same fingerprint, its image bit for bit."""
+    from analytic.relay_wall import RelayWallScene, Scan
+    from transient.render_state import save_scene, _load_saved_scene
+
+    image = np.random.default_rng(5).uniform(0.1, 0.9, (4, 4))
+    scene = RelayWallScene(pixels=4, reflectance=image, scan=Scan(type="exhaustive", grid=(2, 1), laser_grid=(1, 2),
+                                                                  account_first_and_last_bounces=True))
+    save_scene(tmp_path, scene)
+    back = _load_saved_scene(tmp_path)
+    assert isinstance(back, RelayWallScene) and scene_fingerprint(back) == scene_fingerprint(scene)
+    np.testing.assert_array_equal(back.reflectance, image)

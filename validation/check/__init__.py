@@ -11,7 +11,9 @@ One job per module:
 - :mod:`.conventions`: a stated convention (``--expect``) and the known
   ones a fit is diagnosed by;
 - :mod:`.verdict`: :func:`check_transient` and its :class:`CheckResult`;
-- :mod:`.report`: report.md, metrics.json and the figures.
+- :mod:`.report`: report.md, metrics.json and the figures;
+- :mod:`.scan_figure`: a relay-wall capture's z over pairs x bins and on its scan grid;
+- :mod:`.mitransient_nlos`: what mitransient's NLOS integrator renders (the model plus its ray offsets).
 
 Names are loaded on first use (``lazy_loader``); ``__all__`` lists the
 public API.
@@ -25,4 +27,7 @@ __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "conventions": ["Convention", "irradiancemeter", "diagnose", "KNOWN_SCALES", "RAY_EPSILON_FLOAT32"],
     "verdict": ["CheckResult", "check_transient", "FIT_BINS", "MAX_DATA", "MAX_RELATIVE_STDERR"],
     "report": ["write_check_report"],
+    "scan_figure": ["scan_z_figure", "summed_z"],
+    "mitransient_nlos": ["emulated_estimates", "spawn_offset_difference", "moved_read_points", "offset_model",
+                         "transient_nlos_path", "EMULATED_SAMPLES", "EDGE_POINTS"],
 })

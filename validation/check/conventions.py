@@ -10,7 +10,7 @@ lengths) that explain a fitted scale and offset.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -41,7 +41,7 @@ KNOWN_SCALES = (
 
 @dataclass(frozen=True)
 class Convention:
-    """What the data are stated to read: scale · y_model(start_opl + offset_opl).
+    """What the data are stated to read: scale · y_model(start_opl + offset_opl) (+ added).
 
     Attributes
     ----------
@@ -53,11 +53,16 @@ class Convention:
         :attr:`Fit.offset_opl`).
     name : str
         What states it, for reports.
+    added : numpy.ndarray or None
+        ``(K, N)`` a stated difference added to the scaled, shifted model
+        (units of y), derived without reference to the data (e.g.
+        :func:`~validation.check.mitransient_nlos.transient_nlos_path`); None for none.
     """
 
     scale: float
     offset_opl: float
     name: str
+    added: np.ndarray | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
         if not (math.isfinite(self.scale) and self.scale > 0):
@@ -66,7 +71,10 @@ class Convention:
             raise ValueError(f"offset: the stated offset must be a finite number of metres, got {self.offset_opl!r}")
 
     def as_dict(self) -> dict:
-        return {"name": self.name, "scale": self.scale, "offset_opl": self.offset_opl}
+        stated = {"name": self.name, "scale": self.scale, "offset_opl": self.offset_opl}
+        if self.added is not None:
+            stated["added_l2"] = float(np.linalg.norm(self.added))     # ||added||, units of y
+        return stated
 
 
 def irradiancemeter(scene: Scene, radius: float, *, ray_epsilon: float = RAY_EPSILON_FLOAT32) -> Convention:

@@ -62,11 +62,15 @@ class ShiftedModel:
     scene : Scene
         The scene whose model is shifted.
     model : numpy.ndarray, optional
-        ``(K, N)`` forward(scene) when already computed (δ = 0).
+        ``(K, N)`` ``evaluate(scene)`` when already computed (δ = 0).
+    evaluate : callable, optional
+        scene -> ``(K, N)``: what is shifted (default :func:`analytic.system.forward`, the model;
+        :func:`validation.check.offset_model` judges against mitransient's estimator the same way).
     """
 
-    def __init__(self, scene: Scene, model: np.ndarray | None = None):
+    def __init__(self, scene: Scene, model: np.ndarray | None = None, evaluate=None):
         self.scene = scene
+        self.evaluate = evaluate
         self.cache = {} if model is None else {0.0: np.asarray(model, dtype=np.float64)}
 
     def __call__(self, offset: float) -> np.ndarray:
@@ -78,7 +82,7 @@ class ShiftedModel:
             sampling = self.scene.sampling
             shifted = Sampling(bin_width_opl=sampling.bin_width_opl, start_opl=sampling.start_opl + offset,
                                count=sampling.count)
-            self.cache[offset] = forward(self.scene.replace(sampling=shifted))
+            self.cache[offset] = (self.evaluate or forward)(self.scene.replace(sampling=shifted))
         return self.cache[offset]
 
 

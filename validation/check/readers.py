@@ -24,6 +24,7 @@ import numpy as np
 from analytic.errors import DataError
 from analytic.files import (CaptureError, TRANSIENT_FILES, read_capture, read_exr, read_exr_channels, read_npy,
                             transient_format, transient_in_folder)
+from analytic.relay_wall import RelayWallScene
 from analytic.scene import Sampling, Scene
 
 __all__ = ["read_data", "read_stderr", "stderr_beside", "replicas_beside"]
@@ -115,12 +116,21 @@ def _frames(path: Path, frames: list[Path], sensors: int) -> np.ndarray:
     return np.array(values, dtype=np.float64)[None, :]
 
 
-def _capture(path: Path, scene: Scene) -> np.ndarray:
+def _read_capture(path: Path, sampling: Sampling):
+    """tal's capture with its time axis checked against the scene's."""
     try:
         capture = read_capture(path)
     except CaptureError as error:
         raise DataError(str(error)) from None
-    _time_axis(str(path), capture.start_opl, capture.bin_width_opl, scene.sampling)
+    _time_axis(str(path), capture.start_opl, capture.bin_width_opl, sampling)
+    return capture
+
+
+def _capture(path: Path, scene: Scene) -> np.ndarray:
+    capture = _read_capture(path, scene.sampling)
+    if capture.laser_count != 1:
+        raise DataError(f"{path}: H holds {capture.laser_count} laser points ({capture.layout}); a plane scene has "
+                        f"one source: give a capture of one laser point")
     tolerance = 1e-6 + 2.0**-22 * float(np.max(np.abs(scene.sensors)))
     if capture.source is not None and np.max(np.abs(capture.source - scene.source)) > tolerance:
         raise DataError(f"{path}: laser_xyz {capture.source.tolist()} is not the scene's source "
@@ -128,7 +138,7 @@ def _capture(path: Path, scene: Scene) -> np.ndarray:
     transient = capture.transient
     if capture.sensors is None or transient.shape[0] != scene.sensor_count:
         return transient   # the shape check in read_data reports a count mismatch
-    # Sensors by position: a T_Sx_Sy grid may be flattened in another order than the scene's. Sensors
+    # Sensors by position: a grid may be flattened in another order than the scene's. Sensors
     # that share a point are interchangeable: the k-th of the scene's there takes the k-th of the file's.
     order = []
     for k, position in enumerate(scene.sensors):
@@ -142,6 +152,91 @@ def _capture(path: Path, scene: Scene) -> np.ndarray:
             raise DataError(f"{path}: {held}; check it against the scene it was rendered from")
         order.append(int(free[0]))
     return transient[order]
+
+
+def _pairs_text(scene: RelayWallScene) -> str:
+    scan = scene.scan
+    text = f"{scan.type} scan of {scan.grid[0]} x {scan.grid[1]} read points"
+    if scan.type == "exhaustive":
+        lasers = scan.laser_grid or scan.grid
+        text += f" and {lasers[0]} x {lasers[1]} lit points"
+    return f"{scene.sensor_count} pairs ({text})"
+
+
+def _relay_wall_capture(path: Path, scene: RelayWallScene) -> np.ndarray:
+    """A tal capture of a relay-wall scene, its columns matched to the scene's pairs by their points."""
+    capture = _read_capture(path, scene.sampling)
+    flag = scene.scan.account_first_and_last_bounces
+    if capture.accounts_first_and_last_bounces is not None and capture.accounts_first_and_last_bounces != flag:
+        counts = "count" if capture.accounts_first_and_last_bounces else "do not count"
+        raise DataError(f"{path}: t_accounts_first_and_last_bounces is "
+                        f"{str(capture.accounts_first_and_last_bounces).lower()} (its path lengths {counts} "
+                        f"|o_l - l| + |s - o_s|), the scene's scan.account_first_and_last_bounces is "
+                        f"{str(flag).lower()}; set it to {str(not flag).lower()} in the scene to judge this file")
+    lit, read = scene.pair_points
+    tolerance = 1e-6 + 2.0**-22 * float(max(np.max(np.abs(read)), np.max(np.abs(scene.laser_position)),
+                                            np.max(np.abs(scene.sensor_position))))
+    ends = [("laser_xyz", capture.source, scene.laser_position, "laser.position")]
+    if flag:   # the sensor's distance enters the path lengths only when the legs are counted
+        ends.append(("sensor_xyz", capture.sensor_position, scene.sensor_position, "sensor.position"))
+    for key, theirs, ours, scene_key in ends:
+        if theirs is not None and np.max(np.abs(theirs - ours)) > tolerance:
+            raise DataError(f"{path}: {key} {theirs.tolist()} is not the scene's {scene_key} {ours.tolist()}; "
+                            f"check it against the scene it was rendered from")
+    if capture.transient.shape[0] != len(read):
+        raise DataError(f"{path}: H holds {capture.transient.shape[0]} (lit point, read point) columns "
+                        f"({capture.layout}, H of {capture.laser_count} lit x {capture.transient.shape[0] // capture.laser_count} "
+                        f"read points), the scene's {_pairs_text(scene)}; check it against the scene it was "
+                        f"rendered from")
+    if capture.sensors is None or capture.lasers is None:
+        missing = "sensor_grid_xyz" if capture.sensors is None else "laser_grid_xyz"
+        raise DataError(f"{path}: no {missing}, so its columns cannot be matched to the scene's pairs; give a "
+                        f"capture that states its grids")
+    # Columns by their (l, s) points: the file's grids may list them in another order than the scene's.
+    order = np.full(len(read), -1)
+    taken = np.zeros(len(read), dtype=bool)
+    for p in range(len(read)):
+        near = ((np.max(np.abs(capture.sensors - read[p]), axis=1) <= tolerance)
+                & (np.max(np.abs(capture.lasers - lit[p]), axis=1) <= tolerance) & ~taken)
+        if not near.any():
+            raise DataError(f"{path}: no column of the capture reads s = {read[p].tolist()} lit at l = "
+                            f"{lit[p].tolist()} (the scene's pair {p}): its grids differ from the scene's "
+                            f"{_pairs_text(scene)} on a {scene.wall_size[0]:g} x {scene.wall_size[1]:g} m wall")
+        order[p] = int(np.flatnonzero(near)[0])
+        taken[order[p]] = True
+    return capture.transient[order]
+
+
+def _relay_wall_film(name: str, array: np.ndarray, scene: RelayWallScene) -> np.ndarray:
+    """mitransient's developed NLOS film -> ``(P, N)`` in the scene's pair order.
+
+    ``np.array(film)`` of an ``nlos_capture_meter``'s ``transient_hdr_film``
+    is ``(H, W, T, C)``: row j, column i reads grid cell (i, j), pair j W + i
+    (single; confocal once its per-point 1 x 1 films are placed there). An
+    exhaustive film (``exhaustive_scan``) is ``(H, W, Lh, Lw, T, C)``, its
+    lit point at flat index lj Lw + li of the two laser axes (mitransient's
+    ``TransientImageBlock.put_``).
+    """
+    scan = scene.scan
+    width, height = scan.grid
+    bins = scene.sampling.count
+    exhaustive = scan.type == "exhaustive"
+    expected = (height, width) + ((tuple(reversed(scan.laser_grid or scan.grid))) if exhaustive else ())
+    if array.ndim != len(expected) + 2:
+        layout = "(H, W, Lh, Lw, T, C)" if exhaustive else "(H, W, T, C)"
+        raise DataError(f"{name}: a film of shape {array.shape}; the scene's {scan.type} scan needs mitransient's "
+                        f"{layout} film, np.array of the transient film, one file per render")
+    if array.shape[:len(expected)] != expected or array.shape[len(expected)] != bins:
+        what = "H x W" + (" x Lh x Lw" if exhaustive else "")
+        raise DataError(f"{name}: film of {what} = {' x '.join(map(str, array.shape[:len(expected)]))} points and "
+                        f"{array.shape[len(expected)]} bins, the scene's {' x '.join(map(str, expected))} and "
+                        f"{bins} bins ({_pairs_text(scene)}); check it against the scene it was rendered from")
+    values = _film_channels(name, array)
+    if exhaustive:
+        lasers = int(np.prod(expected[2:]))
+        return np.ascontiguousarray(values.reshape(height * width, lasers, bins).transpose(1, 0, 2)
+                                    .reshape(-1, bins))
+    return values.reshape(height * width, bins)
 
 
 def read_data(path: str | Path, scene: Scene) -> np.ndarray:
@@ -169,13 +264,26 @@ def read_data(path: str | Path, scene: Scene) -> np.ndarray:
           that ``mitransient.vis.save_frames`` writes. mitransient's files
           carry no time axis: the film's ``start_opl`` and
           ``bin_width_opl`` must be the scene's (the exported scene's are).
-    scene : Scene
+
+        For a relay-wall (NLOS) scene the rows are its (l, s) pairs
+        (docs/design.md section 7), and the captures and films are:
+
+        - tal's NLOS capture (ours or ``tal render``'s; H_format T_Sx_Sy or
+          T_Lx_Ly_Sx_Sy): time axis, ``laser_xyz`` (and ``sensor_xyz`` when
+          the legs are counted) and ``t_accounts_first_and_last_bounces``
+          checked against the scene, columns matched to the pairs by their
+          lit and read points;
+        - mitransient's ``nlos_capture_meter`` film, ``np.array(film)`` of
+          one render: ``(H, W, T, C)`` (single, confocal) or
+          ``(H, W, Lh, Lw, T, C)`` (exhaustive), row j and column i reading
+          grid cell (i, j).
+    scene : Scene or RelayWallScene
         The scene the data were rendered from.
 
     Returns
     -------
     numpy.ndarray
-        ``(K, N)`` float64 y_k[n], sensors in the scene's order.
+        ``(K, N)`` float64 y_k[n], sensors (or pairs) in the scene's order.
 
     Raises
     ------
@@ -185,6 +293,7 @@ def read_data(path: str | Path, scene: Scene) -> np.ndarray:
     """
     path = Path(path)
     sensors, bins = scene.sensor_count, scene.sampling.count
+    relay_wall = isinstance(scene, RelayWallScene)
     if not path.exists():
         raise DataError(f"{path}: no such file or folder")
     name = str(path)
@@ -198,12 +307,17 @@ def read_data(path: str | Path, scene: Scene) -> np.ndarray:
         if not frames:
             raise DataError(f"{path}: a folder with neither {' nor '.join(TRANSIENT_FILES)} nor 000.exr "
                             f"frames; give the data file itself")
+        if relay_wall:
+            raise DataError(f"{path}: a folder of save_frames images holds no scan grid; save the NLOS film with "
+                            f"np.save(file, np.array(film)) instead, one file per render")
         data = _frames(path, frames, sensors)
     elif kind == "capture":
-        data = _capture(path, scene)
+        data = _relay_wall_capture(path, scene) if relay_wall else _capture(path, scene)
     elif kind == "npy":
         array = read_npy(path)
-        if array.ndim in (4, 5):
+        if relay_wall and array.ndim >= 4:
+            data = _relay_wall_film(name, array, scene)
+        elif array.ndim in (4, 5):
             data = _film_tensor(name, array, sensors)
         else:
             _meta_time_axis(path, scene.sampling)
@@ -214,14 +328,15 @@ def read_data(path: str | Path, scene: Scene) -> np.ndarray:
     else:
         raise DataError(f"{path}: unknown format (expected .npy, .exr, .h5/.hdf5 or a folder of them)")
     if data.shape != (sensors, bins):
+        rows = "pairs" if relay_wall else "sensors"
         if data.shape == (bins, sensors):
-            hint = "it looks transposed: save (sensors, bins)"
+            hint = f"it looks transposed: save ({rows}, bins)"
         elif data.ndim == 3 and data.shape[1:] == (sensors, bins):
             hint = (f"it looks like a stack of {data.shape[0]} replicas (a render's replicas.npy): give the "
                     f"render's folder, or one file per replica")
         else:
-            hint = f"save a ({sensors}, {bins}) array of the scene's sensors and bins"
-        raise DataError(f"{path}: shape {data.shape} does not match the scene's {sensors} sensors x "
+            hint = f"save a ({sensors}, {bins}) array of the scene's {rows} and bins"
+        raise DataError(f"{path}: shape {data.shape} does not match the scene's {sensors} {rows} x "
                         f"{bins} bins; {hint}")
     if not np.all(np.isfinite(data)):
         bad = int(np.sum(~np.isfinite(data)))

@@ -8,13 +8,16 @@ from analytic.files import json_ready, save_json, staged_writes
 from validation.plots import check_transients_figure, check_z_figure, save_figure
 from validation.report import write_markdown
 
+from analytic.relay_wall import RelayWallScene
+
+from .scan_figure import scan_z_figure
 from .verdict import CheckResult, expected_sentence
 
 __all__ = ["write_check_report"]
 
 
 def write_check_report(out: str | Path, result: CheckResult, *, scene_name: str = "",
-                       data_paths=()) -> dict:
+                       data_paths=(), scene=None) -> dict:
     """Write report.md (embedding its figures), metrics.json and the PNGs into ``out``, together.
 
     Parameters
@@ -27,6 +30,9 @@ def write_check_report(out: str | Path, result: CheckResult, *, scene_name: str 
         The scene's label, for the report.
     data_paths : sequence of str
         The files judged, listed in the report.
+    scene : Scene or RelayWallScene, optional
+        The scene judged against: a relay-wall scene adds ``check_scan_z.png``
+        (z over pairs x bins and on the scan grid, :func:`.scan_figure.scan_z_figure`).
 
     Returns
     -------
@@ -54,6 +60,9 @@ def write_check_report(out: str | Path, result: CheckResult, *, scene_name: str 
             if result.as_given is not None:
                 save_figure(check_z_figure(result), out / "check_z.png")
                 lines += ["![z by bin, as given and after the fit](check_z.png)", ""]
+                if isinstance(scene, RelayWallScene):
+                    save_figure(scan_z_figure(result, scene), out / "check_scan_z.png")
+                    lines += ["![z over pairs x bins and on the scan grid](check_scan_z.png)", ""]
         write_markdown(out / "report.md", lines)
     return metrics
 

@@ -110,6 +110,9 @@ class CheckResult:
         Its full verdict (None by shape only or without a stated convention).
     shape_tolerance : float or None
         The relative L2 tolerance when judged by shape only.
+    replica_data : numpy.ndarray or None
+        ``(R, K, N)`` the replicas judged (None for one transient): sums over
+        bins take their error from them.
     """
 
     agrees: bool
@@ -134,6 +137,7 @@ class CheckResult:
     relative_l2_as_expected: float | None = None
     as_expected: Agreement | None = field(default=None, repr=False)
     shape_tolerance: float | None = None
+    replica_data: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def chi2_per_dof(self) -> float | None:
@@ -300,7 +304,7 @@ def _fit_skipped(bins: int, scene: Scene, what: str) -> str | None:
 
 def check_transient(scene: Scene, data, *, stderr=None, dof: int | None = None, shape_only: bool = False,
                     model=None, false_alarm: float = 1e-3, shape_tolerance: float = 1e-2,
-                    expect: Convention | None = None) -> CheckResult:
+                    expect: Convention | None = None, evaluate=None) -> CheckResult:
     """Judge a transient against the exact model of ``scene`` and fit its conventions.
 
     Parameters
@@ -328,7 +332,7 @@ def check_transient(scene: Scene, data, *, stderr=None, dof: int | None = None, 
         L2 error against ``shape_tolerance``, unweighted fit. Refused
         together with ``stderr`` or replicas.
     model : array_like, optional
-        ``forward(scene)`` if already computed.
+        ``forward(scene)`` (or ``evaluate(scene)``) if already computed.
     false_alarm : float
         α: probability that data consistent with the model fail (docs/design.md section 6).
     shape_tolerance : float
@@ -338,6 +342,10 @@ def check_transient(scene: Scene, data, *, stderr=None, dof: int | None = None, 
         :func:`irradiancemeter`): they are judged against
         scale · y_model(start_opl + offset_opl) as well
         (:attr:`CheckResult.agrees_as_expected`).
+    evaluate : callable, optional
+        scene -> ``(K, N)``: judge and fit against this instead of the model
+        (:class:`ShiftedModel`; e.g. :func:`validation.check.offset_model`,
+        mitransient's estimator in closed form).
 
     Returns
     -------
@@ -367,7 +375,7 @@ def check_transient(scene: Scene, data, *, stderr=None, dof: int | None = None, 
     data = _checked_data(data, shape)
     replicas = 1 if data.ndim == 2 else data.shape[0]
     _check_options(replicas, stderr, shape_only)
-    model_at = ShiftedModel(scene, model)
+    model_at = ShiftedModel(scene, model, evaluate)
     y_model = model_at(0.0)
     if y_model.shape != shape:
         raise DataError(f"model: shape {y_model.shape}, expected {shape}")
@@ -384,8 +392,16 @@ def check_transient(scene: Scene, data, *, stderr=None, dof: int | None = None, 
 
 
 def _expected_model(model_at, expect: Convention | None) -> np.ndarray | None:
-    """scale · y_model(start_opl + offset_opl) of the stated convention (None without one)."""
-    return None if expect is None else expect.scale * model_at(expect.offset_opl)
+    """scale · y_model(start_opl + offset_opl) (+ added) of the stated convention (None without one)."""
+    if expect is None:
+        return None
+    expected = expect.scale * model_at(expect.offset_opl)
+    if expect.added is not None:
+        if expect.added.shape != expected.shape:
+            raise DataError(f"expect: the stated difference has shape {expect.added.shape}, the model "
+                            f"{expected.shape}")
+        expected = expected + expect.added
+    return expected
 
 
 def _judge_with_errors(scene, data, error, dof, replica_data, model_at, expect, false_alarm) -> CheckResult:
@@ -425,7 +441,7 @@ def _judge_with_errors(scene, data, error, dof, replica_data, model_at, expect, 
         relative_l2_after_fit=None if fit is None else _relative_l2(data, fitted), after_fit=after,
         expected=expect, agrees_as_expected=None if as_expected is None else bool(as_expected.agrees),
         relative_l2_as_expected=None if expected_model is None else _relative_l2(data, expected_model),
-        as_expected=as_expected)
+        as_expected=as_expected, replica_data=replica_data)
 
 
 def _judge_by_shape(scene, data, model_at, expect, shape_tolerance) -> CheckResult:

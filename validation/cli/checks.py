@@ -7,7 +7,7 @@ import warnings
 from pathlib import Path
 
 from .common import (UsageError, add_quiet, add_window_option, announce_window, apply_window, check_samples_type,
-                     load_plane_scene, load_scene_argument, seed_type, show_progress)
+                     load_scene_argument, seed_type, show_progress)
 from .reconstruct import add_lambda_options
 
 __all__ = ["add_commands", "command_validate", "command_run", "show_reconstruction_warnings"]
@@ -64,7 +64,7 @@ def command_validate(args) -> int:
     from validation.report import write_report
 
     if args.scene:
-        suite = [(load_plane_scene(path), args.spp or DEFAULT_SAMPLES) for path in args.scene]
+        suite = [(load_scene_argument(path), args.spp or DEFAULT_SAMPLES) for path in args.scene]
         labels = [f"scene {scene.name!r} ({path})" for (scene, _), path in zip(suite, args.scene)]
     else:
         suite = _suite_samples(args.spp)
@@ -138,10 +138,12 @@ def command_run(args) -> int:
         show_reconstruction_warnings(check.reconstructions)
         share = check.metrics["window_share"]
         with staged_writes():
-            write_transient(out / "model", check.model, build_meta(scene, kind="model", window_share=share))
+            write_transient(out / "model", check.model, build_meta(scene, kind="model", window_share=share),
+                            scene=scene)
             write_transient(out / "render", check.render,
                             build_meta(scene, kind="render", samples=args.spp, seed=args.seed,
-                                       window_share=share), stderr=check.stderr)
+                                       window_share=share, replicas=check.replicas, dof=check.replicas - 1),
+                            scene=scene, stderr=check.stderr)
             write_report(out, [check], headline=True)
     if not args.quiet:
         print(check.agreement.summary())
@@ -174,7 +176,8 @@ def show_reconstruction_warnings(reconstructions: dict) -> None:
 def add_commands(subparsers) -> None:
     """Add ``validate`` and ``run``."""
     validate = subparsers.add_parser("validate", help="cross-check renders against the model")
-    validate.add_argument("scene", nargs="*", help="scene TOML files (default: the built-in suite)")
+    validate.add_argument("scene", nargs="*", help="scene TOML files, planes or relay-wall captures (default: "
+                                                   "the built-in suite, relay-wall cases included)")
     validate.add_argument("--out", required=True, help="output folder (report.md, metrics.json, plots)")
     validate.add_argument("--spp", type=check_samples_type,
                           help=f"samples per render, at least 4,096, and 65,536 for the built-in suite, "
@@ -186,7 +189,8 @@ def add_commands(subparsers) -> None:
     validate.set_defaults(run=command_validate)
 
     run = subparsers.add_parser("run", help="model, render, cross-check, reconstruct, report: one scene")
-    run.add_argument("scene", nargs="?", help="scene TOML (default: the built-in scene)")
+    run.add_argument("scene", nargs="?", help="scene TOML, a plane or a relay-wall capture (default: the "
+                                              "built-in scene)")
     run.add_argument("--out", required=True, help="output folder")
     run.add_argument("--spp", type=check_samples_type, default=DEFAULT_SAMPLES,
                      help=f"render samples, at least 4,096 (default {DEFAULT_SAMPLES:,})")

@@ -14,8 +14,8 @@ import sys
 from analytic.errors import UserError
 
 __all__ = ["UsageError", "OneLineParser", "seed_type", "samples_type", "positive_float_type",
-           "load_scene_argument", "load_plane_scene", "show_progress", "MAX_SAMPLES", "add_quiet",
-           "check_samples_type", "add_window_option", "apply_window", "announce_window"]
+           "load_scene_argument", "show_progress", "MAX_SAMPLES", "add_quiet",
+           "check_samples_type", "add_window_option", "apply_window", "announce_window", "rows_text"]
 
 #: Most samples a render may be asked for: 2^44, about two days at 1e8 samples/s.
 MAX_SAMPLES = 2**44
@@ -86,37 +86,22 @@ def positive_float_type(option: str):
     return parse
 
 
-def load_scene_argument(path: str | None, *, relay_wall: bool = False):
-    """The scene a command was given: a TOML file, or the built-in default scene (a plane scene).
-
-    Parameters
-    ----------
-    path : str, optional
-        The scene file; None for the built-in plane scene.
-    relay_wall : bool
-        Whether the command takes a relay-wall (NLOS) scene file too; when
-        False such a file is refused in one line (:func:`load_plane_scene`).
-    """
+def load_scene_argument(path: str | None):
+    """The scene a command was given: a TOML file (a plane or a relay-wall capture), or the built-in
+    default scene (a plane scene)."""
     from analytic.scene import default_scene
     from analytic.scene_file import load_scene
 
-    if path is None:
-        return default_scene()
-    return load_scene(path) if relay_wall else load_plane_scene(path)
+    return default_scene() if path is None else load_scene(path)
 
 
-def load_plane_scene(path):
-    """A plane scene file; a relay-wall (NLOS) one is refused in one line: the commands do not take it yet."""
-    from analytic.errors import SceneError
+def rows_text(scene) -> str:
+    """A transient's rows in words: "16 sensors", or "64 pairs (confocal scan)" of a relay-wall capture."""
     from analytic.relay_wall import RelayWallScene
-    from analytic.scene_file import load_scene
 
-    scene = load_scene(path)
     if isinstance(scene, RelayWallScene):
-        raise SceneError("relay_wall", f"{path} is a relay-wall (NLOS) capture: the commands do not take one "
-                                       f"yet; model it from Python (analytic.load_scene, analytic.system_matrix) "
-                                       f"or render it with transient_opl_nlos (docs/model.md)")
-    return scene
+        return f"{scene.sensor_count} pairs ({scene.scan.type} scan)"
+    return f"{scene.sensor_count} sensors"
 
 
 def show_progress(args) -> bool:

@@ -40,15 +40,37 @@ def _read_inputs(args, scene):
     return (arrays[0] if len(arrays) == 1 else np.stack(arrays)), stderr, dof
 
 
-def _convention(args, scene):
-    """The convention stated by --expect, or --expect-scale / --expect-offset; None when none is."""
-    from validation.check import Convention, irradiancemeter
+def _check_expect(args, scene) -> None:
+    """Refuse the --expect options that do not go together or do not apply to the scene (before any work)."""
+    from analytic.relay_wall import RelayWallScene
 
-    numbers = args.expect_scale is not None or args.expect_offset is not None
-    if args.expect is not None and numbers:
+    relay_wall = isinstance(scene, RelayWallScene)
+    if args.expect is not None and (args.expect_scale is not None or args.expect_offset is not None):
         raise UsageError("--expect: give a named convention or --expect-scale/--expect-offset, not both")
     if args.radius is not None and args.expect != "irradiancemeter":
         raise UsageError("--radius: applies to --expect irradiancemeter only")
+    if args.expect == "irradiancemeter" and relay_wall:
+        raise UsageError("--expect irradiancemeter: states mitransient's irradiancemeter spheres of a plane scene; a "
+                         "relay-wall scene's nlos_capture_meter reads the model's own units (judge it as given, "
+                         "--expect transient_nlos_path, or state --expect-scale/--expect-offset)")
+    if args.expect == "transient_nlos_path":
+        if not relay_wall:
+            raise UsageError("--expect transient_nlos_path: states mitransient's NLOS integrator, for a relay-wall "
+                             "scene; a plane scene's mitransient renders are --expect irradiancemeter")
+        if scene.illumination.waveform != "impulse":
+            raise UsageError("--expect transient_nlos_path: mitransient renders the impulse response only; give "
+                             "the scene with waveform = \"impulse\"")
+
+
+def _convention(args, scene):
+    """The convention stated by --expect, or --expect-scale / --expect-offset; None when none is
+    (options checked by :func:`_check_expect`)."""
+    from validation.check import Convention, irradiancemeter
+
+    if args.expect == "transient_nlos_path":
+        from validation.check import transient_nlos_path
+
+        return transient_nlos_path(scene)
     if args.expect == "irradiancemeter":
         from transient.export import RADIUS
 
@@ -56,7 +78,7 @@ def _convention(args, scene):
             return irradiancemeter(scene, RADIUS if args.radius is None else args.radius)
         except ValueError as error:
             raise UsageError(f"--{error}") from None
-    if numbers:
+    if args.expect_scale is not None or args.expect_offset is not None:
         scale = 1.0 if args.expect_scale is None else args.expect_scale
         offset = 0.0 if args.expect_offset is None else args.expect_offset
         return Convention(scale=scale, offset_opl=offset, name="the stated scale and offset")
@@ -79,12 +101,13 @@ def command_check(args) -> int:
                          "spread is their error")
     if args.shape_only and (args.stderr is not None or len(args.data) > 1):
         raise UsageError("--shape-only: only for one --data file without --stderr")
-    expect = _convention(args, scene)
+    _check_expect(args, scene)
     data, stderr, dof = _read_inputs(args, scene)
+    expect = _convention(args, scene)    # after the data are read: transient_nlos_path's emulation takes a while
     result = check_transient(scene, data, stderr=stderr, dof=dof, shape_only=args.shape_only, expect=expect)
     with output_folder(args.out) as out:
         announce_window(args, scene)
-        write_check_report(out, result, scene_name=scene.name, data_paths=args.data)
+        write_check_report(out, result, scene_name=scene.name, data_paths=args.data, scene=scene)
     if not args.quiet:
         print(result.summary())
         print(f"-> {Path(args.out) / 'report.md'}")
@@ -96,9 +119,14 @@ def command_export(args) -> int:
     from analytic.files import output_folder
     from transient.export import export_scene
 
+    from analytic.relay_wall import RelayWallScene
+
     scene = load_scene_argument(args.scene)
     if args.format != "mitransient" and (args.radius is not None or args.spp is not None):
         raise UsageError("--radius/--spp: apply to --format mitransient only")
+    if isinstance(scene, RelayWallScene) and args.radius is not None:
+        raise UsageError("--radius: sizes a plane scene's irradiancemeter spheres; a relay-wall scene's "
+                         "nlos_capture_meter reads wall points")
     if args.spp is not None and not 1 <= args.spp <= 2**31:
         raise UsageError(f"--spp: must be in [1, 2^31], got {args.spp}")
     from analytic.errors import SceneError
@@ -130,7 +158,7 @@ def _finite_float(option: str):
 
 def add_commands(commands) -> None:
     """Add ``check`` and ``export``."""
-    from transient.export import FORMATS, RADIUS, SPP
+    from transient.export import FORMATS, RADIUS, SPP, SPP_RELAY_WALL
 
     check = commands.add_parser(
         "check", help="judge a transient from any tool against the exact model",
@@ -149,12 +177,15 @@ def add_commands(commands) -> None:
                             "freedom)")
     check.add_argument("--shape-only", action="store_true",
                        help="judge a single file without errors by shape only (relative L2)")
-    check.add_argument("--expect", choices=("irradiancemeter",),
+    check.add_argument("--expect", choices=("irradiancemeter", "transient_nlos_path"),
                        help="judge against a stated convention, exit 0 when it holds: irradiancemeter = "
                             "mitransient's irradiancemeter spheres (--format mitransient export): the model "
                             "scaled by exactly 1/4 (a Lambertian plane needs no finite-sphere correction) "
                             "and its start_opl moved by 2r/3 + 8.94e-5 m (rays start on the sphere, plus "
-                            "Mitsuba's float32 RayEpsilon)")
+                            "Mitsuba's float32 RayEpsilon); transient_nlos_path = mitransient's NLOS "
+                            "integrator on a relay-wall scene (--format mitransient export): the model plus "
+                            "what its float32 ray offsets add, emulated without a fitted parameter "
+                            "(docs/interop.md)")
     check.add_argument("--radius", type=positive_float_type("--radius"),
                        help=f"--expect irradiancemeter: the spheres' radius, metres (default {RADIUS:g}, "
                             f"the export's)")
@@ -172,13 +203,16 @@ def add_commands(commands) -> None:
         description="Write SCENE as scene.xml + reflectance.exr (+ README.md) for Mitsuba 3: with this "
                     "package's transient_opl integrator and omni_point sensors (--format mitsuba), or "
                     "with mitransient's transient_path and one irradiancemeter sphere per sensor "
-                    "(--format mitransient).")
+                    "(--format mitransient). A relay-wall (NLOS) scene: our transient_opl_nlos, or "
+                    "mitransient's transient_nlos_path with an nlos_capture_meter and a projector laser "
+                    "(single and confocal scans).")
     export.add_argument("scene", nargs="?", help="scene TOML (default: the built-in scene)")
     export.add_argument("--format", required=True, choices=FORMATS, help="target plugins")
     export.add_argument("--out", required=True, help="output folder")
     export.add_argument("--radius", type=positive_float_type("--radius"),
                         help=f"mitransient: irradiancemeter sphere radius, metres (default {RADIUS:g})")
     export.add_argument("--spp", type=int,
-                        help=f"mitransient: default samples per sensor in the XML (default {SPP})")
+                        help=f"mitransient: default samples per sensor in the XML (default {SPP}; a relay-wall "
+                             f"capture's per film pixel, default {SPP_RELAY_WALL})")
     add_quiet(export)
     export.set_defaults(run=command_export)

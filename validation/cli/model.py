@@ -1,4 +1,4 @@
-"""``diffuse-imaging forward``: the exact model's transient of a scene."""
+"""``diffuse-imaging forward``: the exact model's transient of a scene (a plane, or a capture through a relay wall)."""
 
 from __future__ import annotations
 
@@ -6,9 +6,17 @@ import time
 from pathlib import Path
 
 from .common import (add_quiet, add_window_option, announce_window, apply_window, load_scene_argument,
-                     positive_float_type, show_progress)
+                     positive_float_type, rows_text, show_progress)
 
-__all__ = ["add_commands", "command_forward"]
+__all__ = ["add_commands", "command_forward", "model_title"]
+
+
+def model_title(scene, meta: dict) -> str:
+    """The model figure's title: the scene, its pulse, and its attenuation (a plane) or its scan (a capture)."""
+    if meta["geometry"] == "relay_wall":
+        return (f"{scene.name}: {scene.scan.type} scan through a relay wall, {meta['illumination']} "
+                f"illumination (model)")
+    return f"{scene.name}: {meta['illumination']} illumination, {scene.attenuation} attenuation"
 
 
 def command_forward(args) -> int:
@@ -16,7 +24,7 @@ def command_forward(args) -> int:
     from analytic.files import build_meta, output_folder, staged_writes, write_transient
     from analytic.noise import add_noise
     from analytic.system import forward, system_matrix
-    from validation.plots import model_figure, save_figure
+    from validation.plots import save_figure, scene_transient_figure
 
     scene = apply_window(args, load_scene_argument(args.scene))
     if args.tolerance is not None:
@@ -31,13 +39,12 @@ def command_forward(args) -> int:
         meta = build_meta(scene, kind="model",
                           seed=scene.noise.seed if scene.noise is not None else None,
                           window_share=share, nonzeros=int(matrix.nnz), assembly_seconds=assembly)
-        figure = model_figure(scene.sampling, y, noisy, title=f"{scene.name}: {meta['illumination']} "
-                                                              f"illumination, {scene.attenuation} attenuation")
+        figure = scene_transient_figure(scene, y, noisy=noisy, title=model_title(scene, meta))
         with staged_writes():
-            write_transient(out, y, meta, noisy=noisy)
+            write_transient(out, y, meta, scene=scene, noisy=noisy)
             save_figure(figure, out / "transient.png")
     if not args.quiet:
-        print(f"forward: {scene.sensor_count} sensors x {scene.sampling.count} bins, "
+        print(f"forward: {rows_text(scene)} x {scene.sampling.count} bins, "
               f"A {matrix.shape[0]} x {matrix.shape[1]} with {matrix.nnz:,} non-zeros "
               f"assembled in {assembly:.2f} s -> {Path(args.out)}")
     return 0
@@ -46,7 +53,8 @@ def command_forward(args) -> int:
 def add_commands(subparsers) -> None:
     """Add ``forward``."""
     forward = subparsers.add_parser("forward", help="model the noiseless transient y = A f")
-    forward.add_argument("scene", nargs="?", help="scene TOML (default: the built-in scene)")
+    forward.add_argument("scene", nargs="?", help="scene TOML, a plane or a relay-wall capture (default: the "
+                                                  "built-in scene)")
     forward.add_argument("--out", required=True, help="output folder")
     forward.add_argument("--tolerance", type=positive_float_type("--tolerance"),
                          help="relative accuracy of every entry of A (default: the scene's, 1e-6)")

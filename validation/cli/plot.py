@@ -6,7 +6,9 @@ What it reads, and where each file's time axis comes from:
   ``meta.json`` beside it (an EXR's header, a capture's ``t_start`` and
   ``delta_t`` serve too), with the render's standard error from
   ``stderr.npy`` beside it and the model's noisy samples from
-  ``transient_noisy.npy``;
+  ``transient_noisy.npy``; a relay-wall capture's (its ``meta.json``
+  records the scan) is drawn per pair and over the scan
+  (:func:`validation.plots.relay_wall.relay_wall_figure`);
 - tal's HDF5 capture: its ``t_start`` and ``delta_t``; drawn as the light
   each wall point receives and a few traces (:func:`validation.plots.captures.capture_figure`);
 - with ``--scene SCENE.toml``: anything ``check`` reads
@@ -54,6 +56,8 @@ class Drawable:
     positions : numpy.ndarray or None
         ``(K, 3)`` the points of a capture not written by us (drawn as a
         map), else None.
+    scan : validation.plots.WallScan or None
+        A relay-wall capture's scan (its rows are pairs), else None.
     """
 
     transient: np.ndarray
@@ -63,6 +67,7 @@ class Drawable:
     stderr: np.ndarray | None = None
     noisy: np.ndarray | None = None
     positions: np.ndarray | None = None
+    scan: object | None = None
 
 
 def render_title(name: str, *, samples: int, replicas: int, complete: bool = True) -> str:
@@ -110,6 +115,9 @@ def _title_of(meta: dict, fallback: str) -> tuple[str, str]:
         return "render", render_title(name, samples=int(meta.get("samples", 0)),
                                       replicas=int(meta.get("replicas", 0)),
                                       complete=meta.get("complete", True) is not False)
+    if meta.get("geometry") == "relay_wall" and isinstance(meta.get("scan"), dict):
+        return "model", f"{name}: {meta['scan'].get('type')} scan through a relay wall, " \
+                        f"{meta.get('illumination', 'impulse')} illumination (model)"
     return "model", f"{name}: {meta.get('illumination', 'impulse')} illumination, " \
                     f"{meta.get('attenuation', 'lambertian')} attenuation (model)"
 
@@ -159,7 +167,21 @@ def _ours(path: Path, transient: np.ndarray, meta: dict) -> Drawable:
     stderr = _beside(path, "stderr.npy", shape) if label == "render" else None
     noisy = _beside(path, "transient_noisy.npy", shape) if label == "model" else None
     sampling = _sampling(meta["start_opl"], meta["bin_width_opl"], shape[1], str(path.parent / "meta.json"))
-    return Drawable(transient, sampling, label, title, stderr=stderr, noisy=noisy)
+    return Drawable(transient, sampling, label, title, stderr=stderr, noisy=noisy, scan=_scan_of(path, meta))
+
+
+def _scan_of(path: Path, meta: dict):
+    """A relay-wall capture's scan from our metadata (None for a plane's); a DataError when it is incomplete."""
+    from analytic.errors import DataError
+    from validation.plots import WallScan
+
+    if meta.get("geometry") != "relay_wall":
+        return None
+    try:
+        return WallScan.of_meta(meta)
+    except ValueError as error:
+        raise DataError(f"{path.parent / 'meta.json'}: a relay-wall capture's metadata, but {error}; write the "
+                        f"files again") from None
 
 
 def _capture(path: Path) -> Drawable:
@@ -173,7 +195,7 @@ def _capture(path: Path) -> Drawable:
     if _is_ours(info):
         label, title = _title_of(info, path.parent.name)
         stderr = _beside(path, "stderr.npy", transient.shape) if label == "render" else None
-        return Drawable(transient, sampling, label, title, stderr=stderr)
+        return Drawable(transient, sampling, label, title, stderr=stderr, scan=_scan_of(path, info))
     title = f"{path.name}: tal capture, {transient.shape[0]} points x {transient.shape[1]} bins"
     return Drawable(transient, sampling, "data", title, positions=capture.sensors)
 
@@ -225,13 +247,15 @@ def _header_value(value):
 
 def _with_scene(path: Path, scene) -> Drawable:
     """Anything ``check`` reads, on the scene's time axis (a file that states its own must match it)."""
+    from analytic.relay_wall import RelayWallScene
     from validation.check import read_data, stderr_beside
-
+    from validation.plots import WallScan
     transient = read_data(path, scene)
     beside = stderr_beside(path, scene)
     stderr = beside[0] if beside is not None else None
     label = "render" if stderr is not None else "data"
-    return Drawable(transient, scene.sampling, label, f"{scene.name}: {path.name}", stderr=stderr)
+    scan = WallScan.of_scene(scene) if isinstance(scene, RelayWallScene) else None
+    return Drawable(transient, scene.sampling, label, f"{scene.name}: {path.name}", stderr=stderr, scan=scan)
 
 
 def read_for_plot(path: str | Path, scene=None) -> Drawable:
@@ -261,8 +285,12 @@ def read_for_plot(path: str | Path, scene=None) -> Drawable:
 
 def _figure(drawable: Drawable):
     from validation.plots.captures import capture_figure
+    from validation.plots.relay_wall import relay_wall_figure
     from validation.plots.transients import transient_figure
 
+    if drawable.scan is not None:
+        return relay_wall_figure(drawable.sampling, drawable.transient, drawable.scan, stderr=drawable.stderr,
+                                 noisy=drawable.noisy, label=drawable.label, title=drawable.title)
     if drawable.positions is not None:
         return capture_figure(drawable.sampling, drawable.transient, drawable.positions, title=drawable.title)
     return transient_figure(drawable.sampling, drawable.transient, stderr=drawable.stderr, noisy=drawable.noisy,
@@ -282,7 +310,7 @@ def command_plot(args) -> int:
         save_figure(figure, out / FIGURE_NAME)
     if not args.quiet:
         sensors, bins = drawable.transient.shape
-        points = "points" if drawable.positions is not None else "sensors"
+        points = "points" if drawable.positions is not None else "pairs" if drawable.scan is not None else "sensors"
         print(f"plot: {args.path} ({sensors} {points} x {bins} bins of {drawable.sampling.bin_width_opl:g} m "
               f"from {drawable.sampling.start_opl:g} m) -> {Path(args.out) / FIGURE_NAME}")
     return 0

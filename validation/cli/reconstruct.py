@@ -8,7 +8,8 @@ import warnings
 
 import numpy as np
 
-from .common import UsageError, add_quiet, load_scene_argument, positive_float_type, show_progress
+from .common import (UsageError, add_quiet, load_scene_argument, positive_float_type,
+                     rows_text, show_progress)
 
 __all__ = ["add_commands", "command_reconstruct", "command_reproduce", "lambda_argument", "lambda_grid_of",
            "add_lambda_options"]
@@ -90,8 +91,9 @@ def command_reconstruct(args) -> int:
         matrix = system_matrix(scene, progress=show_progress(args))
         assembly = time.perf_counter() - assembly_started
         if matrix.nnz == 0:
-            raise SceneError("sampling", "the window holds none of the light: no sample sees the plane, "
-                                         "nothing to reconstruct; widen [sampling] start/count")
+            raise SceneError("sampling", "the window holds none of the light: no sample sees the plane (or "
+                                         "the hidden rectangle), nothing to reconstruct; widen [sampling] "
+                                         "start/count")
         truth = np.asarray(scene.reflectance, dtype=np.float64)
         options = {} if args.regularizer == "tv" else {"method": args.method}
         with warnings.catch_warnings(record=True) as caught:
@@ -137,7 +139,7 @@ def command_reconstruct(args) -> int:
                                                     f"SSIM {metrics['ssim']:.3f}"), out / "comparison.png")
             write_markdown(out / "report.md", [
                 f"# Reconstruction of {scene.name}", "",
-                f"From `{args.data}` ({scene.sensor_count} sensors x {scene.sampling.count} bins), "
+                f"From `{args.data}` ({rows_text(scene)} x {scene.sampling.count} bins), "
                 f"M = {scene.pixels}, {report['regularizer']}; {how}"
                 + (f" (σ = {sigma:g} from the scene's [noise])" if sigma is not None else "") + ". "
                 f"PSNR {metrics['psnr']:.2f} dB, SSIM {metrics['ssim']:.3f} against the scene's "
@@ -184,7 +186,7 @@ def _result_table(result, metrics: dict, sigma: float | None, regularizer: str) 
         (penalty[0], f"{result.seminorm:.4g}", penalty[1]),
         ("rank of A", f"{rank} of {result.unknowns}", "how many independent numbers of the image the data fix "
                                                       "(svd method only); the penalty fills the rest"),
-        ("m", f"{result.measurements}", "measurements: sensors x bins, the rows of A"),
+        ("m", f"{result.measurements}", "measurements: sensors (or pairs) x bins, the rows of A"),
     ]
     return (["| quantity | value |", "|---|---|"] + [f"| {name} | {value} |" for name, value, _ in rows]
             + [""] + [f"- **{name}**: {meaning}." for name, _, meaning in rows])
@@ -202,7 +204,6 @@ def _read_data(path: str, scene) -> np.ndarray:
     """The transient, read and checked as ``check`` reads it: shape, finite values, and the time axis
     (and source) that the file states, against the scene's."""
     from validation.check import read_data
-
     return read_data(path, scene)
 
 
@@ -223,9 +224,11 @@ def add_commands(subparsers) -> None:
     """Add ``reconstruct`` and ``reproduce``."""
     command = subparsers.add_parser(
         "reconstruct", help="recover the image from a transient (Laplacian-regularised LS)")
-    command.add_argument("scene", nargs="?", help="scene TOML (default: the built-in scene)")
+    command.add_argument("scene", nargs="?", help="scene TOML, a plane or a relay-wall capture (its hidden image "
+                                                  "is recovered) (default: the built-in scene)")
     command.add_argument("--data", required=True,
-                         help="transient .npy, .exr or tal .h5, (K, N), e.g. from `forward` or `render`")
+                         help="transient .npy, .exr or tal .h5, (K, N) (a relay-wall capture's: (P, N), .npy or "
+                              ".exr), e.g. from `forward` or `render`")
     command.add_argument("--out", required=True, help="output folder")
     add_lambda_options(command, default="auto")
     command.add_argument("--method", choices=("auto", "svd", "lsqr"),

@@ -53,7 +53,8 @@ def command_render(args) -> int:
         if args.spp is None:
             raise UsageError("--spp: required for a new render (the number of samples, e.g. --spp 4194304); "
                              "only --resume DIR takes it from the folder")
-        given, scene, variant = None, apply_window(args, load_scene_argument(args.scene)), args.variant
+        given, scene, variant = None, apply_window(args, load_scene_argument(args.scene)), \
+            args.variant
     select_variant(variant)          # a variant that cannot run here is refused before anything is said
     folder = args.resume if args.resume else args.out
     option = "--resume" if args.resume else "--out"
@@ -80,13 +81,12 @@ def command_render(args) -> int:
 
 def _draw(path: Path, scene, result) -> None:
     """The render's figure (as ``forward`` draws the model's), with ±1 standard error as a band."""
-    from validation.plots import save_figure
-    from validation.plots.transients import transient_figure
+    from validation.plots import save_figure, scene_transient_figure
 
     from .plot import render_title
 
     title = render_title(scene.name, samples=result.samples, replicas=result.replicas)
-    save_figure(transient_figure(scene.sampling, result.mean, stderr=result.stderr, label="render", title=title),
+    save_figure(scene_transient_figure(scene, result.mean, stderr=result.stderr, label="render", title=title),
                 path)
 
 
@@ -114,9 +114,11 @@ def add_commands(subparsers) -> None:
                     "SIGTERM) resumes with --resume DIR alone: the folder holds its scene, seed, samples and "
                     "variant, and any of them given again must match.")
     render.add_argument("scene", nargs="?",
-                        help="scene TOML (default: the built-in scene; with --resume: the scene saved there)")
+                        help="scene TOML, a plane or a relay-wall capture (default: the built-in scene; with "
+                             "--resume: the scene saved there)")
     render.add_argument("--spp", type=samples_type,
-                        help="total number of samples (points on the plane; each serves every sensor), "
+                        help="total number of samples (points on the plane or the hidden rectangle; each "
+                             "serves every sensor or (laser point, read point) pair), "
                              "rounded up to a whole number per replica (32 replicas); required with --out, "
                              "the state's with --resume")
     render.add_argument("--seed", type=seed_type,

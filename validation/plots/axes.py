@@ -16,7 +16,7 @@ import numpy as np
 
 from .common import NANOSECONDS_PER_METRE, Y_LABEL
 
-__all__ = ["log_plot", "log_limits", "no_log_margins", "finish_log_axes", "TimeAxis", "time_axis",
+__all__ = ["log_plot", "log_limits", "no_log_margins", "finish_log_axes", "TimeAxis", "time_axis", "relay_wall_label",
            "nanosecond_axis", "round_origin", "power_of_ten", "window_edges", "window_edges_in_view"]
 
 
@@ -186,6 +186,12 @@ def time_axis(sampling, arrays) -> TimeAxis:
                      (sampling.edges[0] - origin, sampling.edges[-1] - origin),
                      "path length (m)" if origin == 0 else f"path length − {origin:g} m (m)",
                      Y_LABEL if power == 0 else Y_LABEL.replace("(W", f"(1e{power} W"))
+
+
+def relay_wall_label(y_label: str) -> str:
+    """A time axis's y label (y_k[n], maybe with a power of ten) as a relay-wall capture's H[n], whose units are
+    mitransient's (docs/design.md section 7: radiance times path length, W sr⁻¹ m⁻¹)."""
+    return y_label.replace("y_k[n] (", "H[n] (").replace("W m⁻¹", "W sr⁻¹ m⁻¹")
 
 
 def window_edges_in_view(time: TimeAxis) -> list:

@@ -7,17 +7,21 @@ import textwrap
 
 import numpy as np
 
-from .axes import nanosecond_axis, round_origin, time_axis, window_edges, window_edges_in_view
+from .axes import nanosecond_axis, relay_wall_label, round_origin, time_axis, window_edges, window_edges_in_view
 from .common import columns_for_legend, new_figure, plain_text, suptitle
 
 __all__ = ["transients_figure", "transient_figure", "model_figure", "z_map_figure", "finish_time_figure"]
 
 
-def _sensor_list(chosen: np.ndarray, sensors: int) -> str:
+#: What a transient's rows are -> their symbol: a plane's sensors k, a relay-wall capture's pairs p.
+ROW_SYMBOLS = {"sensor": ("k", "K"), "pair": ("p", "P")}
+
+
+def _sensor_list(chosen: np.ndarray, sensors: int, row_kind: str = "sensor") -> str:
     """"sensors 0, 2, 4, ..., 15 (8 of 16, evenly spaced)", or "every sensor" when all are drawn."""
     if len(chosen) == sensors:
-        return f"every sensor (K = {sensors})"
-    return f"sensors {', '.join(str(k) for k in chosen)} ({len(chosen)} of {sensors}, evenly spaced)"
+        return f"every {row_kind} ({ROW_SYMBOLS[row_kind][1]} = {sensors})"
+    return f"{row_kind}s {', '.join(str(k) for k in chosen)} ({len(chosen)} of {sensors}, evenly spaced)"
 
 
 def _error_bars_visible(transients: dict, errors: dict, chosen, first: int, last: int) -> bool:
@@ -37,7 +41,7 @@ _MOST_ERROR_BARS = 100
 
 def transients_figure(sampling, transients: dict[str, np.ndarray], *,
                       errors: dict[str, np.ndarray] | None = None, z_limit: float | None = None,
-                      title: str = "", max_panels: int = 8):
+                      title: str = "", max_panels: int = 8, row_kind: str = "sensor"):
     """Transients against path length, one panel per sensor, with z residuals when errors are given.
 
     Parameters
@@ -60,6 +64,8 @@ def transients_figure(sampling, transients: dict[str, np.ndarray], *,
         Figure title; the sensors drawn are named beneath it.
     max_panels : int
         At most this many sensors, evenly chosen, are drawn.
+    row_kind : {"sensor", "pair"}
+        What the rows are: a plane's sensors, a relay-wall capture's pairs.
 
     Returns
     -------
@@ -73,7 +79,7 @@ def transients_figure(sampling, transients: dict[str, np.ndarray], *,
     time = time_axis(sampling, list(transients.values()))
     first, last, origin, scale, edges, centres = (time.first, time.last, time.origin, time.scale, time.edges,
                                                    time.centres)
-    x_label, y_label = time.x_label, time.y_label
+    x_label, y_label = time.x_label, time.y_label if row_kind == "sensor" else relay_wall_label(time.y_label)
     dense = last - first > _MOST_ERROR_BARS
     if dense:
         note = f"±1 se not drawn over {last - first} bins: see z"
@@ -91,7 +97,7 @@ def transients_figure(sampling, transients: dict[str, np.ndarray], *,
     panel = 3.5 if residual else 2.7
     width = max(3.4 * columns, 5.2)
     legend_columns = columns_for_legend(names, width)
-    notes = [_sensor_list(chosen, sensors)]
+    notes = [_sensor_list(chosen, sensors, row_kind)]
     if residual:
         notes.append("z = (value − model) / se below each panel")
     if window_edges_in_view(time):
@@ -121,7 +127,7 @@ def transients_figure(sampling, transients: dict[str, np.ndarray], *,
             else:
                 drawn.append(axis.plot(centres, data, "o", ms=1.5 if dense else 3, color=f"C{i}")[0])
         window_edges(axis, time)
-        axis.set_title(f"sensor {k}", fontsize=9, loc="left")
+        axis.set_title(f"{row_kind} {k}", fontsize=9, loc="left")
         axis.tick_params(labelsize=8)
         if column == 0:
             axis.set_ylabel(y_label, fontsize=8)
@@ -306,8 +312,10 @@ def _line_colours(count: int) -> list:
     return [colormaps["viridis"](value) for value in np.linspace(0.0, 0.9, count)]
 
 
-def z_map_figure(z: np.ndarray, threshold: float, sampling, title: str):
+def z_map_figure(z: np.ndarray, threshold: float, sampling, title: str, *, row_kind: str = "sensor"):
     """z-scores over sensors x bins (cropped to the judged bins); grey where a bin was not judged.
+
+    ``row_kind`` names the rows: ``"sensor"`` (a plane's) or ``"pair"`` (a relay-wall capture's).
 
     Returns
     -------
@@ -320,7 +328,8 @@ def z_map_figure(z: np.ndarray, threshold: float, sampling, title: str):
     first, last = (int(columns[0]), int(columns[-1]) + 1) if columns.size else (0, z.shape[1])
     shown = z[:, first:last]
     limit = max(threshold, float(np.nanmax(np.abs(shown))) if np.isfinite(shown).any() else threshold)
-    figure = new_figure(7.5, max(0.3 * z.shape[0] + 2.0, 3.2), dpi=100)
+    # 0.3 inch a row up to 20 rows, then no taller (a relay-wall capture has hundreds of pairs)
+    figure = new_figure(7.5, min(max(0.3 * z.shape[0] + 2.0, 3.2), 8.0), dpi=100)
     axis = figure.add_subplot()
     from matplotlib import colormaps
     from matplotlib.ticker import MaxNLocator
@@ -338,7 +347,7 @@ def z_map_figure(z: np.ndarray, threshold: float, sampling, title: str):
     for level in (-threshold, threshold):
         bar.ax.axhline(level, color="k", lw=1.0, ls="--")
     axis.set_xlabel("path length (m)" if origin == 0 else f"path length − {origin:g} m (m)")
-    axis.set_ylabel("sensor k")
+    axis.set_ylabel(f"{row_kind} {ROW_SYMBOLS[row_kind][0]}")
     if z.shape[0] <= 16:
         axis.set_yticks(range(z.shape[0]))
     else:

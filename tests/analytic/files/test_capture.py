@@ -11,8 +11,6 @@ file written by tal's own writer (``tal.io.write_capture``).
 from __future__ import annotations
 
 import json
-import subprocess
-from pathlib import Path
 
 import h5py
 import numpy as np
@@ -23,21 +21,9 @@ from analytic.files import CaptureError, read_capture, write_capture
 from analytic.scene import Sampling, Scene, sensor_grid
 from analytic.system import forward
 from analytic.errors import DataError
+from tal_env import TAL_READ, needs_tal, run_tal
 from validation.check import read_data
 
-ROOT = Path(__file__).resolve().parents[3]
-TAL_PYTHON = ROOT / ".venv-tal" / "bin" / "python"
-needs_tal = pytest.mark.skipif(not TAL_PYTHON.is_file(),
-                               reason="tal's virtual environment .venv-tal is absent "
-                                      "(create it with scripts/setup_interop.sh)")
-
-
-def run_tal(code: str, *args) -> str:
-    """Run Python code in tal's environment; return its stdout."""
-    done = subprocess.run([str(TAL_PYTHON), "-c", code, *map(str, args)], capture_output=True, text=True,
-                          timeout=300)
-    assert done.returncode == 0, done.stderr[-2000:]
-    return done.stdout
 
 
 def small_capture(tmp_path, rng):
@@ -104,8 +90,13 @@ def test_files_that_are_not_captures_are_refused(tmp_path):
         handle.create_dataset("H_format", (1,), dtype=h5py.enum_dtype(capture_module.H_FORMATS, basetype="i"))
         handle["H_format"][0] = capture_module.H_FORMATS["T_Li_Si"]
         handle["t_start"], handle["delta_t"] = 0.0, 0.1
-    with pytest.raises(CaptureError, match="2 laser points"):
-        read_capture(tmp_path / "lasers.h5")
+    assert read_capture(tmp_path / "lasers.h5").laser_count == 2      # read (a relay wall's layout) ...
+    plane = Scene(size=1.0, pixels=4, reflectance=0.5, source=(0.5, 0.5, 1.0),
+                  sensors=[(0.2, 0.7, 1.0), (0.8, 0.15, 0.5), (0.3, 0.4, 0.9)],
+                  sampling=Sampling(bin_width_opl=0.1, start_opl=0.0, count=5))
+    with pytest.raises(DataError, match="H holds 2 laser points .* a plane scene has one source"):
+        read_data(tmp_path / "lasers.h5", plane)                          # ... and refused for a plane
+
     with pytest.raises(FileNotFoundError):
         read_capture(tmp_path / "missing.h5")
 
@@ -212,24 +203,12 @@ def test_every_malformed_dataset_is_one_line_naming_it(tmp_path, rng, key, store
     assert "\n" not in message and message.startswith(str(path))
 
 
-_TAL_READ = r"""
-import json, sys
-import numpy as np, tal
-data = tal.io.read_capture(sys.argv[1])
-np.save(sys.argv[2], data.H)
-print(json.dumps({"H_format": data.H_format.name, "sensor_grid_format": data.sensor_grid_format.name,
-                  "laser_grid_format": data.laser_grid_format.name, "delta_t": float(data.delta_t),
-                  "t_start": float(data.t_start), "sensor_grid_xyz": data.sensor_grid_xyz.tolist(),
-                  "laser_xyz": data.laser_xyz.tolist(), "laser_grid_xyz": data.laser_grid_xyz.tolist(),
-                  "accounts": bool(data.t_accounts_first_and_last_bounces), "scene_info": data.scene_info,
-                  "confocal": bool(data.is_confocal())}))
-"""
 
 
 @needs_tal
 def test_tal_reads_our_capture_back(tmp_path, rng):
     path, transient, sensors = small_capture(tmp_path, rng)
-    seen = json.loads(run_tal(_TAL_READ, path, tmp_path / "H.npy").splitlines()[-1])
+    seen = json.loads(run_tal(TAL_READ, path, tmp_path / "H.npy").splitlines()[-1])
     H = np.load(tmp_path / "H.npy")
     assert H.dtype == np.float64 and np.array_equal(H, transient.T)
     assert seen["t_start"] == 1.2345678901234567 and seen["delta_t"] == 0.1
@@ -299,7 +278,7 @@ tal.io.write_capture(sys.argv[1], data)
 
 @needs_tal
 def test_a_capture_written_by_tal_is_read_with_sensors_matched_by_position(tmp_path):
-    """tal's T_Sx_Sy grid flattens (x index, y index) row-major; the scene lists x fastest."""
+    """tal's T_Sx_Sy grid is indexed [x index, y index]; read_capture lists x fastest, as the scene does."""
     scene = Scene(size=1.0, pixels=8, reflectance=0.5, source=(0.5, 0.5, 1.0),
                   sensors=sensor_grid((3, 2), 0.6, (0.5, 0.5, 1.0)),
                   sampling=Sampling(bin_width_opl=0.05, start_opl=1.5, count=30))
@@ -312,8 +291,8 @@ def test_a_capture_written_by_tal_is_read_with_sensors_matched_by_position(tmp_p
     read = read_capture(tmp_path / "tal.hdf5")
     assert read.transient.shape == (6, 30) and read.start_opl == 1.5 and read.bin_width_opl == 0.05
     assert read.scene_info == "written_by: tal\n"                 # tal's YAML, kept as text
-    assert not np.array_equal(read.sensors, scene.sensors)        # another order than the scene's
-    assert np.array_equal(read_data(tmp_path / "tal.hdf5", scene), y)  # put back in the scene's
+    assert np.array_equal(read.sensors, scene.sensors)            # x fastest, as the scene lists them
+    assert np.array_equal(read_data(tmp_path / "tal.hdf5", scene), y)
 
 
 def test_data_reader_refuses_captures_of_another_scene(tmp_path, rng):

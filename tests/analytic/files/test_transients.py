@@ -31,6 +31,34 @@ def test_one_schema_for_model_and_render(waveform):
         build_meta(scene, kind="model", bins=3)
 
 
+def test_a_relay_wall_capture_has_the_same_keys_and_its_own_tables(tmp_path):
+    """One schema: a capture's record has every key a plane's has (those of the other geometry None), and a
+    capture's transient is written without a tal file (tal's NLOS layout is wired apart)."""
+    from analytic.relay_wall import RelayWallScene, Scan
+
+    plane = build_meta(default_scene(pixels=8), kind="model", window_share=1.0)
+    capture = RelayWallScene(pixels=4, scan=Scan(type="single", grid=(3, 2), laser_point=(0.2, -0.1, 0.0)),
+                             laser_position=(-0.5, 0.1, 0.3), wall_reflectance=0.7)
+    meta = build_meta(capture, kind="render", samples=64, seed=1)
+    assert set(meta) == set(plane) and SCHEMA <= set(meta)
+    assert plane["geometry"] == "plane" and all(plane[key] is None for key in
+                                                 ("relay_wall", "hidden", "laser", "sensor", "scan"))
+    assert meta["geometry"] == "relay_wall" and meta["plane_size"] is meta["source"] is None
+    assert meta["sensors"] == 6 and meta["pixels"] == 4 and meta["attenuation"] == "lambertian"
+    assert meta["relay_wall"] == {"size": [2.0, 2.0], "reflectance": 0.7}
+    assert meta["laser"]["position"] == [-0.5, 0.1, 0.3]
+    assert meta["scan"] == {"type": "single", "grid": [3, 2], "laser_point": [0.2, -0.1, 0.0], "laser_grid": None,
+                            "account_first_and_last_bounces": False, "pairs": 6}
+    (tmp_path / "transient.h5").write_bytes(b"an earlier command's")
+    y = np.arange(6 * meta["bins"], dtype=np.float64).reshape(6, meta["bins"])
+    with pytest.raises(ValueError, match="needs its scene"):
+        write_transient(tmp_path, y, meta)
+    written = write_transient(tmp_path, y, meta, scene=capture)
+    assert set(written) == {"transient.npy", "transient.exr", "transient.h5", "meta.json"}
+    np.testing.assert_array_equal(read_transient(tmp_path / "transient.h5"), y)     # tal's layout, our pair order
+    assert json.loads((tmp_path / "meta.json").read_text())["scan"]["laser_point"] == [0.2, -0.1, 0.0]
+
+
 def test_exr_header_holds_numbers_as_doubles(tmp_path):
     scene = default_scene(pixels=8).replace(sampling=default_scene().sampling.__class__(
         bin_width_opl=1e-4, start_opl=800.123456789, count=4))

@@ -10,8 +10,10 @@ Measures, on this machine (named in the output, with its load average):
    M = 50, 8 x 8 at M = 256, K = 16) in the same process: the ratio, and
    every entry's error relative to its row's largest against a tight
    assembly. With ``--before REV`` the same child script runs on the
-   project as it was at git revision REV (``git archive``, its own Numba
-   cache, warmed first), so that before and after are one run's numbers.
+   project as it was at git revision REV (``git archive`` into a folder of
+   the temporary directory named by the commit and kept, so that its Numba
+   cache, warmed first, serves later runs), so that before and after are
+   one run's numbers.
 2. ``forward`` at M = 1024, K = 16 end to end (process start to files
    written) and its peak resident memory, now and at REV.
 3. Scaling: time, CPU time, non-zeros, time per non-zero and peak memory
@@ -227,11 +229,22 @@ for method in METHODS:
 
 
 def checkout(revision: str) -> Path:
-    """The project's files at a git revision, in a temporary folder (``git archive``: no git state changes)."""
-    folder = Path(tempfile.mkdtemp(prefix="bench_model_before_"))
-    archive = subprocess.run(["git", "-C", str(ROOT), "archive", "--format=tar", revision], check=True,
+    """The project's files at a git revision (``git archive``: no git state changes), in a temporary folder
+    named by the commit and kept: its Numba cache beside the sources serves the next run (compiling an
+    old revision took up to 30 minutes on a loaded machine)."""
+    commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--verify", f"{revision}^{{commit}}"], check=True,
+                            capture_output=True, text=True).stdout.strip()
+    folder = Path(tempfile.gettempdir()) / f"bench_model_before_{commit}"
+    if (folder / ".complete").exists():
+        return folder
+    staging = Path(tempfile.mkdtemp(prefix="bench_model_before_"))
+    archive = subprocess.run(["git", "-C", str(ROOT), "archive", "--format=tar", commit], check=True,
                              capture_output=True).stdout
-    subprocess.run(["tar", "-x", "-C", str(folder)], input=archive, check=True)
+    subprocess.run(["tar", "-x", "-C", str(staging)], input=archive, check=True)
+    (staging / ".complete").touch()
+    if folder.exists():      # an interrupted extraction
+        return staging
+    staging.rename(folder)
     return folder
 
 

@@ -16,7 +16,8 @@ import numpy as np
 from .kernel_cache import njit
 from .waveforms.pieces import ROUNDING, WaveformTerms, piece_of, piece_value
 
-__all__ = ["TimeAxis", "BinRun", "KernelProblem", "bin_edge", "bin_of", "pixel_bins", "kernel_cut", "kernel_values"]
+__all__ = ["TimeAxis", "BinRun", "KernelProblem", "StepTable", "bin_edge", "bin_of", "pixel_bins", "kernel_cut",
+           "kernel_values", "step_table", "step_cut", "step_kernels"]
 
 
 class TimeAxis(NamedTuple):
@@ -114,3 +115,74 @@ def kernel_values(problem, tau, scale, values, noise):
         values[i] = scale * (constant + (upper_value - lower_value))
         noise[i] = size * (abs(constant) + upper_size + lower_size)
         lower_value, lower_size, lower_constant = upper_value, upper_size, upper_constant
+
+
+class StepTable(NamedTuple):
+    """A waveform's pieces as plain arrays for the kernels' hot path (:mod:`analytic.assembly`).
+
+    ``kinked``: the starts b_i where s or a derivative jumps (the kernels' breakpoints are the
+    bin edges shifted back by them). ``steps``: whether S is a step function (every piece a
+    constant, ``WaveformTerms.degree`` 0, as for the impulse); then S = K_i + F_i on piece i
+    with ``starts``, ``constants`` K_i and ``forms`` F_i, and each κ_n is constant between
+    breakpoints. Arrays read by compiled code through plain arguments, not through a record's
+    fields, whose every read pays a reference count.
+    """
+
+    kinked: np.ndarray
+    steps: bool
+    starts: np.ndarray
+    constants: np.ndarray
+    forms: np.ndarray
+
+
+@njit(cache=True, error_model="numpy")
+def step_table(terms):
+    """The :class:`StepTable` of a waveform's pieces."""
+    kinked = terms.starts[terms.kinks].copy()
+    steps = terms.degree == 0
+    forms = np.zeros(terms.starts.size)
+    for i in range(terms.starts.size):
+        if steps and terms.offsets[i + 1] > terms.offsets[i]:
+            forms[i] = piece_value(terms, i, 0.0)[0]    # a constant: its value anywhere
+    return StepTable(kinked, steps, terms.starts.copy(), terms.constants.copy(), forms)
+
+
+@njit(cache=True, error_model="numpy")
+def step_cut(kinked, low, high, axis, run):
+    """:func:`kernel_cut` from a :class:`StepTable`'s ``kinked`` starts."""
+    for n in range(run.first, run.first + run.bins + 1):
+        edge = bin_edge(axis, n)
+        for i in range(kinked.size):
+            if low < edge - kinked[i] < high:
+                return True
+    return False
+
+
+@njit(cache=True, error_model="numpy")
+def _step_of(starts, u):
+    """:func:`analytic.waveforms.pieces.piece_of` on plain arrays: the last piece starting below u, or -1.
+
+    A step function has a few pieces (the impulse one): a scan from the end.
+    """
+    for piece in range(starts.size - 1, -1, -1):
+        if starts[piece] < u:
+            return piece
+    return -1
+
+
+@njit(cache=True, error_model="numpy")
+def step_kernels(starts, constants, forms, axis, run, tau, scale, out):
+    """out[i] = scale κ_{first + i}(τ), i < bins, for a step-function S (a :class:`StepTable` with ``steps``).
+
+    κ_n = (K_j - K_i) + (F_j - F_i) at the bin's two edges, as :func:`kernel_values` and
+    :func:`analytic.taylor.kernel_taylor` compute it, so the same numbers.
+    """
+    lower = _step_of(starts, bin_edge(axis, run.first) - tau)
+    lower_constant = 0.0 if lower < 0 else constants[lower]
+    lower_form = 0.0 if lower < 0 else forms[lower]
+    for i in range(run.bins):
+        upper = _step_of(starts, bin_edge(axis, run.first + i + 1) - tau)
+        upper_constant = 0.0 if upper < 0 else constants[upper]
+        upper_form = 0.0 if upper < 0 else forms[upper]
+        out[i] = ((upper_constant - lower_constant) + (upper_form - lower_form)) * scale
+        lower_constant, lower_form = upper_constant, upper_form

@@ -49,7 +49,7 @@ from .kernel_cache import njit
 from .attenuation import LAMBERTIAN, PAPER, attenuation_at
 
 __all__ = ["Frame", "Isochrone", "PixelBox", "make_frame", "pair_frame", "ellipse", "point_on_ellipse", "jacobian", "path_length_at",
-           "first_arrival_point", "segment_minimum", "rectangle_range", "rectangle_crossings",
+           "first_arrival_point", "segment_minimum", "rectangle_range", "range_bound", "rectangle_crossings",
            "LAMBERTIAN", "PAPER", "attenuation_at"]
 
 class PixelBox(NamedTuple):
@@ -276,6 +276,38 @@ def rectangle_range(frame, box):
     low = min(low, segment_minimum(frame, x0, y1, x1, y1)[0])
     low = min(low, segment_minimum(frame, x0, y0, x0, y1)[0])
     return low, top
+
+
+#: Relative slack of :func:`range_bound` over the rounding of d (a few dozen roundings of a path length).
+_BOUND_SLACK = 1e-14
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def range_bound(frame, centre_x, centre_y, half_x, half_y):
+    """An interval of path length holding d over the box centre ± half, metres, from d and ∇d at its centre.
+
+    d is convex, so d >= d(c) + ∇d(c)·δ over the box; its Hessian along the plane is at
+    most 1/d_s + 1/d_k (each distance's is (I - u uᵀ)/d), so d <= d(c) + ∇d(c)·δ + |δ|²/2
+    (1/d_s + 1/d_k) with each distance at least its value at the centre less |δ| (and its
+    height). For a pixel far smaller than its distances the interval exceeds
+    :func:`rectangle_range` by ~|δ|²/d: two square roots instead of a dozen. The slack
+    covers both computations' rounding, so the interval holds :func:`rectangle_range`'s
+    floating-point ends too.
+    """
+    sx = centre_x - frame.source_x
+    sy = centre_y - frame.source_y
+    kx = centre_x - frame.sensor_x
+    ky = centre_y - frame.sensor_y
+    ds = math.sqrt(sx * sx + sy * sy + frame.source_height ** 2)
+    dk = math.sqrt(kx * kx + ky * ky + frame.sensor_height ** 2)
+    linear = abs(sx / ds + kx / dk) * half_x + abs(sy / ds + ky / dk) * half_y
+    radius2 = half_x * half_x + half_y * half_y
+    radius = math.sqrt(radius2)
+    curvature = 0.5 * radius2 * (1.0 / max(ds - radius, frame.source_height)
+                                 + 1.0 / max(dk - radius, frame.sensor_height))
+    d = ds + dk
+    slack = _BOUND_SLACK * (d + linear + curvature)
+    return d - linear - slack, d + linear + curvature + slack
 
 
 @njit(cache=True, error_model="numpy")

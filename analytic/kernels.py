@@ -26,15 +26,14 @@ from .bins import BinRun, KernelProblem, TimeAxis, bin_edge, bin_of, kernel_cut,
 from .isochrone import Frame, PixelBox, ellipse, first_arrival_point, path_length_at, segment_minimum
 from .kernel_cache import njit
 from .attenuation import attenuation_of_distances
-from .quadrature import (GAUSS_NODES, GAUSS_WEIGHTS, LINEAR, ROOT_BOTH, ROOT_END, ROOT_START, TENSOR_LEVELS,
-                         IsochronePiece, Workspace, adapt, integrate, isochrone_rule, make_workspace, piece_map,
+from .quadrature import (LINEAR, ROOT_BOTH, ROOT_END, ROOT_START, IsochronePiece, Workspace, adapt, integrate, isochrone_rule, make_workspace, piece_map,
                          pixel_isochrone_integral, tensor_integrate)
+from .moments import MomentProblem, bin_moments, moment_weight, smooth_by_moments
 from .strips import strip_entries
-from .taylor import MAX_TERMS, cancels, entries_from_moments, kernel_taylor
-from .waveforms.pieces import ROUNDING
+from .taylor import MAX_TERMS, kernel_taylor
 
 __all__ = ["TimeAxis", "BinRun", "Scratch", "RouteOutcome", "make_scratch", "pixel_bins", "pair_entries",
-           "pair_by_method", "bin_of", "FOOT_CLEARANCE", "SAFETY", "AUTO", "SMOOTH", "ISOCHRONE", "ADAPTIVE", "STRIP"]
+           "pair_by_method", "clear_of_feet", "scratch_failures", "bin_of", "FOOT_CLEARANCE", "SAFETY", "AUTO", "SMOOTH", "ISOCHRONE", "ADAPTIVE", "STRIP"]
 
 #: A pixel is integrated as a smooth 2-D function only if every foot is at
 #: least this many pixel sides away, counting its height: sqrt(δ² + h²) >=
@@ -87,13 +86,6 @@ class SmoothProblem(NamedTuple):
     kernel: "KernelProblem"
 
 
-class MomentProblem(NamedTuple):
-    """Powers (τ - centre)^j, j < count, of the path length: the moments' weights (:mod:`analytic.taylor`)."""
-
-    centre: float
-    count: int
-
-
 class CutProblem(NamedTuple):
     """:func:`_cut_integrand`'s problem: one τ-piece of one (pair, pixel), inner φ-integrals adaptive."""
 
@@ -119,7 +111,7 @@ def make_scratch(width):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _clear_of_feet(frame, box):
+def clear_of_feet(frame, box):
     """Whether the attenuation's peaks under both feet are far enough for the tensor rule."""
     side = FOOT_CLEARANCE * max(box.x1 - box.x0, box.y1 - box.y0)
     for fx, fy, height in ((frame.source_x, frame.source_y, frame.source_height),
@@ -139,114 +131,6 @@ def _smooth_integrand(problem, x, y, values, noise):
     dk2 = (x - frame.sensor_x) ** 2 + (y - frame.sensor_y) ** 2 + frame.sensor_height ** 2
     kernel_values(problem.kernel, math.sqrt(ds2) + math.sqrt(dk2), attenuation_of_distances(frame, x, y, ds2, dk2),
              values, noise)
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _moment_weight(problem, tau, scale, values, noise):
-    """values[j] = scale (τ - centre)^j, j < count: the moments' weights (their rounding is negligible)."""
-    offset = tau - problem.centre
-    power = scale
-    for j in range(problem.count):
-        values[j] = power
-        noise[j] = 0.0
-        power *= offset
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _pixel_moments(frame, box, centre, count, rtol, moments):
-    """m_j = ∫_pixel a(x) (d(x) - centre)^j dx, j < count, by the tensor Gauss ladder; True when converged.
-
-    The rule and its judgement are :func:`analytic.quadrature.tensor_integrate`'s (rung n is
-    G_n x G_n, its error the next rung's difference or the previous rungs' trend, G_1 trusted
-    for an integrand analytic around the pixel), written for the few scalar moments of one
-    pixel: a generic vector of components would cost more than the arithmetic itself.
-    ``moments`` is a Workspace of at least ``count`` components; the result is in its
-    ``result`` and each moment's ∫ |...| in its ``magnitude``.
-    """
-    lower, upper, magnitude = moments.lower, moments.upper, moments.magnitude
-    previous, before, result = moments.previous, moments.before, moments.result
-    cx = 0.5 * (box.x0 + box.x1)
-    hx = 0.5 * (box.x1 - box.x0)
-    cy = 0.5 * (box.y0 + box.y1)
-    hy = 0.5 * (box.y1 - box.y0)
-    for order in range(1, TENSOR_LEVELS + 1):
-        target = lower if order == 1 else upper
-        for j in range(count):
-            target[j] = 0.0
-            magnitude[j] = 0.0
-        for jx in range(order):
-            x = cx + hx * GAUSS_NODES[order, jx]
-            wx = hx * GAUSS_WEIGHTS[order, jx]
-            source_x = (x - frame.source_x) ** 2 + frame.source_height ** 2
-            sensor_x = (x - frame.sensor_x) ** 2 + frame.sensor_height ** 2
-            for jy in range(order):
-                y = cy + hy * GAUSS_NODES[order, jy]
-                ds2 = source_x + (y - frame.source_y) ** 2
-                dk2 = sensor_x + (y - frame.sensor_y) ** 2
-                value = wx * hy * GAUSS_WEIGHTS[order, jy] * attenuation_of_distances(frame, x, y, ds2, dk2)
-                offset = math.sqrt(ds2) + math.sqrt(dk2) - centre
-                for j in range(count):
-                    target[j] += value
-                    magnitude[j] += abs(value)
-                    value *= offset
-        if order == 1:
-            continue
-        rung = order - 1            # is G_rung (in lower) within the tolerance, by G_{rung+1} (in upper)?
-        accepted = True
-        for j in range(count):
-            delta = abs(lower[j] - upper[j])
-            estimate = delta
-            if rung >= 2:
-                estimate = max(delta, previous[j] * min(1.0, previous[j] / before[j]) if before[j] > 0.0
-                               else previous[j])
-            if not estimate <= max(rtol, ROUNDING) * magnitude[j]:
-                accepted = False
-                break
-        if accepted:
-            for j in range(count):
-                result[j] = lower[j]
-            return True
-        for j in range(count):
-            before[j] = magnitude[j] if rung == 1 else previous[j]
-            previous[j] = abs(lower[j] - upper[j])
-            lower[j] = upper[j]
-    return False
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _smooth_by_moments(frame, box, low, high, terms, axis, run, rtol, out, scratch):
-    """The smooth route through the pixel's moments (:mod:`analytic.taylor`); False when it does not apply.
-
-    It does not apply when a kernel needs more than MAX_TERMS Taylor terms over the pixel's range,
-    when the moments' tensor rule does not converge, or when an entry's terms cancel.
-    """
-    centre = 0.5 * (low + high)
-    half = 0.5 * (high - low)
-    count = kernel_taylor(terms, axis, run, centre, half, rtol, scratch.coefficients, scratch.lower_edge,
-                          scratch.upper_edge)
-    if count == 0:
-        return False
-    if not _pixel_moments(frame, box, centre, count, rtol, scratch.moments):
-        return False
-    return _bin_moments(scratch, count, run.bins, half, out)
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _bin_moments(scratch, count, bins, half, out):
-    """Add Σ_j c_{n,j} m_j to out[:bins], unless an entry's terms cancel (then False and nothing added).
-
-    The response is never negative, so M_j = ∫ |τ - c|^j G <= half^j m_0 bounds each moment's magnitude.
-    """
-    moments = scratch.moments.result
-    magnitudes = scratch.moments.floor      # free here: the quadrature is over
-    power = 1.0
-    for j in range(count):
-        magnitudes[j] = power * abs(moments[0])
-        power *= half
-    if cancels(scratch.coefficients, count, bins, moments, magnitudes):
-        return False
-    entries_from_moments(scratch.coefficients, count, bins, moments, out)
-    return True
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -281,7 +165,7 @@ def _cut_integrand(problem, v, values, noise):
 def _cut_moments_integrand(problem, v, values, noise):
     """(τ - centre)^j G(τ) dτ/dv at τ = piece_map(v), j < count: the piece's moments."""
     tau, weight = _cut_response(problem, v)
-    _moment_weight(problem.kernel, tau, weight, values, noise)
+    moment_weight(problem.kernel, tau, weight, values, noise)
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -351,9 +235,13 @@ def _pixel_breakpoints(frame, box, low, high, terms, axis, run):
     return kept_points[:kept], kept_flags[:kept]
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy")
 def _cut_entries(frame, box, low, high, terms, axis, run, rtol, smooth_arcs, taylor, out, scratch):
     """Add the pair's entries to out[:run.bins] by the cut (τ, φ) quadrature.
+
+    A real call (not inlined): compiled once for :func:`pair_entries` and :func:`pair_by_method`;
+    its cost per call (a reference count on each of the scratch's arrays) is small beside a cut
+    pair's quadrature.
 
     ``smooth_arcs``: the integrand is smooth along every arc (the pixel is
     clear of the feet and of x*), so each τ-piece first tries the tensor
@@ -427,7 +315,7 @@ def _piece_by_moments(frame, box, terms, axis, run, kind, tau_a, span, rtol, smo
     if smooth_arcs:
         for j in range(count):
             result[j] = 0.0
-        failed = adapt(isochrone_rule, _moment_weight, IsochronePiece(powers, frame, box, kind, tau_a, span,
+        failed = adapt(isochrone_rule, moment_weight, IsochronePiece(powers, frame, box, kind, tau_a, span,
                                                                       scratch.angles, scratch.arcs),
                        0.0, 1.0, rtol, count, result, moments, resolution, _TENSOR_PIECES)
         if failed:
@@ -439,7 +327,7 @@ def _piece_by_moments(frame, box, terms, axis, run, kind, tau_a, span, rtol, smo
         integrate(_cut_moments_integrand, CutProblem(frame, box, powers, kind, tau_a, span, rtol * _INNER_FACTOR,
                                                      scratch.angles, scratch.arcs, scratch.inner),
                   0.0, 1.0, rtol, count, result, moments, resolution)
-    return _bin_moments(scratch, count, run.bins, half, target)
+    return bin_moments(scratch, count, run.bins, half, target)
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -457,9 +345,19 @@ def _smooth_arcs(frame, box, clear):
     return clear and dx * dx + dy * dy >= side * side
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy")
+def _smooth_direct(frame, box, terms, axis, run, rtol, out, work):
+    """The smooth route with every kernel at every node (the tensor Gauss ladder); True when converged."""
+    return tensor_integrate(_smooth_integrand, SmoothProblem(frame, KernelProblem(terms, axis, run)), box, rtol,
+                            run.bins, out, work)
+
+
+@njit(cache=True, error_model="numpy")
 def pair_entries(frame, box, low, high, terms, axis, run, rtol, out, scratch):
     """out[i] = A[(k, first + i), p] for one (pair, pixel); True if the smooth route served.
+
+    A real call (not inlined): assembly takes it only for the pairs its own smooth path
+    (:mod:`analytic.assembly`) does not serve.
 
     Parameters
     ----------
@@ -484,12 +382,11 @@ def pair_entries(frame, box, low, high, terms, axis, run, rtol, out, scratch):
     """
     for i in range(run.bins):
         out[i] = 0.0
-    clear = _clear_of_feet(frame, box)
+    clear = clear_of_feet(frame, box)
     if clear and not kernel_cut(low, high, terms, axis, run):
-        if _smooth_by_moments(frame, box, low, high, terms, axis, run, rtol, out, scratch):
+        if smooth_by_moments(frame, box, low, high, terms, axis, run, rtol, out, scratch):
             return True
-        if tensor_integrate(_smooth_integrand, SmoothProblem(frame, KernelProblem(terms, axis, run)), box, rtol,
-                            run.bins, out, scratch.work):
+        if _smooth_direct(frame, box, terms, axis, run, rtol, out, scratch.work):
             return True
     smooth_arcs = _smooth_arcs(frame, box, clear)
     if smooth_arcs and strip_entries(frame, box, low, high, terms, axis, run, rtol, out, scratch.work):
@@ -500,37 +397,44 @@ def pair_entries(frame, box, low, high, terms, axis, run, rtol, out, scratch):
 
 @njit(cache=True, error_model="numpy")
 def pair_by_method(frame, box, low, high, terms, axis, run, rtol, method, taylor, out, scratch):
-    """One (pair, pixel)'s entries by one route (``AUTO``, ``SMOOTH``, ``ISOCHRONE`` or ``ADAPTIVE``).
+    """One (pair, pixel)'s entries by one route (``SMOOTH``, ``STRIP``, ``ISOCHRONE`` or ``ADAPTIVE``).
 
-    ``taylor`` (except for ``AUTO``): through the moments and the kernels' Taylor coefficients
-    (:mod:`analytic.taylor`), or False: with the kernels at every quadrature node.
+    ``taylor`` (except for ``STRIP``): through the moments and the kernels' Taylor coefficients
+    (:mod:`analytic.taylor`), or False: with the kernels at every quadrature node. ``AUTO``
+    is :func:`pair_entries` (what assembly does for the pairs its smooth path does not serve;
+    :func:`analytic.assembly.auto_entries` is assembly's whole route).
 
     Returns
     -------
     RouteOutcome
-        ``applies`` False when the smooth route does not apply (a kernel
-        breakpoint crosses the pixel or a foot is near), ``converged``
-        False when it did not converge; ``failures``: quadrature pieces
-        kept without meeting the tolerance.
+        ``applies`` False when the route does not apply (a kernel breakpoint
+        crosses the pixel or a foot is near; for ``STRIP``, x* or a foot is
+        near), ``converged`` False when it did not converge; ``failures``:
+        quadrature pieces kept without meeting the tolerance.
     """
     for i in range(run.bins):
         out[i] = 0.0
     if method == AUTO:
         pair_entries(frame, box, low, high, terms, axis, run, rtol, out, scratch)
     elif method == SMOOTH:
-        if kernel_cut(low, high, terms, axis, run) or not _clear_of_feet(frame, box):
+        if kernel_cut(low, high, terms, axis, run) or not clear_of_feet(frame, box):
             return RouteOutcome(False, False, 0)
         if taylor:
-            if not _smooth_by_moments(frame, box, low, high, terms, axis, run, rtol, out, scratch):
+            if not smooth_by_moments(frame, box, low, high, terms, axis, run, rtol, out, scratch):
                 return RouteOutcome(True, False, 0)
-        elif not tensor_integrate(_smooth_integrand, SmoothProblem(frame, KernelProblem(terms, axis, run)), box,
-                                  rtol, run.bins, out, scratch.work):
+        elif not _smooth_direct(frame, box, terms, axis, run, rtol, out, scratch.work):
             return RouteOutcome(True, False, 0)
     elif method == STRIP:
-        if not _smooth_arcs(frame, box, _clear_of_feet(frame, box)):
+        if not _smooth_arcs(frame, box, clear_of_feet(frame, box)):
             return RouteOutcome(False, False, 0)
         if not strip_entries(frame, box, low, high, terms, axis, run, rtol, out, scratch.work):
             return RouteOutcome(True, False, 0)
     else:
         _cut_entries(frame, box, low, high, terms, axis, run, rtol, method == ISOCHRONE, taylor, out, scratch)
-    return RouteOutcome(True, True, scratch.work.failures[0] + scratch.inner.failures[0] + scratch.moments.failures[0])
+    return RouteOutcome(True, True, scratch_failures(scratch))
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def scratch_failures(scratch):
+    """Quadrature pieces kept without meeting the tolerance, over the scratch's three workspaces."""
+    return scratch.work.failures[0] + scratch.inner.failures[0] + scratch.moments.failures[0]

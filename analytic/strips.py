@@ -16,7 +16,11 @@ point x* (there the isochrones turn inside the pixel, and the routes of
 :mod:`analytic.kernels` take over). Each entry is the G_4 x G_4 rule,
 accepted when G_3 x G_3 agrees with it within the tolerance (for a smooth
 integrand the difference far exceeds G_4's own error); otherwise nothing is
-kept and the caller integrates the pixel its other way.
+kept and the caller integrates the pixel its other way. For a step-function S
+(the impulse) every κ_n is constant on a slab, so the rules integrate a_k alone
+and the kernels are taken once per slab. A pixel that one isochrone cuts (the
+common case for small pixels) has two slabs with the same side: they are
+integrated together, its roots found once per node.
 """
 
 from __future__ import annotations
@@ -102,6 +106,9 @@ def _polish(frame, tau, u, w, swap, along_w):
             w -= step
         else:
             u -= step
+        # Newton converges quadratically: after a step this small the next is below rounding
+        if abs(step) <= 1e-14 * (tau + abs(u) + abs(w)):
+            break
     return w if along_w else u
 
 
@@ -194,32 +201,93 @@ def _region_rows(frame, lower, upper, tau_a, tau_b, has_lower, has_upper, swap, 
 
 
 @njit(cache=True, error_model="numpy", inline="always")
+def _row_rule(frame, kernel, swap, u, wu, wa, wb, order, values, noise, total, magnitude, rounding, judged, steps):
+    """G_order in w over [wa, wb] of the row at u (weight ``wu``), added as :func:`_slab_rule` says."""
+    scalar = 0.0
+    scalar_magnitude = 0.0
+    if not wb > wa:
+        return scalar, scalar_magnitude
+    cw = 0.5 * (wa + wb)
+    hw = 0.5 * (wb - wa)
+    for jw in range(order):
+        w = cw + hw * GAUSS_NODES[order, jw]
+        x, y = (w, u) if swap else (u, w)
+        ds2 = (x - frame.source_x) ** 2 + (y - frame.source_y) ** 2 + frame.source_height ** 2
+        dk2 = (x - frame.sensor_x) ** 2 + (y - frame.sensor_y) ** 2 + frame.sensor_height ** 2
+        weight = wu * hw * GAUSS_WEIGHTS[order, jw] * attenuation_of_distances(frame, x, y, ds2, dk2)
+        if steps:
+            scalar += weight
+            scalar_magnitude += abs(weight)
+            continue
+        kernel_values(kernel, math.sqrt(ds2) + math.sqrt(dk2), weight, values, noise)
+        for i in range(kernel.run.bins):
+            total[i] += values[i]
+        if judged:
+            for i in range(kernel.run.bins):
+                magnitude[i] += abs(values[i])
+                rounding[i] += noise[i]
+    return scalar, scalar_magnitude
+
+
+@njit(cache=True, error_model="numpy", inline="always")
 def _slab_rule(frame, kernel, lower, upper, tau_a, tau_b, has_lower, has_upper, swap, ua, ub, w0, w1, order,
-               values, noise, total, magnitude, rounding):
-    """G_order x G_order of a_k κ_n(d) over the slab's region for u in [ua, ub], added to total (per bin)."""
+               values, noise, total, magnitude, rounding, judged, steps):
+    """G_order x G_order of a_k κ_n(d) over the slab's region for u in [ua, ub], added to total (per bin).
+
+    ``judged``: also add ∫ |f| and f's rounding to magnitude and rounding (the rule that is kept;
+    the rule that only judges it needs neither). ``steps``: the kernels are constant on the slab
+    (a step-function S): the rule integrates a_k alone and returns (∫ a_k, ∫ |a_k|), adding nothing,
+    and its caller multiplies by the kernels once; else it returns (0, 0).
+    """
     cu = 0.5 * (ua + ub)
     hu = 0.5 * (ub - ua)
+    scalar = 0.0
+    scalar_magnitude = 0.0
     for ju in range(order):
         u = cu + hu * GAUSS_NODES[order, ju]
         wu = hu * GAUSS_WEIGHTS[order, ju]
         first_a, first_b, second_a, second_b = _region_rows(frame, lower, upper, tau_a, tau_b, has_lower, has_upper,
                                                             swap, u, w0, w1)
         for wa, wb in ((first_a, first_b), (second_a, second_b)):
-            if not wb > wa:
-                continue
-            cw = 0.5 * (wa + wb)
-            hw = 0.5 * (wb - wa)
-            for jw in range(order):
-                w = cw + hw * GAUSS_NODES[order, jw]
-                x, y = (w, u) if swap else (u, w)
-                ds2 = (x - frame.source_x) ** 2 + (y - frame.source_y) ** 2 + frame.source_height ** 2
-                dk2 = (x - frame.sensor_x) ** 2 + (y - frame.sensor_y) ** 2 + frame.sensor_height ** 2
-                weight = wu * hw * GAUSS_WEIGHTS[order, jw] * attenuation_of_distances(frame, x, y, ds2, dk2)
-                kernel_values(kernel, math.sqrt(ds2) + math.sqrt(dk2), weight, values, noise)
-                for i in range(kernel.run.bins):
-                    total[i] += values[i]
-                    magnitude[i] += abs(values[i])
-                    rounding[i] += noise[i]
+            value, value_size = _row_rule(frame, kernel, swap, u, wu, wa, wb, order, values, noise, total, magnitude,
+                                          rounding, judged, steps)
+            scalar += value
+            scalar_magnitude += value_size
+    return scalar, scalar_magnitude
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _cut_rule(frame, kernels, conic, tau, swap, ua, ub, w0, w1, order, values, noise, totals, magnitudes, roundings,
+              judged, steps):
+    """:func:`_slab_rule` of both slabs of a pixel that one isochrone d = τ cuts, at once.
+
+    The slabs {d <= τ} and {d >= τ} have the same side, so their u-pieces and their inner limits
+    at each node are the same roots, found once. ``kernels``, ``totals``, ``magnitudes`` and
+    ``roundings`` are pairs (slab below, slab above); returns the steps' scalars of both,
+    (∫ a, ∫ |a|) below, then above.
+    """
+    cu = 0.5 * (ua + ub)
+    hu = 0.5 * (ub - ua)
+    below, below_size, above, above_size = 0.0, 0.0, 0.0, 0.0
+    for ju in range(order):
+        u = cu + hu * GAUSS_NODES[order, ju]
+        wu = hu * GAUSS_WEIGHTS[order, ju]
+        low, high, real = _inner_roots(frame, conic, tau, u, swap)
+        if not real:        # the row lies wholly above
+            low, high = np.inf, np.inf
+        rows = ((max(w0, low), min(w1, high)), (w0, min(w1, low)), (max(w0, high), w1))
+        for row in range(3):
+            slab = min(row, 1)
+            value, value_size = _row_rule(frame, kernels[slab], swap, u, wu, rows[row][0], rows[row][1], order,
+                                          values, noise, totals[slab], magnitudes[slab], roundings[slab], judged,
+                                          steps)
+            if slab == 0:
+                below += value
+                below_size += value_size
+            else:
+                above += value
+                above_size += value_size
+    return below, below_size, above, above_size
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -240,9 +308,11 @@ def _slab_kinks(low, high, terms, axis, run, points):
     return used
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy")
 def strip_entries(frame, box, low, high, terms, axis, run, rtol, out, work):
     """Add one (pair, pixel)'s entries to out[:run.bins] by strips; False (out zeroed) when the route does not serve.
+
+    A real call (compiled once for every caller); its cost per call is small beside a cut pair's rules.
 
     Parameters
     ----------
@@ -280,22 +350,55 @@ def strip_entries(frame, box, low, high, terms, axis, run, rtol, out, work):
     taus = np.empty(2 + kinks * (run.bins + 1))
     slabs = _slab_kinks(low, high, terms, axis, run, taus)
     points = np.empty(10)
+    steps = terms.degree == 0
     low_order, magnitude, rounding = work.lower, work.magnitude, work.rounding
     for i in range(run.bins):
         low_order[i] = 0.0
         magnitude[i] = 0.0
         rounding[i] = 0.0
-    scratch_magnitude, scratch_rounding = work.previous, work.before
+    if slabs == 3:      # one isochrone cuts the pixel: its two slabs share their side
+        tau = taus[1]
+        below, below_offset = _slab_kernel(terms, axis, run, low, tau)
+        above, above_offset = _slab_kernel(terms, axis, run, tau, high)
+        conic = _conic(frame, tau, swap)
+        if conic[2] == 0.0:
+            return _discard(out, run.bins)
+        pieces = _slab_pieces(frame, box, conic, conic, tau, tau, True, False, swap, points)
+        if pieces < 0:
+            return _discard(out, run.bins)
+        kernels = (below, above)
+        sums = np.zeros(6)      # ∫ a_k below and above, by the kept and the judging rule, and ∫ |a_k| (steps)
+        for piece in range(pieces - 1):
+            ua, ub = points[piece], points[piece + 1]
+            if not ub > ua:
+                continue
+            value, value_size, other, other_size = _cut_rule(
+                frame, kernels, conic, tau, swap, ua, ub, w0, w1, HIGH_ORDER, work.values, work.noise,
+                (out[below_offset:], out[above_offset:]), (magnitude[below_offset:], magnitude[above_offset:]),
+                (rounding[below_offset:], rounding[above_offset:]), True, steps)
+            sums[0] += value
+            sums[1] += value_size
+            sums[2] += other
+            sums[3] += other_size
+            value, _, other, _ = _cut_rule(
+                frame, kernels, conic, tau, swap, ua, ub, w0, w1, LOW_ORDER, work.values, work.noise,
+                (low_order[below_offset:], low_order[above_offset:]), (magnitude, magnitude), (rounding, rounding),
+                False, steps)
+            sums[4] += value
+            sums[5] += other
+        if steps:
+            _add_steps(below, 0.5 * (low + tau), sums[0], sums[4], sums[1], below_offset, out, low_order, magnitude,
+                       rounding, work)
+            _add_steps(above, 0.5 * (tau + high), sums[2], sums[5], sums[3], above_offset, out, low_order,
+                       magnitude, rounding, work)
+        return _judged(out, low_order, magnitude, rounding, rtol, run.bins)
     for slab in range(slabs - 1):
         tau_a, tau_b = taus[slab], taus[slab + 1]
         if not tau_b > tau_a:
             continue
-        lo_bin = max(run.first, bin_of(tau_a + terms.lead, axis) - 1)
-        hi_bin = min(run.first + run.bins - 1, bin_of(tau_b + terms.duration, axis) + 1)
-        if hi_bin < lo_bin:
+        kernel, offset = _slab_kernel(terms, axis, run, tau_a, tau_b)
+        if kernel.run.bins <= 0:
             continue
-        kernel = KernelProblem(terms, axis, BinRun(lo_bin, hi_bin - lo_bin + 1))
-        offset = lo_bin - run.first
         has_lower, has_upper = slab > 0, slab < slabs - 2
         lower, upper = _conic(frame, tau_a, swap), _conic(frame, tau_b, swap)
         if (has_lower and lower[2] == 0.0) or (has_upper and upper[2] == 0.0):
@@ -303,18 +406,51 @@ def strip_entries(frame, box, low, high, terms, axis, run, rtol, out, work):
         pieces = _slab_pieces(frame, box, lower, upper, tau_a, tau_b, has_lower, has_upper, swap, points)
         if pieces < 0:
             return _discard(out, run.bins)
+        high_sum, low_sum, size = 0.0, 0.0, 0.0       # ∫ a_k over the slab (step-function S)
         for piece in range(pieces - 1):
             ua, ub = points[piece], points[piece + 1]
             if not ub > ua:
                 continue
-            _slab_rule(frame, kernel, lower, upper, tau_a, tau_b, has_lower, has_upper, swap, ua, ub, w0, w1,
-                       HIGH_ORDER, work.values, work.noise, out[offset:], magnitude[offset:], rounding[offset:])
-            _slab_rule(frame, kernel, lower, upper, tau_a, tau_b, has_lower, has_upper, swap, ua, ub, w0, w1,
-                       LOW_ORDER, work.values, work.noise, low_order[offset:], scratch_magnitude[offset:],
-                       scratch_rounding[offset:])
-    for i in range(run.bins):
+            value, value_size = _slab_rule(frame, kernel, lower, upper, tau_a, tau_b, has_lower, has_upper, swap, ua,
+                                           ub, w0, w1, HIGH_ORDER, work.values, work.noise, out[offset:],
+                                           magnitude[offset:], rounding[offset:], True, steps)
+            high_sum += value
+            size += value_size
+            low_sum += _slab_rule(frame, kernel, lower, upper, tau_a, tau_b, has_lower, has_upper, swap, ua, ub, w0,
+                                  w1, LOW_ORDER, work.values, work.noise, low_order[offset:], magnitude, rounding,
+                                  False, steps)[0]
+        if steps:
+            _add_steps(kernel, 0.5 * (tau_a + tau_b), high_sum, low_sum, size, offset, out, low_order, magnitude,
+                       rounding, work)
+    return _judged(out, low_order, magnitude, rounding, rtol, run.bins)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _slab_kernel(terms, axis, run, tau_a, tau_b):
+    """(kernels, offset): the bins light leaving the slab [τ_a, τ_b] reaches (one spare each side), and where they
+    start in the run."""
+    lo_bin = max(run.first, bin_of(tau_a + terms.lead, axis) - 1)
+    hi_bin = min(run.first + run.bins - 1, bin_of(tau_b + terms.duration, axis) + 1)
+    return KernelProblem(terms, axis, BinRun(lo_bin, max(hi_bin - lo_bin + 1, 0))), lo_bin - run.first
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _add_steps(kernel, tau, high_sum, low_sum, size, offset, out, low_order, magnitude, rounding, work):
+    """A step-function S's slab: κ_n is constant there, its value at τ (the middle) times ∫ a_k by each rule."""
+    kernel_values(kernel, tau, 1.0, work.values, work.noise)
+    for i in range(kernel.run.bins):
+        out[offset + i] += work.values[i] * high_sum
+        low_order[offset + i] += work.values[i] * low_sum
+        magnitude[offset + i] += abs(work.values[i]) * size
+        rounding[offset + i] += work.noise[i] * size
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _judged(out, low_order, magnitude, rounding, rtol, bins):
+    """Whether every entry's G_4 x G_4 agrees with G_3 x G_3 within the tolerance (else out zeroed, False)."""
+    for i in range(bins):
         if not abs(out[i] - low_order[i]) <= rtol * abs(out[i]) + 4.0 * (rounding[i] + ROUNDING * magnitude[i]):
-            return _discard(out, run.bins)
+            return _discard(out, bins)
     return True
 
 

@@ -1,6 +1,6 @@
 """Speed, memory and accuracy of the exact system matrix A, against a brute force and an earlier version.
 
-    python benchmarks/bench_model.py --out out/bench_model [--quick] [--before REV]
+    python benchmarks/bench_model.py --out out/bench_model [--quick] [--before REV] [--compile]
 
 Measures, on this machine (named in the output, with its load average):
 
@@ -10,8 +10,10 @@ Measures, on this machine (named in the output, with its load average):
    M = 50, 8 x 8 at M = 256, K = 16) in the same process: the ratio, and
    every entry's error relative to its row's largest against a tight
    assembly. With ``--before REV`` the same child script runs on the
-   project as it was at git revision REV (``git archive``, its own Numba
-   cache, warmed first), so that before and after are one run's numbers.
+   project as it was at git revision REV (``git archive`` into a folder of
+   the temporary directory named by the commit and kept, so that its Numba
+   cache, warmed first, serves later runs), so that before and after are
+   one run's numbers.
 2. ``forward`` at M = 1024, K = 16 end to end (process start to files
    written) and its peak resident memory, now and at REV.
 3. Scaling: time, CPU time, non-zeros, time per non-zero and peak memory
@@ -25,6 +27,11 @@ Measures, on this machine (named in the output, with its load average):
    (interleaved runs, best and median).
 5. The tolerance setting: build time and achieved error (against the tight
    assembly) from 1e-2 to 1e-8 on the default scene.
+6. With ``--compile``: Numba's compile from an empty cache (a fresh
+   ``NUMBA_CACHE_DIR``), wall and CPU time and peak memory, of what
+   ``scripts/setup.sh``'s warm-up compiles (A's assembly), then of the
+   entry points only the tests use (``pair_entries`` by every route), now
+   and at REV.
 
 Prints markdown tables and writes ``results.json`` in --out. Timings on a
 shared machine are provisional: compare ratios taken in the same run.
@@ -111,17 +118,24 @@ def run(command: str, root: Path = ROOT) -> float:
     return run_measured(command, root)[0]
 
 
-def run_measured(command: str, root: Path = ROOT) -> tuple[float, int]:
+def run_measured(command: str, root: Path = ROOT, **environment) -> tuple[float, int]:
     """(wall seconds, peak resident bytes) of a command, process start to exit (it must succeed)."""
-    environment = dict(os.environ, PYTHONPATH=f"{root}{os.pathsep}{Path(__file__).resolve().parent}")
+    return run_usage(command, root, **environment)[::2]
+
+
+def run_usage(command, root: Path = ROOT, **environment) -> tuple[float, float, int]:
+    """(wall seconds, CPU seconds, peak resident bytes) of a command line or argument list (it must succeed),
+    extra variables set."""
+    environment = dict(os.environ, PYTHONPATH=f"{root}{os.pathsep}{Path(__file__).resolve().parent}", **environment)
     started = time.perf_counter()
-    process = subprocess.Popen(shlex.split(command), env=environment, cwd=root, stdout=subprocess.DEVNULL)
+    arguments = shlex.split(command) if isinstance(command, str) else command
+    process = subprocess.Popen(arguments, env=environment, cwd=root, stdout=subprocess.DEVNULL)
     _, status, usage = os.wait4(process.pid, 0)
     seconds = time.perf_counter() - started
     process.returncode = os.waitstatus_to_exitcode(status)
     if process.returncode != 0:
         raise subprocess.CalledProcessError(process.returncode, command)
-    return seconds, usage.ru_maxrss * 1024
+    return seconds, usage.ru_utime + usage.ru_stime, usage.ru_maxrss * 1024
 
 
 def child(code: str, root: Path = ROOT) -> dict:
@@ -197,13 +211,40 @@ print(json.dumps(rows))
 WARM = "{python} -c 'from analytic.scene import default_scene; from analytic.system import forward; " \
        "forward(default_scene(pixels=4, noise=None))'"
 
+# What a fresh clone compiles: A's assembly (the set-up's warm-up), then the routes only the tests call
+COMPILE_ASSEMBLY = """
+from analytic.scene import default_scene
+from analytic.system import system_matrix
+system_matrix(default_scene(pixels=4, noise=None))
+"""
+COMPILE_ROUTES = """
+import contextlib
+from analytic.scene import default_scene
+from analytic.system import METHODS, pair_entries
+for method in METHODS:
+    for taylor in (True, False):
+        with contextlib.suppress(ValueError):      # a route that does not apply to this pixel was still compiled
+            pair_entries(default_scene(pixels=4, noise=None), 0, 5, method=method, taylor=taylor)
+"""
+
 
 def checkout(revision: str) -> Path:
-    """The project's files at a git revision, in a temporary folder (``git archive``: no git state changes)."""
-    folder = Path(tempfile.mkdtemp(prefix="bench_model_before_"))
-    archive = subprocess.run(["git", "-C", str(ROOT), "archive", "--format=tar", revision], check=True,
+    """The project's files at a git revision (``git archive``: no git state changes), in a temporary folder
+    named by the commit and kept: its Numba cache beside the sources serves the next run (compiling an
+    old revision took up to 30 minutes on a loaded machine)."""
+    commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--verify", f"{revision}^{{commit}}"], check=True,
+                            capture_output=True, text=True).stdout.strip()
+    folder = Path(tempfile.gettempdir()) / f"bench_model_before_{commit}"
+    if (folder / ".complete").exists():
+        return folder
+    staging = Path(tempfile.mkdtemp(prefix="bench_model_before_"))
+    archive = subprocess.run(["git", "-C", str(ROOT), "archive", "--format=tar", commit], check=True,
                              capture_output=True).stdout
-    subprocess.run(["tar", "-x", "-C", str(folder)], input=archive, check=True)
+    subprocess.run(["tar", "-x", "-C", str(staging)], input=archive, check=True)
+    (staging / ".complete").touch()
+    if folder.exists():      # an interrupted extraction
+        return staging
+    staging.rename(folder)
     return folder
 
 
@@ -249,11 +290,29 @@ def in_process(root: Path, repeats: int) -> list:
     return child(IN_PROCESS.format(repeats=repeats), root)
 
 
+def compile_times(versions: dict) -> list:
+    """Section 6: each version's compile from an empty cache, A's assembly first, then the tests' routes."""
+    rows, measured = [], []
+    for label, root in versions.items():
+        with tempfile.TemporaryDirectory(prefix="bench_model_cache_") as cache:
+            for step, code in (("assembly (set-up's warm-up)", COMPILE_ASSEMBLY), ("tests' routes", COMPILE_ROUTES)):
+                wall, cpu, peak = run_usage([sys.executable, "-c", code], root, NUMBA_CACHE_DIR=cache)
+                measured.append({"version": label, "step": step, "seconds": wall, "cpu_seconds": cpu,
+                                 "peak_bytes": peak})
+                rows.append([label, step, f"{wall:.0f}", f"{cpu:.0f}", f"{peak / 2**30:.2f}"])
+    print("Numba's compile from an empty cache (a fresh NUMBA_CACHE_DIR; each step one process, the routes after "
+          "the assembly in the same cache):\n")
+    table(["version", "what", "wall (s)", "CPU (s)", "peak memory (GiB)"], rows)
+    return measured
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default="out/bench_model")
     parser.add_argument("--quick", action="store_true", help="skip M = 512, 1024 and K = 64; fewer repeats")
     parser.add_argument("--before", metavar="REV", help="also time the project at this git revision")
+    parser.add_argument("--compile", action="store_true",
+                        help="also time Numba's compile from an empty cache (minutes; GiB of memory at some revisions)")
     args = parser.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -376,6 +435,9 @@ def main():
           "entry error = max |A - A_tight| / |A_tight|, what the tolerance bounds; row error = max "
           "|A - A_tight| / row max):\n")
     table(["tolerance", "build (s)", "entry error", "tolerance / entry error", "row error"], rows)
+
+    if args.compile:
+        results["compile"] = compile_times(versions)
 
     results["load_average_end"] = load()
     print(f"load average at end {results['load_average_end']}")

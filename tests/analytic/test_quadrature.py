@@ -112,6 +112,19 @@ def test_assembly_route_agrees_with_adaptive(rng, waveform):
             _assert_agree(auto, _reference(scene, sensor, int(pixel)), (waveform, sensor, pixel))
 
 
+@pytest.mark.parametrize("waveform", ["impulse", "square", "butterworth"])
+def test_assembly_route_on_fine_pixels_agrees_with_adaptive(rng, waveform):
+    """Fine pixels, where assembly settles most pairs from d and ∇d at the pixel's centre and takes
+    the smooth ones through their moments over that bound (analytic.assembly): the same run of bins
+    as the exact range gives, and the adaptive route's entries."""
+    for _ in range(3):
+        scene = _random_scene(rng, waveform).replace(pixels=int(rng.integers(200, 1500)), reflectance=1.0)
+        for _ in range(10):
+            sensor, pixel = int(rng.integers(scene.sensor_count)), int(rng.integers(scene.pixels**2))
+            auto = pair_entries(scene, sensor, pixel, method="auto", tolerance=TOLERANCE)
+            _assert_agree(auto, _reference(scene, sensor, pixel), (waveform, scene.pixels, sensor, pixel))
+
+
 def test_unknown_route_and_inapplicable_smooth_route_are_refused():
     scene = Scene(pixels=4, source=(0.5, 0.5, 1.0), sensors=[(0.5, 0.5, 1.0)],
                   sampling=Sampling(bin_width_opl=0.001, start_opl=1.9, count=400))

@@ -8,7 +8,7 @@ lies wholly in front of it (the only scenes :class:`analytic.relay_wall.RelayWal
 accepts), so no rays are traced. Each sample is a point x of the hidden
 rectangle that serves *every* (l, s) pair of the scan: for pair p it adds
 
-    c_p = L_p ρ_h(x) / π · cos θ_x^l cos θ_x^s cos θ_l^x cos θ_s^x / (|x - l|² |x - s|²) / p(x),
+    c_p = L_p ρ_h(x) / π · g_l(x) g_s(x) / p(x),   g_w = cos θ_x^w cos θ_w^x / |x - w|²,
 
 L_p = cos θ_l^las / |o_l - l|² (ρ_w / π)² the laser leg per unit intensity,
 to the bins its path |x - l| + |x - s| (plus both legs when the scan counts
@@ -17,10 +17,25 @@ unit laser intensity; :func:`transient.render.render` multiplies by I once.
 Geometry and sums are float64; only the hidden texture is float32
 (Mitsuba's bitmaps).
 
-Points are drawn uniformly over the rectangle, jittered-stratified in
-Morton order per replica, as ``transient_opl`` does; lanes run over
-(sample, pair), so one compiled kernel serves any number of pairs, in
-launches of at most :data:`MAX_LANES` lanes.
+How x is drawn (:mod:`transient.plane_sampling`, chosen as for the plane
+by :func:`transient.plane.techniques`, with a single scan's laser point l
+in the source's place and the read points in the sensors'):
+
+- ``mis`` (default): single scans by the solid angle l sees the rectangle
+  under where g_l varies more than 3-fold over it (a rectangle near the
+  wall), and, when some read point's g_s would then leave a weight over
+  :data:`MIS_PEAK_RATIO` x its mean, the read points' own techniques
+  too, all weighted by the balance heuristic; confocal and exhaustive
+  scans share no laser point and sample by area;
+- ``source``: l's technique alone; ``area``: uniformly (kept to measure
+  the others against);
+- each technique's share of a replica jittered-stratified in Morton order
+  (``sampler = stratified``), as ``transient_opl`` does.
+
+The kernel's lanes are samples: the per-sample work (random stream,
+stratified point, texture, density) is done once and a loop over the scan
+(:meth:`TransientNlosIntegrator._deposit_pairs`) adds each pair with two
+distances' worth of arithmetic and one scatter-add.
 
 Import only after :func:`transient.backend.select_variant`.
 """
@@ -28,6 +43,7 @@ Import only after :func:`transient.backend.select_variant`.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import drjit as dr
 import mitsuba as mi
@@ -38,23 +54,71 @@ from analytic.relay_wall import WALL_NORMAL, grid_points
 from .chunks import ReplicaLayout, checked_chunk
 from .common import deposit, is_diffuse, jittered_point, opaque_f64, opaque_u32, reduce_mode, replica_of, \
     sample_stream, time_axis_and_waveform
+from .plane import SAMPLERS, STRATEGIES, plane_frame, techniques
+from .plane_sampling import block_bounds, mixture_density, peak_ratio, warp
 
-__all__ = ["TransientNlosIntegrator", "PLUGIN_NAME", "MAX_LANES", "SCAN_TYPES"]
+__all__ = ["TransientNlosIntegrator", "PLUGIN_NAME", "SCAN_TYPES", "STRATEGIES", "SAMPLERS", "MIS_PEAK_RATIO"]
 
 PLUGIN_NAME = "transient_opl_nlos"
 
-#: Most (sample, pair) lanes of one kernel launch; a chunk with more is cut into launches.
-MAX_LANES = 2**24
-
 SCAN_TYPES = ("single", "confocal", "exhaustive")
+
+#: A single scan mixes in techniques of its read points only when, with points drawn for l alone, some
+#: read point's largest weight exceeds its mean by more than this factor; then every read point over the
+#: plane's :data:`transient.plane.PEAK_RATIO_LIMIT` (16) gets one, as on the plane. Below it l's technique
+#: alone does better: each technique's share is stratified on its own, which costs more than peaks of
+#: up to ~100 do (measured in docs/renderer.md).
+MIS_PEAK_RATIO = 256.0
 
 # Agreement demanded between the double-precision rectangle this plugin is given and the float32 copy
 # Mitsuba built the shape from.
 _FLOAT32_MATCH = 1e-6
 
 
+class _Point(NamedTuple):
+    """Each sample's hidden point: x, y in the hidden rectangle's frame, z above the wall (metres)."""
+
+    x: object
+    y: object
+    z: object
+
+
+class _WallPoints(NamedTuple):
+    """Wall points as the kernel reads them.
+
+    Attributes
+    ----------
+    point : tuple of 3
+        (x, y, h) in the hidden rectangle's frame, metres (h > 0: the lit face sees them).
+    leg : array
+        Laser leg per unit intensity L = cos θ_l^las / |o_l - l|² (ρ_w / π)², 1/m², of the point lit.
+    offset : array
+        Path length the scan adds to a path through the point, metres (0 unless the legs are counted).
+    """
+
+    point: tuple
+    leg: object
+    offset: object
+
+
+class _Grid(NamedTuple):
+    """A W x H grid of wall points, point (column i, row j) = origin + i column + j row (hidden frame, metres)."""
+
+    origin: tuple
+    column: tuple
+    row: tuple
+    width: int
+
+
 def _vector(props, name: str) -> np.ndarray:
     return np.array(props.get(name), dtype=np.float64).reshape(3)
+
+
+def _wall_factor(point: _Point, wall):
+    """(|x - w|, g_w = h_w z_x / |x - w|⁴) of each sample's point x and a wall point w = (x, y, h)."""
+    squared = dr.square(point.x - wall[0]) + dr.square(point.y - wall[1]) + dr.square(wall[2])
+    inverse = 1.0 / squared
+    return dr.sqrt(squared), wall[2] * point.z * dr.square(inverse)
 
 
 class TransientNlosIntegrator(mi.SamplingIntegrator):
@@ -98,6 +162,15 @@ class TransientNlosIntegrator(mi.SamplingIntegrator):
      * - account_first_and_last_bounces
        - |bool|
        - Path lengths add |o_l - l| + |s - o_s|. (Default: false)
+     * - strategy
+       - |string|
+       - ``mis`` (single scans: l's solid angle where it pays, strongly
+         peaked read points' own, balance heuristic; others by area),
+         ``source`` (l's alone) or ``area`` (Default: ``mis``).
+     * - sampler
+       - |string|
+       - ``stratified`` (jittered, Morton order) or ``independent``
+         (Default: ``stratified``).
 
     Render with :meth:`render_chunk_per_unit_intensity` (or
     :func:`transient.render.render`), not ``mi.render``.
@@ -109,14 +182,11 @@ class TransientNlosIntegrator(mi.SamplingIntegrator):
         if "hidden_to_world" not in props:
             raise ValueError(f"{PLUGIN_NAME}: hidden_to_world is required")
         self.hidden_matrix = np.array(props.get("hidden_to_world").matrix, dtype=np.float64).reshape(4, 4)
-        corner = self.hidden_matrix[:3, :3] @ np.array([-1.0, -1.0, 0.0]) + self.hidden_matrix[:3, 3]
-        u, v = 2.0 * self.hidden_matrix[:3, 0], 2.0 * self.hidden_matrix[:3, 1]
-        width, height = float(np.linalg.norm(u)), float(np.linalg.norm(v))
-        if not (width > 0 and height > 0) or abs(u @ v) > 1e-12 * width * height:
-            raise ValueError(f"{PLUGIN_NAME}: hidden_to_world must map the square to a rectangle")
-        self.corner, self.u, self.v = corner, u, v
-        self.normal = np.cross(u, v) / (width * height)
-        self.area = width * height
+        try:
+            self.corner, x_axis, y_axis, _, self.width, self.height = plane_frame(self.hidden_matrix)
+        except ValueError:
+            raise ValueError(f"{PLUGIN_NAME}: hidden_to_world must map the square to a rectangle") from None
+        self.axes = (x_axis, y_axis, np.cross(x_axis, y_axis))      # the lit face's normal u x v / |u x v|
         self.wall_size = (float(props.get("wall_size_x")), float(props.get("wall_size_y")))
         self.wall_reflectance = float(props.get("wall_reflectance", 1.0))
         self.laser_position = _vector(props, "laser_position")
@@ -124,34 +194,79 @@ class TransientNlosIntegrator(mi.SamplingIntegrator):
         self.scan_type = str(props.get("scan_type", "single"))
         if self.scan_type not in SCAN_TYPES:
             raise ValueError(f"{PLUGIN_NAME}: scan_type must be one of {SCAN_TYPES}, got {self.scan_type!r}")
+        self.strategy = str(props.get("strategy", "mis"))
+        if self.strategy not in STRATEGIES:
+            raise ValueError(f"{PLUGIN_NAME}: strategy must be one of {STRATEGIES}, got {self.strategy!r}")
+        self.sampler = str(props.get("sampler", "stratified"))
+        if self.sampler not in SAMPLERS:
+            raise ValueError(f"{PLUGIN_NAME}: sampler must be one of {SAMPLERS}, got {self.sampler!r}")
         grid = (int(props.get("grid_width")), int(props.get("grid_height")))
         laser_point = _vector(props, "laser_point") if "laser_point" in props else np.zeros(3)
         laser_grid = (int(props.get("laser_grid_width", grid[0])), int(props.get("laser_grid_height", grid[1])))
         self.account = bool(props.get("account_first_and_last_bounces", False))
-        read = grid_points(grid, self.wall_size)
-        if self.scan_type == "single":
-            lit, self.read = np.repeat(laser_point[None, :], len(read), axis=0), read
-        elif self.scan_type == "confocal":
-            lit, self.read = read, read.copy()
+        self.read_points = grid_points(grid, self.wall_size)
+        self.laser_points = {"single": laser_point[None, :], "confocal": self.read_points,
+                             "exhaustive": grid_points(laser_grid, self.wall_size)}[self.scan_type]
+        self._lasers = self._wall_points(self.laser_points, self.laser_position)
+        reads = self._wall_points(self.read_points, self.sensor_position)
+        if self.scan_type == "confocal":              # l = s: each read point's own leg, both offsets
+            reads = reads._replace(leg=self._lasers.leg, offset=reads.offset + self._lasers.offset)
+        # the kernel's read points: the grid, computed (_Grid); their legs (confocal) and offsets, gathered
+        self._read_grid = self._grid_in_hidden_frame(grid)
+        self._read_leg, self._read_offset = mi.Float64(reads.leg), mi.Float64(reads.offset)
+        # per pair, in the pair order (the kernel computes them from the tables above): l, s, L_p, offsets
+        if self.scan_type == "confocal":
+            self.lit, self.read, self.leg, self.offsets = self.read_points, self.read_points, reads.leg, reads.offset
         else:
-            lasers = grid_points(laser_grid, self.wall_size)
-            lit, self.read = np.repeat(lasers, len(read), axis=0), np.tile(read, (len(lasers), 1))
-        self.lit = lit
-        toward = self.laser_position - lit
+            lasers, count = len(self.laser_points), len(self.read_points)
+            self.lit, self.read = np.repeat(self.laser_points, count, axis=0), np.tile(self.read_points, (lasers, 1))
+            self.leg = np.repeat(self._lasers.leg, count)
+            self.offsets = np.repeat(self._lasers.offset, count) + np.tile(reads.offset, lasers)
+        self.plan = self._techniques()
+
+    def _wall_points(self, points: np.ndarray, origin: np.ndarray) -> _WallPoints:
+        """Wall points in the hidden frame, the leg from the laser if lit from ``origin``, the offset to it."""
+        toward = origin - points
         distance = np.linalg.norm(toward, axis=1)
-        # the laser leg per unit intensity: cos θ_l^las / |o_l - l|² (ρ_w / π)²
-        self.leg = (toward @ WALL_NORMAL) / distance**3 * (self.wall_reflectance / math.pi) ** 2
-        self.offsets = (distance + np.linalg.norm(self.read - self.sensor_position, axis=1) if self.account
-                        else np.zeros(len(lit)))
+        leg = (toward @ WALL_NORMAL) / distance**3 * (self.wall_reflectance / math.pi) ** 2
+        offset = distance if self.account else np.zeros(len(points))
+        return _WallPoints(tuple(np.ascontiguousarray(c) for c in self.to_hidden(points).T), leg, offset)
+
+    def _grid_in_hidden_frame(self, grid) -> "_Grid":
+        """The read grid's cell centres as origin + column · step + row · step in the hidden frame."""
+        origin = self.to_hidden(grid_points(grid, self.wall_size)[0])
+        # a step along the wall is a rotation of it in the hidden frame (no translation)
+        column, row = (np.stack(self.axes) @ step for step in np.diag([self.wall_size[0] / grid[0],
+                                                                          self.wall_size[1] / grid[1], 0.0])[:2])
+        return _Grid(tuple(float(c) for c in origin), tuple(float(c) for c in column),
+                     tuple(float(c) for c in row), int(grid[0]))
+
+    def to_hidden(self, points) -> np.ndarray:
+        """World points ``(..., 3)`` in the hidden frame: (x, y) along its edges from the corner, h along its normal."""
+        offset = np.asarray(points, dtype=np.float64) - self.corner
+        return np.stack([offset @ axis for axis in self.axes], axis=-1)
+
+    def _techniques(self):
+        """The sampling plan of :data:`STRATEGIES` (module docstring); confocal and exhaustive scans by area."""
+        lit = self.to_hidden(self.laser_points[0])
+        if self.strategy == "area" or self.scan_type != "single":
+            return techniques(lit, np.zeros((0, 3)), self.width, self.height, "area")
+        first = techniques(lit, np.zeros((0, 3)), self.width, self.height, "source")
+        reads = self.to_hidden(self.read_points)
+        if self.strategy == "source" or max(peak_ratio(first[0], tuple(read), self.width, self.height)
+                                            for read in reads) <= MIS_PEAK_RATIO:
+            return first
+        return techniques(lit, reads, self.width, self.height, "mis")
 
     @property
     def pairs(self) -> int:
         """P, the (l, s) pairs: the rows of the transient."""
-        return len(self.lit)
+        return len(self.read_points) * (1 if self.scan_type == "confocal" else len(self.laser_points))
 
     def to_string(self):
         return (f"TransientNlosIntegrator[bins={self.bins}, start_opl={self.start_opl}, "
-                f"bin_width_opl={self.bin_width_opl}, scan={self.scan_type!r}, pairs={self.pairs}]")
+                f"bin_width_opl={self.bin_width_opl}, scan={self.scan_type!r}, pairs={self.pairs}, "
+                f"strategy={self.strategy!r}, sampler={self.sampler!r}]")
 
     def _hidden_shape(self, scene):
         """The shape with id ``hidden``, checked: a rectangle, a diffuse BSDF, the given to_world."""
@@ -176,59 +291,122 @@ class TransientNlosIntegrator(mi.SamplingIntegrator):
         numpy.ndarray
             ``(replicas touched, P, N)`` float64, as ``transient_opl``'s
             (``render_chunk_per_unit_intensity``), with the pairs as rows.
+
+        Notes
+        -----
+        One kernel launch: lanes are samples, each looping over every pair
+        (:meth:`_deposit_pairs`); every value that changes between chunks
+        reaches the kernel as an opaque value, so one compiled kernel
+        serves every chunk of every render of the scene.
         """
         first, count = checked_chunk(layout, seed, first, count)
         hidden = self._hidden_shape(scene)
         size = layout.size
         first_replica = first // size
         rows = (first + count - 1) // size - first_replica + 1
-        total = np.zeros((layout.histogram_rows, self.pairs, self.bins))
-        per_launch = max(1, MAX_LANES // self.pairs)
-        for start in range(first, first + count, per_launch):
-            launch = min(per_launch, first + count - start)
-            total += self._launch(hidden, seed, layout, first_replica, start, launch)
-        return total[:rows]
+        plan = self.plan
+        bounds = block_bounds([t.share for t in plan], size)
 
-    def _launch(self, hidden, seed, layout, first_replica, first, count):
-        """One kernel launch: samples [first, first + count) x every pair; rows counted from first_replica."""
-        size = layout.size
-        pairs, bins = self.pairs, self.bins
-        lane = dr.arange(mi.UInt32, count * pairs)
-        sample = lane // opaque_u32(pairs)                              # within the launch
-        pair = lane - sample * opaque_u32(pairs)
-        index = mi.UInt64(sample) + dr.opaque(mi.UInt64, first)        # global sample index g
+        # -- per sample: index, random stream, replica, technique block, point, ρ_h / (π p)
+        lane = dr.arange(mi.UInt32, count)                            # sample within the chunk
+        index = mi.UInt64(lane) + dr.opaque(mi.UInt64, first)        # global sample index g
         rng = sample_stream(opaque_u32(seed), mi.UInt32(index), mi.UInt32(index >> 32))
-        replica, in_replica = replica_of(mi.Float64(sample) + opaque_f64(first - first_replica * size),
+        replica, in_replica = replica_of(mi.Float64(lane) + opaque_f64(first - first_replica * size),
                                          opaque_f64(size))
+        technique, block_start, block_size = mi.UInt32(0), opaque_u32(0), opaque_u32(bounds[1] - bounds[0])
+        for t in range(1, len(plan)):
+            later = in_replica >= opaque_u32(bounds[t])
+            technique = dr.select(later, mi.UInt32(t), technique)
+            block_start = dr.select(later, opaque_u32(bounds[t]), block_start)
+            block_size = dr.select(later, opaque_u32(bounds[t + 1] - bounds[t]), block_size)
         jitter_u, jitter_v = rng.next_float64(), rng.next_float64()
-        u, v = jittered_point(in_replica, opaque_u32(size), jitter_u, jitter_v)
-        point = [float(self.corner[i]) + u * float(self.u[i]) + v * float(self.v[i]) for i in range(3)]
-        reflectance = self._reflectance(hidden, u, v)
+        if self.sampler == "stratified":
+            u, v = jittered_point(in_replica - block_start, block_size, jitter_u, jitter_v)
+        else:
+            u, v = jitter_u, jitter_v
+        x, y = warp(plan, technique, u, v, self.width, self.height)
+        shares = [opaque_f64((bounds[t + 1] - bounds[t]) / size) for t in range(len(plan))]
+        # the balance heuristic: each point weighted by the density of all techniques together
+        density = mixture_density(plan, shares, x, y, self.width, self.height)
+        scale = self._reflectance(hidden, x / self.width, y / self.height) / (math.pi * density)
+        height = float(self.corner[2]) + x * float(self.axes[0][2]) + y * float(self.axes[1][2])  # x's z
 
-        def gathered(table):
-            return dr.gather(mi.Float64, mi.Float64(np.ascontiguousarray(table, dtype=np.float64)), pair)
-
-        lit = [gathered(self.lit[:, i]) for i in range(3)]
-        read = [gathered(self.read[:, i]) for i in range(3)]
-        to_lit = [lit[i] - point[i] for i in range(3)]
-        to_read = [read[i] - point[i] for i in range(3)]
-        lit_squared = dr.square(to_lit[0]) + dr.square(to_lit[1]) + dr.square(to_lit[2])
-        read_squared = dr.square(to_read[0]) + dr.square(to_read[1]) + dr.square(to_read[2])
-        lit_distance, read_distance = dr.sqrt(lit_squared), dr.sqrt(read_squared)
-        normal = [float(c) for c in self.normal]
-        # cos θ_x^l cos θ_x^s (at x, toward l and s) and cos θ_l^x cos θ_s^x (at the wall, toward x: its z)
-        at_hidden = ((to_lit[0] * normal[0] + to_lit[1] * normal[1] + to_lit[2] * normal[2])
-                     * (to_read[0] * normal[0] + to_read[1] * normal[1] + to_read[2] * normal[2]))
-        at_wall = point[2] * point[2]
-        weight = (gathered(self.leg) * reflectance * (self.area / math.pi) * at_hidden * at_wall
-                  / (dr.square(lit_squared) * dr.square(read_squared)))
-        length = lit_distance + read_distance + gathered(self.offsets)
-        histogram = dr.zeros(mi.Float64, layout.histogram_rows * pairs * bins)
-        deposit(histogram, replica * pairs + pair, weight, length, mi.Bool(True), bins=bins,
-                start_opl=self.start_opl, bin_width_opl=self.bin_width_opl, terms=self.waveform.terms,
-                taps=self.waveform.bins_touched(self.bin_width_opl, bins), mode=reduce_mode())
+        histogram = dr.zeros(mi.Float64, layout.histogram_rows * self.pairs * self.bins)
+        self._deposit_pairs(histogram, replica * opaque_u32(self.pairs), _Point(x, y, height), scale)
         dr.eval(histogram)
-        return np.array(histogram, dtype=np.float64).reshape(layout.histogram_rows, pairs, bins)
+        return np.array(histogram, dtype=np.float64).reshape(-1, self.pairs, self.bins)[:rows]
+
+    def _deposit_pairs(self, histogram, row_base, point, scale):
+        """Deposit every pair's path through each sample's point: a loop over the scan, per-pair work minimal.
+
+        Parameters
+        ----------
+        histogram : mi.Float64
+            ``(rows, P, N)`` flat accumulator.
+        row_base : mi.UInt32
+            Each sample's replica row times P.
+        point : _Point
+            Each sample's hidden point (hidden frame x, y; world z), metres.
+        scale : mi.Float64
+            ρ_h(x) / (π p(x)), m².
+
+        Notes
+        -----
+        A wall point w seen from x contributes the factor
+        g_w = cos θ_x^w cos θ_w^x / |x - w|² = h_w z_x / |x - w|⁴ (h_w its
+        height above the hidden plane, z_x x's above the wall), so pair
+        (l, s) adds L_p ρ_h / (π p) g_l g_s at |x - l| + |x - s| (+ offsets).
+        Single scans compute l's factor once per sample, confocal ones
+        square s's, exhaustive ones compute each laser point's once per
+        laser in an outer loop. The read points are the grid's cell centres,
+        an affine function of (column, row) in the hidden frame: computed,
+        not gathered (a gather of the loop's index costs more than the
+        arithmetic on the CPU).
+        """
+        grid, bins = self._read_grid, self.bins
+        # LLVM: plain atomics, 1.1 to 1.8 x faster here than the per-thread copies of reduce_mode()'s Auto
+        # (the deposits of one sample spread over P rows; docs/renderer.md). CUDA: as reduce_mode().
+        mode = reduce_mode() if dr.backend_v(mi.Float64) == dr.JitBackend.CUDA else dr.ReduceMode.Direct
+
+        def deposit_reads(row, weight, base_length, laser_offset):
+            """Loop over the read points: one distance, one factor, one deposit each."""
+            def body(b, column, line):
+                wall = [grid.origin[k] + column * grid.column[k] + line * grid.row[k] for k in range(3)]
+                distance, factor = _wall_factor(point, wall)
+                if self.scan_type == "confocal":
+                    weight_b = weight * dr.gather(mi.Float64, self._read_leg, b) * dr.square(factor)
+                    length = 2.0 * distance
+                else:
+                    weight_b, length = weight * factor, base_length + distance
+                if self.account:
+                    length += laser_offset + dr.gather(mi.Float64, self._read_offset, b)
+                deposit(histogram, row + b, weight_b, length, mi.Bool(True), bins=bins,
+                        start_opl=self.start_opl, bin_width_opl=self.bin_width_opl, terms=self.waveform.terms,
+                        taps=self.waveform.bins_touched(self.bin_width_opl, bins), mode=mode)
+                column += 1.0
+                wrap = column == float(grid.width)
+                return b + 1, dr.select(wrap, 0.0, column), dr.select(wrap, line + 1.0, line)
+
+            dr.while_loop((mi.UInt32(0), mi.Float64(0.0), mi.Float64(0.0)),
+                          lambda b, column, line: b < opaque_u32(len(self.read_points)), body, label="nlos_reads")
+
+        if self.scan_type == "confocal":
+            deposit_reads(row_base, scale, None, None)
+            return
+        lasers = self._lasers
+        if len(lasers.leg) == 1:                      # single: l's factor once per sample
+            distance, factor = _wall_factor(point, [float(c[0]) for c in lasers.point])
+            deposit_reads(row_base, scale * float(lasers.leg[0]) * factor, distance, float(lasers.offset[0]))
+            return
+        tables = [mi.Float64(table) for table in (*lasers.point, lasers.leg, lasers.offset)]
+
+        def body(a):
+            lit_x, lit_y, lit_h, leg, offset = (dr.gather(mi.Float64, table, a) for table in tables)
+            distance, factor = _wall_factor(point, (lit_x, lit_y, lit_h))
+            deposit_reads(row_base + a * opaque_u32(len(self.read_points)), scale * leg * factor, distance, offset)
+            return (a + 1,)
+
+        dr.while_loop((mi.UInt32(0),), lambda a: a < opaque_u32(len(lasers.leg)), body, label="nlos_lasers")
 
     def _reflectance(self, hidden, u, v):
         """ρ_h at (u, v) of the hidden rectangle's texture (float32 as Mitsuba stores it), Float64."""

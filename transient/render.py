@@ -63,7 +63,7 @@ from .render_state import (STATE_FILE, load_state, read_saved_render, save_scene
                            state_identity)
 
 __all__ = ["RenderResult", "RenderInterrupted", "render", "resume", "render_loaded", "sigterm_as_interrupt",
-           "DEFAULT_CHUNK", "DEFAULT_CHUNK_GPU", "FIRST_CHUNK", "PARTIAL_FOLDER", "REPLICAS_FILE", "FIGURE_FILE",
+           "DEFAULT_CHUNK", "DEFAULT_CHUNK_GPU", "FIRST_CHUNK", "CHUNK_ROWS", "default_chunk", "PARTIAL_FOLDER", "REPLICAS_FILE", "FIGURE_FILE",
            "MAX_SAMPLES"]
 
 #: Largest chunk on a CPU, samples: one fused kernel of this width keeps
@@ -80,6 +80,21 @@ DEFAULT_CHUNK_GPU = 2**28
 #: The first chunk: small, so that the first checkpoint comes within a
 #: second; chunks then double up to the chunk size.
 FIRST_CHUNK = 2**16
+
+#: Rows (sensors, or a capture's pairs) the default chunks are sized for: every sample serves every row,
+#: so a scene with more rows gets proportionally fewer samples per chunk (a 1024-pair scan 2^16 on a CPU),
+#: and a chunk, hence the time between checkpoints, stays under a second or so whatever the scan.
+CHUNK_ROWS = 16
+
+
+def default_chunk(rows: int, gpu: bool) -> int:
+    """The largest chunk, samples, for a scene of ``rows`` sensors or pairs: :data:`DEFAULT_CHUNK` (CPU)
+    or :data:`DEFAULT_CHUNK_GPU` at up to :data:`CHUNK_ROWS` rows, in proportion fewer beyond (a power of
+    two, at least 1)."""
+    largest = DEFAULT_CHUNK_GPU if gpu else DEFAULT_CHUNK
+    if rows <= CHUNK_ROWS:
+        return largest
+    return 1 << max(0, (largest * CHUNK_ROWS // rows).bit_length() - 1)
 
 #: Where an unfinished render's current estimate goes (``meta.json`` says ``"complete": false``).
 PARTIAL_FOLDER = "partial"
@@ -213,7 +228,8 @@ def render_loaded(loaded, *, spp: int, seed: int = 0, replicas: int | None = Non
     Parameters
     ----------
     loaded : mitsuba.Scene
-        Loaded with ``transient_opl`` or ``transient_opl_path``.
+        Loaded with ``transient_opl`` or ``transient_opl_path`` (a ``transient_opl_nlos`` scene is
+        refused: it renders per unit laser intensity).
     spp, seed, replicas, chunk_size
         As for :func:`render`.
     """
@@ -224,6 +240,11 @@ def render_loaded(loaded, *, spp: int, seed: int = 0, replicas: int | None = Non
     _check_arguments(spp, seed, chunk_size, replicas)
     layout = ReplicaLayout.for_samples(int(spp), replicas)
     integrator = loaded.integrator()
+    if not hasattr(integrator, "render_chunk"):
+        # transient_opl_nlos holds no laser intensity: it renders per unit intensity only
+        raise ValueError(f"render_loaded: {type(integrator).__name__} renders per unit laser intensity; render "
+                         f"the RelayWallScene with transient.render.render, or call its "
+                         f"render_chunk_per_unit_intensity and multiply by I")
     shape = (len(loaded.sensors()), int(integrator.bins))
     accumulator = ReplicaAccumulator(layout, shape)
     started = time.perf_counter()
@@ -341,8 +362,9 @@ def render(scene: Scene, *, spp: int, seed: int = 0, out_dir: str | Path | None 
         :func:`resume` needs only the folder.
     chunk_size : int, optional
         Most samples per kernel launch (memory and checkpoint granularity),
-        1 <= chunk_size <= 2^31. Default :data:`DEFAULT_CHUNK` (2^22) on a
-        CPU, :data:`DEFAULT_CHUNK_GPU` (2^28) on a CUDA variant.
+        1 <= chunk_size <= 2^31. Default :func:`default_chunk`: 2^22 on a
+        CPU, 2^28 on a CUDA variant, fewer for scenes of more than 16
+        sensors or pairs.
     progress : bool
         Show a tqdm progress bar over samples (on stderr).
     on_chunk : callable, optional
@@ -376,7 +398,7 @@ def render(scene: Scene, *, spp: int, seed: int = 0, out_dir: str | Path | None 
         have been written to ``out_dir`` (a KeyboardInterrupt).
     """
     gpu = variant is not None and str(variant).startswith("cuda")
-    chunk_size = (DEFAULT_CHUNK_GPU if gpu else DEFAULT_CHUNK) if chunk_size is None else chunk_size
+    chunk_size = default_chunk(scene.sensor_count, gpu) if chunk_size is None else chunk_size
     _check_arguments(spp, seed, chunk_size, replicas)
     spp, seed, chunk_size = int(spp), int(seed), int(chunk_size)
     if resume and out_dir is None:

@@ -16,21 +16,48 @@ def _covering(scene, period=0.02):
                                            count=int((high - low) / period) + 3))
 
 
-def _render(scene, spp, seed):
+def _loaded(scene, **estimator):
     from transient.backend import select_variant
 
     select_variant()
     import mitsuba as mi
 
-    from transient.chunks import ReplicaLayout
     from transient.mitsuba_scene import relay_wall_scene_dict
 
-    loaded = mi.load_dict(relay_wall_scene_dict(scene))
+    return mi.load_dict(relay_wall_scene_dict(scene, **estimator))
+
+
+def _render(scene, spp, seed, **estimator):
+    from transient.chunks import ReplicaLayout
+
+    loaded = _loaded(scene, **estimator)
     layout = ReplicaLayout.for_samples(spp)
     sums = loaded.integrator().render_chunk_per_unit_intensity(loaded, seed=seed, layout=layout, first=0,
                                                                count=layout.samples)
     return sums / layout.size * scene.intensity
 
+
+def _model(scene):
+    return (system_matrix(scene) @ scene.reflectance.ravel()).reshape(scene.sensor_count, -1)
+
+
+def _agrees(replicas, reference):
+    return agreement(replicas.mean(axis=0), replicas.std(axis=0, ddof=1) / np.sqrt(len(replicas)), reference,
+                     dof=len(replicas) - 1, replicas=replicas)
+
+
+
+
+def _near_wall_single(distance):
+    """A 0.6 x 0.5 m rectangle ``distance`` in front of a 1 m wall, lit right below it, read on a 3 x 3 grid."""
+    return RelayWallScene(pixels=4, reflectance=np.linspace(0.2, 1.0, 16).reshape(4, 4), center=(0.05, 0.0, distance),
+                          u=(0.6, 0.0, 0.0), v=(0.0, -0.5, 0.0), wall_size=(1.0, 1.0),
+                          scan=Scan(type="single", grid=(3, 3), laser_point=(0.1, 0.05, 0.0)))
+
+
+# 2 cm from the wall: l's g_l varies 1e3-fold (its solid angle), and a read point's weight would peak 1.3e3 x
+# its mean with l's points alone: every read point over 16 gets its own technique (10 in all).
+NEAR_WALL_SINGLE = _near_wall_single(0.02)
 
 CASES = {
     "confocal": default_relay_wall_scene(pixels=8, scan=Scan(type="confocal", grid=(3, 3))),
@@ -41,16 +68,16 @@ CASES = {
     "exhaustive, legs counted, near the wall": RelayWallScene(
         pixels=4, center=(0.1, 0.0, 0.15), u=(0.3, 0.0, 0.0), v=(0.0, -0.3, 0.0),
         scan=Scan(type="exhaustive", grid=(2, 2), laser_grid=(2, 1), account_first_and_last_bounces=True)),
+    "single, 15 cm from the wall, l's solid angle": _near_wall_single(0.15),
+    "single, 2 cm from the wall, MIS": NEAR_WALL_SINGLE,
 }
 
 
 @pytest.mark.parametrize("name", list(CASES))
 def test_render_agrees_with_the_model(name):
     scene = _covering(CASES[name])
-    model = (system_matrix(scene) @ scene.reflectance.ravel()).reshape(scene.sensor_count, -1)
     replicas = _render(scene, 2**18, seed=3)
-    chi2, max_z, bins, passes = agreement(replicas.mean(axis=0), replicas.std(axis=0, ddof=1) / np.sqrt(len(replicas)),
-                                          model, dof=len(replicas) - 1, replicas=replicas)
+    chi2, max_z, bins, passes = _agrees(replicas, _model(scene))
     assert passes and bins > 50, (chi2, max_z, bins)
 
 
@@ -67,6 +94,128 @@ def test_a_wrong_model_fails():
                              scales=pairs.scales)
     wrong = (rectangle_matrix(rectangle, wrong_pairs, scene.sampling, make_waveform(scene.illumination, 0.02))
              @ scene.reflectance.ravel()).reshape(scene.sensor_count, -1)
-    *_, passes = agreement(replicas.mean(axis=0), replicas.std(axis=0, ddof=1) / np.sqrt(len(replicas)), wrong,
-                           dof=len(replicas) - 1, replicas=replicas)
+    *_, passes = _agrees(replicas, wrong)
     assert not passes
+
+
+def _hidden_frame(scene, points):
+    """World points in the hidden rectangle's frame, from the scene's own vectors (not the plugin's)."""
+    u, v = np.asarray(scene.u, float), np.asarray(scene.v, float)
+    corner = np.asarray(scene.center, float) - 0.5 * u - 0.5 * v
+    normal = np.cross(u, v) / np.linalg.norm(np.cross(u, v))
+    offset = np.asarray(points, float) - corner
+    return np.stack([offset @ (u / np.linalg.norm(u)), offset @ (v / np.linalg.norm(v)), offset @ normal], axis=-1)
+
+
+def test_mis_plan_of_a_near_wall_single_scan_and_its_balance_weights_sum_to_one():
+    """l's solid angle first, peaked read points' own; Σ_t share_t p_t / p = 1 with each p_t in closed form."""
+    from transient.plane_sampling import AREA, SOLID_ANGLE, mixture_density
+
+    import mitsuba as mi
+
+    scene = NEAR_WALL_SINGLE
+    integrator = _loaded(scene).integrator()
+    plan = integrator.plan
+    width, height = np.linalg.norm(scene.u), np.linalg.norm(scene.v)
+    assert plan[0].kind == SOLID_ANGLE and np.allclose(plan[0].point, _hidden_frame(scene, scene.laser_points[0]))
+    reads = _hidden_frame(scene, scene.read_points)
+    assert len(plan) == 10 and all(t.kind == SOLID_ANGLE and np.min(np.abs(reads - t.point).sum(axis=1)) < 1e-12
+                                 for t in plan[1:])
+    assert np.isclose(sum(t.share for t in plan), 1.0)
+    rng = np.random.default_rng(5)
+    x, y = rng.uniform(0, width, 1000), rng.uniform(0, height, 1000)
+    density = np.array(mixture_density(plan, [mi.Float64(t.share) for t in plan], mi.Float64(x), mi.Float64(y),
+                                       width, height))
+    parts = []
+    for t in plan:     # h / (Ω d³), Ω of the rectangle seen from the point by a fine midpoint rule
+        if t.kind == AREA:
+            parts.append(np.full_like(x, t.share / (width * height)))
+            continue
+        px, py, h = t.point
+        cx, cy = np.meshgrid((np.arange(800) + 0.5) / 800 * width, (np.arange(800) + 0.5) / 800 * height)
+        omega = np.sum(h / ((cx - px) ** 2 + (cy - py) ** 2 + h * h) ** 1.5) * width * height / 800**2
+        parts.append(t.share * h / (((x - px) ** 2 + (y - py) ** 2 + h * h) ** 1.5 * omega))
+    weights = np.array(parts) / density
+    assert np.allclose(weights.sum(axis=0), 1.0, rtol=2e-4)
+
+
+def test_mis_and_area_agree_and_mis_has_the_smaller_error():
+    """Both strategies agree with the model on the near-wall single scan; MIS's replicas scatter less."""
+    scene = _covering(NEAR_WALL_SINGLE)
+    model = _model(scene)
+    spread = {}
+    for strategy in ("mis", "area"):
+        replicas = _render(scene, 2**18, seed=6, strategy=strategy)
+        chi2, max_z, bins, passes = _agrees(replicas, model)
+        assert passes and bins > 50, (strategy, chi2, max_z, bins)
+        spread[strategy] = float(np.sum(replicas.var(axis=0, ddof=1)))
+    assert spread["mis"] < 0.5 * spread["area"], spread
+
+
+def test_mis_without_the_balance_heuristic_fails(monkeypatch):
+    """Weighting each point by its own technique's density alone (no balance heuristic) is biased: caught."""
+    import transient.nlos as nlos
+    from transient.plane_sampling import mixture_density
+
+    def own_density_only(plan, shares, x, y, width, height):
+        return mixture_density(plan[:1], [1.0], x, y, width, height)      # l's density for every point
+
+    scene = _covering(NEAR_WALL_SINGLE)
+    monkeypatch.setattr(nlos, "mixture_density", own_density_only)
+    replicas = _render(scene, 2**18, seed=7)
+    *_, passes = _agrees(replicas, _model(scene))
+    assert not passes
+
+
+def test_unknown_strategy_is_refused():
+    with pytest.raises(RuntimeError, match="strategy must be one of"):
+        _loaded(CASES["confocal"], strategy="solid_angle")
+
+
+def test_chunks_add_up_to_the_whole_render_and_share_one_kernel():
+    """Sample g's numbers depend on (seed, g) only; seeds, offsets and technique blocks are opaque."""
+    import drjit as dr
+
+    from transient.chunks import ReplicaLayout
+
+    loaded = _loaded(_covering(NEAR_WALL_SINGLE))
+    integrator = loaded.integrator()
+    layout = ReplicaLayout.for_samples(2**14)                  # 32 replicas of 512 samples
+
+    def chunk(first, count, seed=2):
+        return integrator.render_chunk_per_unit_intensity(loaded, seed=seed, layout=layout, first=first, count=count)
+
+    whole = chunk(0, layout.samples)
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        dr.kernel_history()
+        head, tail = chunk(0, 1000), chunk(1000, layout.samples - 1000)     # cut inside replica 1
+        chunk(700, 3000, seed=9)
+        launches = [k for k in dr.kernel_history()
+                    if k["type"] == dr.KernelType.JIT and k["size"] in (1000, layout.samples - 1000, 3000)]
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    combined = np.zeros_like(whole)
+    combined[:2] += head
+    combined[1:] += tail
+    assert np.allclose(combined, whole, rtol=1e-12, atol=1e-15 * np.abs(whole).max())
+    assert len(launches) == 3 and len({k["hash"] for k in launches}) == 1
+
+
+def test_render_loaded_refuses_a_capture_it_cannot_scale():
+    """transient_opl_nlos holds no laser intensity: render_loaded names what to call instead."""
+    from transient.render import render_loaded
+
+    with pytest.raises(ValueError, match="per unit laser intensity"):
+        render_loaded(_loaded(CASES["confocal"]), spp=64)
+
+
+def test_default_chunks_shrink_with_the_pairs_so_that_checkpoints_stay_frequent():
+    """Every sample serves every pair: a chunk is sized in (sample, pair) evaluations, 2^26 on a CPU."""
+    from transient.render import DEFAULT_CHUNK, DEFAULT_CHUNK_GPU, default_chunk
+
+    assert default_chunk(1, False) == default_chunk(16, False) == DEFAULT_CHUNK
+    assert default_chunk(64, False) == DEFAULT_CHUNK // 4 and default_chunk(1024, False) == 2**16
+    assert default_chunk(100, False) == 2**19          # a power of two at or below 2^26 / 100
+    assert default_chunk(2**20, False) == 64 and default_chunk(2**40, False) == 1
+    assert default_chunk(1024, True) == DEFAULT_CHUNK_GPU // 64

@@ -131,7 +131,9 @@ def ours(matrix, y, scene, sigma: float | None):
     started = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RankDeficiencyWarning)
-        result = reconstruct(matrix, y, scene.pixels, rule="discrepancy" if sigma else "gcv", sigma=sigma)
+        # the dense SVD (3.6 GiB here) serves every λ of the sweep at once; LSQR would solve each
+        result = reconstruct(matrix, y, scene.pixels, rule="discrepancy" if sigma else "gcv", sigma=sigma,
+                             method="svd", memory_limit=6 * 2**30)
     return result.image, time.perf_counter() - started, result.rule, result.lam
 
 

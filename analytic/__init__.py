@@ -21,6 +21,7 @@ __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "errors": ["UserError", "SceneError", "ImageError", "DataError", "ResourceError"],
     "scene": ["Scene", "Illumination", "Sampling", "Noise", "default_scene", "sensor_grid"],
     "relay_wall": ["RelayWallScene", "Scan", "default_relay_wall_scene"],
+    "tal_config": ["TalScene", "TalConfigWarning", "load_tal_config"],
     "scene_file": ["load_scene", "scene_from_dict", "scene_to_tables", "read_toml"],
     "reflectance": ["builtin_reflectance", "read_reflectance"],
     "waveforms": ["Waveform", "make_waveform"],

@@ -321,6 +321,20 @@ class RelayWallScene:
         """The hidden rectangle: corner at centre - (u + v)/2, edges u and v, M x M pixels."""
         return Rectangle(self.center - 0.5 * (self.u + self.v), self.u, self.v, self.pixels)
 
+    def blocked(self, start: np.ndarray, ends: np.ndarray) -> np.ndarray:
+        """Which segments ``start`` -> ``ends[i]`` cross the hidden rectangle (a renderer that traces them
+        loses that light; the model counts the laser's and the sensor's lines clear)."""
+        rectangle = self.rectangle()
+        normal = rectangle.normal
+        toward = np.asarray(ends, dtype=np.float64) - start
+        along = toward @ normal
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.where(along != 0, (rectangle.corner - start) @ normal / along, np.inf)
+        crossing = start + t[:, None] * toward - rectangle.corner
+        u = crossing @ rectangle.u / (rectangle.u @ rectangle.u)
+        v = crossing @ rectangle.v / (rectangle.v @ rectangle.v)
+        return (t > 0) & (t < 1) & (u >= 0) & (u <= 1) & (v >= 0) & (v <= 1)
+
     def laser_leg(self, lit: np.ndarray) -> np.ndarray:
         """I cos θ_l^las / |o_l - l|² (ρ_w / π)² for lit points ``(P, 3)``: each pair's constant factor."""
         toward = self.laser_position - lit

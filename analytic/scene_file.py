@@ -321,7 +321,7 @@ def scene_to_tables(scene: Scene) -> dict:
 
 
 def load_scene(path: str | Path) -> Scene:
-    """Read a scene TOML file.
+    """Read a scene TOML file, or a tal render configuration (``.yaml``/``.yml``: :mod:`analytic.tal_config`).
 
     Parameters
     ----------
@@ -333,9 +333,39 @@ def load_scene(path: str | Path) -> Scene:
     SceneError
         Unreadable file, bad TOML, unknown key or bad value.
     """
+    if isinstance(path, (str, Path)) and str(path) and Path(path).suffix.lower() in (".yaml", ".yml"):
+        from .tal_config import load_tal_config
+
+        return load_tal_config(path)           # a tal render configuration (docs/tal.md)
     data = read_toml(path, "scene")
     path = Path(path)
     return scene_from_dict(data, path.parent, name=path.stem)
+
+
+def read_text(path: str | Path, what: str = "scene", *, language: str = "TOML") -> tuple[str, str]:
+    """The UTF-8 text of a scene file of at most :data:`MAX_FILE_BYTES`, and its printable name.
+
+    Raises
+    ------
+    SceneError
+        Naming the file: empty path, missing, not a regular file, too large, not UTF-8 (as :func:`read_toml`).
+    """
+    if isinstance(path, str) and not path:
+        raise SceneError(f"{what} file", f"empty path; give a {language} {what} file")
+    path = Path(path)
+    shown = printable(str(path))
+    problem = regular_file_problem(path)
+    if problem is not None:
+        raise SceneError(shown, f"cannot read {what} file: {problem}")
+    try:
+        with open(path, "rb") as stream:
+            raw = stream.read(MAX_FILE_BYTES + 1)
+    except OSError as error:
+        raise SceneError(shown, f"cannot read {what} file ({error.strerror})") from None
+    if len(raw) > MAX_FILE_BYTES:
+        raise SceneError(shown, f"{what} file larger than {MAX_FILE_BYTES // 1024} KiB; "
+                                f"is it really a {language} {what} file?")
+    return _decode(raw, shown, what), shown
 
 
 def read_toml(path: str | Path, what: str = "scene") -> dict:
@@ -353,22 +383,7 @@ def read_toml(path: str | Path, what: str = "scene") -> dict:
         line and, for a key or table given twice, saying so), or without any
         key.
     """
-    if isinstance(path, str) and not path:
-        raise SceneError(f"{what} file", f"empty path; give a TOML {what} file")
-    path = Path(path)
-    shown = printable(str(path))
-    problem = regular_file_problem(path)
-    if problem is not None:
-        raise SceneError(shown, f"cannot read {what} file: {problem}")
-    try:
-        with open(path, "rb") as stream:
-            raw = stream.read(MAX_FILE_BYTES + 1)
-    except OSError as error:
-        raise SceneError(shown, f"cannot read {what} file ({error.strerror})") from None
-    if len(raw) > MAX_FILE_BYTES:
-        raise SceneError(shown, f"{what} file larger than {MAX_FILE_BYTES // 1024} KiB; "
-                                f"is it really a TOML {what} file?")
-    text = _decode(raw, shown, what)
+    text, shown = read_text(path, what)
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:

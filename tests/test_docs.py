@@ -119,8 +119,9 @@ class Workspace:
         self.folder = folder
         shutil.copytree(ROOT / "examples", folder / "examples",
                         ignore=shutil.ignore_patterns("__pycache__", "out"))
-        if (ROOT / ".venv-tal").is_dir():
-            (folder / ".venv-tal").symlink_to(ROOT / ".venv-tal")
+        for venv in (".venv-tal", ".venv-tal-render"):         # tal, and tal with its renderer (docs/tal.md)
+            if (ROOT / venv).is_dir():
+                (folder / venv).symlink_to(ROOT / venv)
         self.outcomes: dict[int, str | None] = {}      # snippet line -> None (ran) or the failure
 
     def run(self, snippet: Snippet) -> str | None:

@@ -167,20 +167,6 @@ def _mitransient(root, scene: RelayWallScene, shift: np.ndarray) -> None:
     add(laser, "float", "fov", value=number(PROJECTOR_FOV))
 
 
-def _blocked(start: np.ndarray, ends: np.ndarray, scene: RelayWallScene) -> np.ndarray:
-    """Which segments start -> ends[i] cross the hidden rectangle (mitransient traces them, the model does not)."""
-    rectangle = scene.rectangle()
-    normal = rectangle.normal
-    toward = ends - start
-    along = toward @ normal
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = np.where(along != 0, (rectangle.corner - start) @ normal / along, np.inf)
-    crossing = start + t[:, None] * toward - rectangle.corner
-    u = crossing @ rectangle.u / (rectangle.u @ rectangle.u)
-    v = crossing @ rectangle.v / (rectangle.v @ rectangle.v)
-    return (t > 0) & (t < 1) & (u >= 0) & (u <= 1) & (v >= 0) & (v <= 1)
-
-
 def _check_mitransient(scene: RelayWallScene) -> None:
     from .export import MITRANSIENT_IMPULSE_ONLY
 
@@ -192,7 +178,7 @@ def _check_mitransient(scene: RelayWallScene) -> None:
         raise SceneError("illumination.waveform", MITRANSIENT_IMPULSE_ONLY)
     for key, origin, points in (("laser.position", scene.laser_position, scene.laser_points),
                                 ("sensor.position", scene.sensor_position, scene.read_points)):
-        blocked = _blocked(origin, points, scene)
+        blocked = scene.blocked(origin, points)
         if blocked.any():
             where = points[int(np.argmax(blocked))].tolist()
             raise SceneError(key, f"the hidden rectangle blocks the line from {origin.tolist()} to the wall point "

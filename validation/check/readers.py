@@ -167,12 +167,15 @@ def _relay_wall_capture(path: Path, scene: RelayWallScene) -> np.ndarray:
     """A tal capture of a relay-wall scene, its columns matched to the scene's pairs by their points."""
     capture = _read_capture(path, scene.sampling)
     flag = scene.scan.account_first_and_last_bounces
-    if capture.accounts_first_and_last_bounces is not None and capture.accounts_first_and_last_bounces != flag:
+    # a tal configuration's capture states the YAML's flag, which tal 0.20 does not render (analytic.tal_config)
+    stated = getattr(scene, "capture_accounts_flag", flag)
+    if capture.accounts_first_and_last_bounces is not None and capture.accounts_first_and_last_bounces != stated:
         counts = "count" if capture.accounts_first_and_last_bounces else "do not count"
         raise DataError(f"{path}: t_accounts_first_and_last_bounces is "
                         f"{str(capture.accounts_first_and_last_bounces).lower()} (its path lengths {counts} "
                         f"|o_l - l| + |s - o_s|), the scene's scan.account_first_and_last_bounces is "
-                        f"{str(flag).lower()}; set it to {str(not flag).lower()} in the scene to judge this file")
+                        f"{str(stated).lower()}; set it to {str(not stated).lower()} in the scene to judge this "
+                        f"file")
     lit, read = scene.pair_points
     tolerance = 1e-6 + 2.0**-22 * float(max(np.max(np.abs(read)), np.max(np.abs(scene.laser_position)),
                                             np.max(np.abs(scene.sensor_position))))

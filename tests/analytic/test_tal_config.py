@@ -1,0 +1,228 @@
+"""tal render configurations (YAML) read as the scene tal renders: every key's meaning, and the refusals.
+
+The expected poses are built here independently of analytic.tal_config: the
+transform by SciPy's extrinsic x-y-z Euler rotation (Rz Ry Rx), the grid
+and lookat points from tal's formulas written out.
+"""
+
+import math
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from scipy.spatial.transform import Rotation
+
+from analytic.errors import SceneError
+from analytic.scene_file import load_scene
+from analytic.tal_config import TalConfigWarning, TalScene, load_tal_config, tal_config_scene
+
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples" / "tal"
+
+WALL = {"name": "relay_wall", "mesh": {"type": "rectangle"}, "displacement_x": 0.0, "displacement_y": 0.0,
+        "displacement_z": 0.0, "scale_x": 1, "scale_y": 1, "material": {"id": "white"}}
+
+
+def config(hidden=None, **keys):
+    """A small tal configuration: a 1 m square facing the wall 1 m away, a 4 x 4 single scan."""
+    hidden = hidden or {"name": "plane", "mesh": {"type": "rectangle"}, "scale_x": 0.5, "scale_y": 0.5,
+                        "rot_degrees_x": 180.0, "displacement_z": 1.0, "material": {"id": "white"}}
+    base = {"name": "t", "integrator_filter_bounces": 2, "num_bins": 100, "bin_width_opl": 0.02,
+            "start_opl": 1.9, "sensor_width": 4, "sensor_height": 4, "geometry": [hidden, WALL],
+            "relay_wall": "relay_wall"}
+    return {**base, **keys}
+
+
+def scene_of(data, tmp_path=None, **kwargs):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", TalConfigWarning)
+        return tal_config_scene(data, cwd=tmp_path, **kwargs)
+
+
+def refusal(data, key, tmp_path=None):
+    with pytest.raises(SceneError) as caught:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", TalConfigWarning)
+            tal_config_scene(data, cwd=tmp_path)
+    assert caught.value.key == key, str(caught.value)
+    assert "\n" not in str(caught.value)
+    return str(caught.value)
+
+
+def test_example_is_what_tal_renders():
+    scene = load_scene(EXAMPLES / "plane-single.yaml")           # dispatch by extension
+    assert isinstance(scene, TalScene) and scene.name == "plane-single"
+    np.testing.assert_allclose(scene.center, [0, 0, 1], atol=1e-15)
+    np.testing.assert_allclose(scene.u, [1, 0, 0], atol=1e-15)
+    np.testing.assert_allclose(scene.v, [0, -1, 0], atol=1e-15)
+    np.testing.assert_allclose(scene.rectangle().normal, [0, 0, -1], atol=1e-15)   # toward the wall
+    assert scene.wall_size == (2.0, 2.0) and scene.wall_reflectance == 1.0 and scene.reflectance.max() == 1.0
+    assert scene.intensity == pytest.approx(3 * math.pi)         # π E per channel, three channels summed
+    assert (scene.scan.type, scene.scan.grid) == ("single", (16, 16))
+    np.testing.assert_array_equal(scene.scan.laser_point, [0, 0, 0])
+    assert (scene.sampling.count, scene.sampling.bin_width_opl, scene.sampling.start_opl) == (520, 0.003, 1.95)
+    np.testing.assert_array_equal(scene.laser_position, [-0.5, 0, 0.25])     # tal's defaults
+    np.testing.assert_array_equal(scene.sensor_position, [-0.5, 0, 0.25])
+
+
+@pytest.mark.parametrize("angles", [(0.0, 0.0, 0.0), (200.0, 10.0, -30.0), (170.0, -25.0, 60.0)])
+def test_transform_is_T_Rz_Ry_Rx_S(angles):
+    scale = (0.3, 0.2, 2.0)
+    shift = (0.1, -0.2, 1.5)
+    hidden = {"name": "p", "mesh": {"type": "rectangle"}, "material": {"id": "white"},
+              **{f"scale_{a}": s for a, s in zip("xyz", scale)},
+              **{f"rot_degrees_{a}": t for a, t in zip("xyz", angles)},
+              **{f"displacement_{a}": d for a, d in zip("xyz", shift)}}
+    matrix = Rotation.from_euler("xyz", angles, degrees=True).as_matrix() @ np.diag(scale)
+    normal = Rotation.from_euler("xyz", angles, degrees=True).apply([0, 0, 1])
+    data = config(hidden)
+    if normal[2] >= 0:                        # faces away: tal renders it black, refused
+        refusal(data, "geometry[p]")
+        return
+    scene = scene_of(data)
+    np.testing.assert_allclose(scene.center, shift, atol=1e-14)
+    np.testing.assert_allclose(scene.u, matrix @ [2, 0, 0], atol=1e-14)
+    np.testing.assert_allclose(scene.v, matrix @ [0, 2, 0], atol=1e-14)
+    np.testing.assert_allclose(scene.rectangle().normal, normal, atol=1e-14)
+
+
+def test_zero_scale_counts_as_one_and_lookat_zero_as_unset():
+    hidden = {"name": "p", "mesh": {"type": "rectangle"}, "scale_x": 0, "scale_y": 0.5, "rot_degrees_x": 180,
+              "displacement_z": 1.0, "material": {"id": "white"}}
+    scene = scene_of(config(hidden, laser_lookat_x=0, laser_lookat_y=3))
+    assert np.linalg.norm(scene.u) == pytest.approx(2.0)          # tal's `scale_x or 1.0`
+    # lookat 0 is unset (the wall's centre, x = 0); y = 3 of 4 pixels: uv 0.75 -> y = 2 0.75 - 1
+    np.testing.assert_allclose(scene.scan.laser_point, [0.0, 0.5, 0.0])
+
+
+def test_scans_and_grids():
+    scene = scene_of(config(scan_type="exhaustive", laser_width=2, laser_height=3))
+    assert scene.scan.laser_grid == (2, 3) and scene.sensor_count == 4 * 4 * 2 * 3
+    np.testing.assert_allclose(scene.laser_points[:, :2], [[x, y] for y in (-2 / 3, 0, 2 / 3) for x in (-0.5, 0.5)])
+    confocal = scene_of(config(scan_type="confocal", laser_width=4, laser_height=4))
+    assert confocal.scan.type == "confocal"
+    assert "tal refuses" in refusal(config(scan_type="confocal"), "laser_width")   # default laser grid 32 x 32
+    wide = {**WALL, "scale_x": 1.5, "scale_y": 0.5}
+    scene = scene_of(config(geometry=[config()["geometry"][0], wide]))
+    assert scene.wall_size == (3.0, 1.0)
+    np.testing.assert_allclose(scene.read_points[0], [-1.125, -0.375, 0.0])         # tal's get_grid_xyz
+
+
+def test_obj_rectangle_two_triangles_and_refusals(tmp_path):
+    quad = "v 1 -1 0\nv -1 -1 0\nv 1 1 0\nv -1 1 0\nvn 0 0 -1\nf 1//1 2//1 4//1 3//1\n"
+    (tmp_path / "quad.obj").write_text(quad)
+    (tmp_path / "tri.obj").write_text("v 1 -1 0\nv -1 -1 0\nv 1 1 0\nv -1 1 0\nf 1 2 4\nf 1 4 3\n")
+    hidden = {"name": "w", "mesh": {"type": "obj", "filename": "quad.obj"}, "displacement_z": 1.0,
+              "scale_x": 0.5, "scale_y": 0.25, "material": {"id": "white"}}
+    scene = scene_of(config(hidden), tmp_path)
+    np.testing.assert_allclose(scene.center, [0, 0, 1], atol=1e-15)
+    np.testing.assert_allclose(scene.u, [1, 0, 0], atol=1e-15)
+    np.testing.assert_allclose(scene.v, [0, -0.5, 0], atol=1e-15)
+    split = scene_of(config({**hidden, "mesh": {"type": "obj", "filename": "tri.obj"}}), tmp_path)
+    for name in ("center", "u", "v"):
+        np.testing.assert_allclose(getattr(split, name), getattr(scene, name), atol=1e-15)
+    refused = {
+        # an L (a Z-like polygon): six corners
+        "ell.obj": "v 0 0 0\nv -1 0 0\nv -1 -1 0\nv 0 -2 0\nv 0 -1 0\nv -2 -2 0\nf 1 2 5\nf 2 3 5\nf 3 6 4\nf 3 4 5\n",
+        "bent.obj": "v 1 -1 0\nv -1 -1 0\nv 1 1 0\nv -1 1 0.3\nf 1 2 4\nf 1 4 3\n",          # not coplanar
+        "gap.obj": "v 1 -1 0\nv -1 -1 0\nv 1 1 0\nv -1 1 0\nv 0 0 0\nf 1 2 5\nf 2 4 5\nf 4 3 5\n",  # a hole
+        "tee.obj": "v 1 -1 0\nv -1 -1 0\nv 1 1 0\nv -1 1 0\nv 0 -1 0\nf 1 5 3\nf 5 2 4\nf 5 4 3\nf 1 2 4\n",
+        "flip.obj": "v 1 -1 0\nv -1 -1 0\nv 1 1 0\nv -1 1 0\nvn 0 0 1\nf 1//1 2//1 4//1 3//1\n",  # vn vs winding
+    }
+    for name, text in refused.items():
+        (tmp_path / name).write_text(text)
+        message = refusal(config({**hidden, "mesh": {"type": "obj", "filename": name}}), "geometry[w].mesh.filename",
+                          tmp_path)
+        assert name in message
+    assert "working directory" in refusal(config({**hidden, "mesh": {"type": "obj", "filename": "none.obj"}}),
+                                          "geometry[w].mesh.filename", tmp_path)
+
+
+def test_example_obj_matches_rectangle_example():
+    obj = scene_of(yaml.safe_load((EXAMPLES / "plane-confocal.yaml").read_text()),
+                   EXAMPLES.parents[1])
+    np.testing.assert_allclose(obj.center, [0, 0, 1], atol=1e-15)
+    np.testing.assert_allclose(obj.u, [2, 0, 0], atol=1e-15)
+    np.testing.assert_allclose(obj.v, [0, -2, 0], atol=1e-15)
+    assert obj.intensity == pytest.approx(math.pi)                  # mono: one channel
+    assert obj.noise.sigma == 1e-4 and obj.pixels == 32
+
+
+def test_channels_are_summed():
+    hidden = {**config()["geometry"][0],
+              "material": {"id": "custom", "text": '<bsdf type="diffuse"><rgb name="reflectance" '
+                                                   'value="0.2, 0.4, 0.6"/></bsdf>'}}
+    scene = scene_of(config(hidden, laser_emission="1, 2, 3"))
+    # I rho_w^2 rho_h = sum_c pi E_c rho_w,c^2 rho_h,c
+    assert scene.intensity * scene.wall_reflectance**2 * scene.reflectance[0, 0] == pytest.approx(
+        math.pi * (0.2 + 0.8 + 1.8))
+    grey_wall = {**WALL, "material": {"id": "custom", "text": '<bsdf type="diffuse"><float name="reflectance" '
+                                                              'value="0.5"/></bsdf>'}}
+    scene = scene_of(config(geometry=[config()["geometry"][0], grey_wall]))
+    assert (scene.wall_reflectance, scene.reflectance[0, 0], scene.intensity) == (0.5, 1.0, pytest.approx(3 * math.pi))
+    coloured_wall = {**WALL, "material": {"id": "custom", "text": '<bsdf type="diffuse"><rgb name="reflectance" '
+                                                                  'value="1, 0.5, 0"/></bsdf>'}}
+    scene = scene_of(config(geometry=[config()["geometry"][0], coloured_wall]))
+    assert scene.intensity * scene.wall_reflectance**2 * scene.reflectance[0, 0] == pytest.approx(math.pi * 1.25)
+    assert "mono" in refusal(config(hidden, mitsuba_variant="llvm_ad_mono"), "geometry[plane].material.text")
+
+
+def test_stated_flag_kept_and_warned():
+    with pytest.warns(TalConfigWarning, match="account_first_and_last_bounces: true reaches only"):
+        scene = tal_config_scene(config(account_first_and_last_bounces=True))
+    assert scene.scan.account_first_and_last_bounces is False     # what tal renders
+    assert scene.capture_accounts_flag is True                    # what its HDF5 says
+    assert scene.replace(name="other").capture_accounts_flag is True
+    with pytest.warns(TalConfigWarning, match="integrator_filter_bounces: -1"):
+        tal_config_scene(config(integrator_filter_bounces=-1))
+
+
+@pytest.mark.parametrize("change, key", [
+    ({"mitsuba_variant": "llvm_ad_spectral"}, "mitsuba_variant"),
+    ({"integrator_filter_bounces": 3}, "integrator_filter_bounces"),
+    ({"integrator_max_depth": 3}, "integrator_max_depth"),
+    ({"histogram_mode": "frequency"}, "histogram_mode"),
+    ({"scan_type": "confocal", "laser_width": 4, "laser_height": 4, "laser_aperture_end_x": 0.5},
+     "laser_aperture_start_x"),
+    ({"laser_lookat_x": 9}, "laser_lookat_x"),
+    ({"laser_emission_mode": "spectrum"}, "laser_emission_mode"),
+    ({"sensor_widht": 4}, "sensor_widht"),
+    ({"num_bins": 0}, "num_bins"),
+    ({"laser_z": -1.0}, "laser_z"),
+    ({"diffuse_imaging": {"pixels": 4, "noise": {"sigma": 1e-3, "seeds": 1}}}, "diffuse_imaging.noise"),
+])
+def test_refusals_name_tal_keys(change, key):
+    refusal(config(**change), key)
+
+
+def test_refused_geometry_and_materials():
+    hidden = config()["geometry"][0]
+    refusal(config({**hidden, "material": {"id": "copper", "alpha": "0.1"}}), "geometry[plane].material.id")
+    refusal(config({**hidden, "mesh": {"type": "sphere"}}), "geometry[plane].mesh.type")
+    refusal(config({**hidden, "rot_degrees_x": 0.0}), "geometry[plane]")                     # faces away
+    refusal(config({**hidden, "displacement_z": -1.0}), "geometry[plane]")                   # behind the wall
+    refusal(config({**hidden, "displacement_z": 0.2, "displacement_x": -0.5, "scale_x": 0.2}),
+            "geometry[plane]")                                                               # blocks the laser
+    refusal(config({**hidden, "material": {"id": "custom", "text": '<bsdf type="plastic"/>'}}),
+            "geometry[plane].material.text")
+    refusal(config({**hidden, "material": {"id": "custom", "text": '<bsdf type="diffuse"><texture '
+                                                                   'type="bitmap" name="reflectance"/></bsdf>'}}),
+            "geometry[plane].material.text")
+    refusal(config(geometry=[hidden, hidden, WALL]), "geometry")
+    refusal(config(geometry=[hidden, {**WALL, "rot_degrees_x": 0.0}]), "geometry[relay_wall].rot_degrees_x")
+    without = {k: v for k, v in WALL.items() if k != "displacement_y"}
+    refusal(config(geometry=[hidden, without]), "geometry[relay_wall].displacement_y")
+    default = {k: v for k, v in config().items() if k != "geometry"}
+    assert "./Z.obj" in refusal(default, "geometry[Z].mesh.filename")      # tal's default hidden geometry
+
+
+def test_yaml_file_errors(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("name: [unclosed\n")
+    with pytest.raises(SceneError, match="invalid YAML at line"):
+        load_tal_config(bad)
+    listed = tmp_path / "list.yml"
+    listed.write_text("- 1\n- 2\n")
+    with pytest.raises(SceneError, match="mapping of keys"):
+        load_scene(listed)

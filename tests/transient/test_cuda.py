@@ -40,7 +40,14 @@ def test_cuda_variant_agrees_with_model(scene):
 @pytest.mark.cuda
 @pytest.mark.parametrize("waveform", ["impulse", "butterworth"])
 def test_cuda_sums_equal_cpu_sums(scene, waveform):
-    """A fixed seed draws the same samples on both backends: the sums agree to float64 rounding."""
+    """A fixed seed draws the same samples on both backends: the sums agree to float32 geometry's rounding.
+
+    Each sample's path length and weight are computed in the variant's float32 (only the
+    accumulation is float64), and the two backends contract multiply-adds differently: measured
+    on an H100, 12 of 1,920 entries moved by up to 1e-4 of themselves (a sample within rounding of
+    a bin edge lands on the other side) and the total by 5.7e-7. A different sampler, a lost term
+    or a wrong bin would move them by far more.
+    """
     variant = _cuda_variant()
     if variant is None:
         pytest.skip("no CUDA device")
@@ -59,4 +66,6 @@ def test_cuda_sums_equal_cpu_sums(scene, waveform):
                                                           count=2**21)
     finally:
         backend.select_variant()
-    np.testing.assert_allclose(sums[variant], sums[None], rtol=1e-9, atol=1e-9 * np.abs(sums[None]).max())
+    cuda, cpu = np.asarray(sums[variant]), np.asarray(sums[None])
+    np.testing.assert_allclose(cuda.sum(axis=-1), cpu.sum(axis=-1), rtol=1e-4)   # every (replica, sensor)
+    np.testing.assert_allclose(cuda, cpu, rtol=0, atol=1e-3 * np.abs(cpu).max())

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import datetime
 import json
+import math
 import re
 import tomllib
 from pathlib import Path
@@ -192,10 +193,31 @@ def _illumination(table: dict, base_dir) -> Illumination:
         if not isinstance(name, str) or not name:
             raise SceneError("illumination.file", f"expected a file name (.npy or .csv, relative to the scene "
                                                   f"file), got {name!r}")
-        from .waveforms.measured import read_samples
+        from .waveforms.measured import HISTOGRAM_SUFFIXES, histogram_axis, read_samples
 
-        table["samples"] = read_samples(Path(base_dir) / name)
+        path = Path(base_dir) / name
+        table["samples"] = read_samples(path)
+        if path.suffix.lower() in HISTOGRAM_SUFFIXES:
+            _histogram_spacing(table, *histogram_axis(path))
     return Illumination(**table)
+
+
+def _histogram_spacing(table: dict, width: float, start: float) -> None:
+    """A tal histogram's own spacing (the scene's must equal it) and, unless the scene sets one, its start."""
+    from .waveforms.measured import sample_width_metres
+
+    given = [key for key in ("sample_width", "sample_width_ps") if table.get(key) is not None]
+    if not given:
+        table["sample_width"] = width
+    elif len(given) == 1:
+        try:
+            stated = sample_width_metres(table.get("sample_width"), table.get("sample_width_ps"))
+        except (TypeError, ValueError):
+            stated = None     # not a number: Illumination names the key
+        if stated is not None and not math.isclose(stated, width, rel_tol=1e-9):
+            raise SceneError(f"illumination.{given[0]}", f"{stated:g} m differs from the file's delta_t, {width:g} m; "
+                                                         f"leave it out to use the file's")
+    table.setdefault("start", start)
 
 
 def _detector(data: dict, schema: dict = _SCHEMA) -> Detector | None:

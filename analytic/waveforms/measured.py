@@ -2,7 +2,8 @@
 
 The ``sampled`` waveform (docs/design.md section 8) takes its samples from
 ``[illumination] file`` (.npy: a 1-D array; .csv or .txt: one number per
-line, blank lines and lines starting with ``#`` skipped) or inline as
+line, blank lines and lines starting with ``#`` skipped; .h5 or .hdf5: a tal
+capture holding one histogram, whose bin centres are the samples) or inline as
 ``[illumination] samples = [...]``. :func:`check_samples` is what the
 scene's :class:`~analytic.scene.Illumination` runs on either.
 """
@@ -16,7 +17,7 @@ import numpy as np
 
 from ..errors import SceneError
 
-__all__ = ["read_samples", "check_samples", "sample_width_metres", "finite_span", "MAX_SAMPLES",
+__all__ = ["read_samples", "histogram_axis", "check_samples", "sample_width_metres", "finite_span", "MAX_SAMPLES",
            "METRES_PER_PICOSECOND", "SUFFIXES"]
 
 #: Most samples accepted: each is a kink of the pulse, where the model cuts its integrals.
@@ -24,7 +25,9 @@ MAX_SAMPLES = 100_000
 #: Path length light travels in one picosecond, metres (c = 299 792 458 m/s).
 METRES_PER_PICOSECOND = 2.99792458e-4
 #: File types read.
-SUFFIXES = (".npy", ".csv", ".txt")
+SUFFIXES = (".npy", ".csv", ".txt", ".h5", ".hdf5")
+#: tal captures among them: their own time axis gives the spacing and start.
+HISTOGRAM_SUFFIXES = (".h5", ".hdf5")
 #: Largest file read, bytes (a text file of MAX_SAMPLES numbers is ~2.5 MB).
 _MAX_BYTES = 16 << 20
 
@@ -35,8 +38,9 @@ def read_samples(path, key: str = "illumination.file") -> np.ndarray:
     Parameters
     ----------
     path : str or Path
-        A .npy file holding a 1-D array, or a .csv / .txt file with one
-        number per line.
+        A .npy file holding a 1-D array, a .csv / .txt file with one
+        number per line, or a tal HDF5 capture (``H``) of one histogram
+        (:func:`histogram_axis` gives its spacing and first bin centre).
     key : str
         The scene key named in errors.
 
@@ -59,6 +63,8 @@ def read_samples(path, key: str = "illumination.file") -> np.ndarray:
         if suffix == ".npy":
             with open(path, "rb") as stream:
                 values = np.load(stream, allow_pickle=False)
+        elif suffix in HISTOGRAM_SUFFIXES:
+            values = _histogram(path, key).transient[0]
         else:
             values = _read_text(path, key)
     except (OSError, ValueError, EOFError) as error:
@@ -71,6 +77,31 @@ def read_samples(path, key: str = "illumination.file") -> np.ndarray:
     if not (np.issubdtype(values.dtype, np.floating) or np.issubdtype(values.dtype, np.integer)):
         raise SceneError(key, f"{shown}: expected numbers, got dtype {values.dtype}")
     return check_samples(values.astype(np.float64), key)
+
+
+def _histogram(path: Path, key: str):
+    from ..errors import DataError
+    from ..files.capture import read_capture
+
+    try:
+        capture = read_capture(path)
+    except DataError as error:
+        raise SceneError(key, str(error)) from None
+    if capture.transient.shape[0] != 1:
+        raise SceneError(key, f"{path}: holds {capture.transient.shape[0]} histograms; an instrument response "
+                              f"is one (write the pixel you measured it on alone)")
+    return capture
+
+
+def histogram_axis(path, key: str = "illumination.file") -> tuple[float, float]:
+    """``(sample_width, start)`` of a tal capture's histogram, metres of path.
+
+    A histogram's bin n covers [t_start + n delta_t, t_start + (n + 1) delta_t):
+    its count is taken as the response at the bin's centre, so the samples are
+    ``delta_t`` apart from ``t_start + delta_t / 2``.
+    """
+    capture = _histogram(Path(path), key)
+    return float(capture.bin_width_opl), float(capture.start_opl + capture.bin_width_opl / 2)
 
 
 def _read_text(path: Path, key: str) -> np.ndarray:

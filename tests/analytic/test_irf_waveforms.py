@@ -227,3 +227,45 @@ def test_taylor_polynomials_match_the_kernels(illumination, rng):
         scale = np.max(np.abs(exact), axis=1, keepdims=True)
         assert np.all(np.abs(series - exact) <= rtol * scale + 1e-15 * np.max(scale))
     assert kept >= 10           # the route serves these pulses
+
+
+def _tal_histogram(path, counts, delta_t, t_start):
+    """A tal capture of one histogram, written with h5py alone (tal's dataset names)."""
+    import h5py
+
+    with h5py.File(path, "w") as stream:
+        stream["H"] = np.asarray(counts, dtype=float)[:, None]
+        stream["delta_t"] = delta_t
+        stream["t_start"] = t_start
+
+
+def test_a_tal_histogram_is_a_sampled_response(tmp_path):
+    """Its counts are the samples, at its bins' centres, delta_t apart; the scene's width must agree."""
+    from analytic.scene_file import load_scene
+
+    counts = [0, 3, 40, 100, 61, 20, 7, 2, 0]
+    _tal_histogram(tmp_path / "irf.hdf5", counts, 0.0015, -0.003)
+    scene = ("[plane]\nsize = 1.0\npixels = 2\n[source]\nposition = [0.5, 0.5, 1.0]\n"
+             "[sensors]\npositions = [[0.2, 0.7, 1.0]]\n[sampling]\nperiod = 0.01\nstart = 1.9\ncount = 60\n"
+             "[illumination]\nwaveform = \"sampled\"\nfile = \"irf.hdf5\"\n")
+    (tmp_path / "s.toml").write_text(scene)
+    illumination = load_scene(tmp_path / "s.toml").illumination
+    assert list(illumination.samples) == counts
+    assert illumination.sample_width == 0.0015
+    assert illumination.start == pytest.approx(-0.003 + 0.0015 / 2, abs=1e-15)
+    (tmp_path / "own_start.toml").write_text(scene + "start = 0.001\nsample_width_ps = 5.003461427972\n")
+    assert load_scene(tmp_path / "own_start.toml").illumination.start == 0.001      # the scene's start wins
+    (tmp_path / "wider.toml").write_text(scene + "sample_width = 0.002\n")
+    with pytest.raises(SceneError, match="illumination.sample_width: 0.002 m differs from the file's delta_t"):
+        load_scene(tmp_path / "wider.toml")
+    with h5py_file(tmp_path / "irf.hdf5") as stream:
+        del stream["H"]
+        stream["H"] = np.ones((9, 2))
+    with pytest.raises(SceneError, match="holds 2 histograms"):
+        load_scene(tmp_path / "s.toml")
+
+
+def h5py_file(path):
+    import h5py
+
+    return h5py.File(path, "r+")

@@ -97,7 +97,8 @@ def test_check_counts_passes_the_draw_and_fails_a_wider_pulse_or_no_dead_time(sp
     (["--counts", "--fit", "offset,offset_opl"], "--fit: each name once"),
     (["--counts", "--fit", "tail"], "--fit tail: the scene's pulse ('gaussian') has no tail"),
     (["--counts", "--expect-scale", "2"], "--expect-scale: does not apply to --counts"),
-    (["--counts", "--false-alarm", "0.7"], "--false-alarm: must be in (0, 0.5]"),
+    (["--counts", "--false-alarm", "0.7"], "--false-alarm: must be in [0.0001, 0.5]"),
+    (["--counts", "--false-alarm", "1e-9"], "--false-alarm: must be in [0.0001, 0.5]"),
 ])
 def test_check_counts_refuses_bad_options_in_one_line(spad, tmp_path, capsys, arguments, message):
     path, out = spad

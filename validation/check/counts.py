@@ -210,12 +210,18 @@ def judge_counts(counts, expected, detector: Detector, *, false_alarm: float = D
         raise DataError(f"draws = {draws} cannot resolve the {1 - false_alarm:g} quantile; use at least "
                         f"{math.ceil(10 / false_alarm)}")
     observed = deviance(values, expected, detector)
-    null = null_deviances(expected, detector, draws, np.random.default_rng(seed))
+    # A stream of its own: seeded like a detector's draw (seed 0 by default), the first reference
+    # histogram would be the capture itself whenever the capture is our own draw.
+    null = null_deviances(expected, detector, draws, np.random.default_rng([seed, _REFERENCE_STREAM]))
     threshold = float(np.quantile(null, 1.0 - false_alarm, method="higher"))
     p_value = (1.0 + float(np.sum(null >= observed))) / (draws + 1.0)
     bins = int(values.size)
     return CountsVerdict(bool(observed <= threshold), observed, threshold, p_value, float(false_alarm),
                          "poisson" if detector.dead_time == "none" else "multinomial", bins, int(draws))
+
+
+#: Second word of the reference draws' seed, apart from every detector draw's ``default_rng(seed)``.
+_REFERENCE_STREAM = 0x636F756E
 
 
 class SceneModel:

@@ -179,6 +179,10 @@ def add_counts_options(check) -> None:
                             "(default 0.01)")
 
 
+#: Smallest --false-alarm: the null distribution is drawn, about 20 / alpha histograms.
+MIN_FALSE_ALARM = 1e-4
+
+
 def _rate(text: str) -> float:
     import argparse
 
@@ -186,8 +190,9 @@ def _rate(text: str) -> float:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"--false-alarm: expected a number, got {text!r}") from None
-    if not 0.0 < value <= 0.5:
-        raise argparse.ArgumentTypeError(f"--false-alarm: must be in (0, 0.5], got {text}")
+    if not MIN_FALSE_ALARM <= value <= 0.5:
+        # the judge draws ~20 / alpha reference histograms: 1e-4 is 2e5 of them, smaller would not fit in memory
+        raise argparse.ArgumentTypeError(f"--false-alarm: must be in [{MIN_FALSE_ALARM:g}, 0.5], got {text}")
     return value
 
 

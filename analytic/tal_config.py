@@ -466,8 +466,11 @@ def tal_config_scene(data: dict, *, name: str = "tal", config: str = "",
                       f"the scene is what {TAL_VERSION} renders", TalConfigWarning, stacklevel=3)
     merged = {**TAL_DEFAULTS, **data}                                  # tal's shallow merge
     ours = merged.get(_OURS) or {}
-    if not isinstance(ours, dict) or set(ours) - _OUR_KEYS:
-        raise SceneError(_OURS, f"expected a mapping of {', '.join(sorted(_OUR_KEYS))}")
+    if not isinstance(ours, dict):
+        raise SceneError(_OURS, f"expected a mapping of {', '.join(sorted(_OUR_KEYS))}, got {ours!r}")
+    if set(ours) - _OUR_KEYS:
+        raise SceneError(f"{_OURS}.{sorted(map(str, set(ours) - _OUR_KEYS))[0]}",
+                         f"not a key of ours here; the keys are {', '.join(sorted(_OUR_KEYS))}")
     label = merged.get("name", name)
     if not isinstance(label, str):
         raise SceneError("name", f"expected a string, got {label!r}")

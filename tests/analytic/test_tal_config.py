@@ -191,6 +191,8 @@ def test_stated_flag_kept_and_warned():
     ({"num_bins": 0}, "num_bins"),
     ({"laser_z": -1.0}, "laser_z"),
     ({"diffuse_imaging": {"pixels": 4, "noise": {"sigma": 1e-3, "seeds": 1}}}, "diffuse_imaging.noise"),
+    ({"diffuse_imaging": {"pixels": 4, "detector": {"photons": 1}}}, "diffuse_imaging.detector"),
+    ({"diffuse_imaging": [4]}, "diffuse_imaging"),
 ])
 def test_refusals_name_tal_keys(change, key):
     refusal(config(**change), key)

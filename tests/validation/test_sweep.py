@@ -176,8 +176,10 @@ def test_reflectance_folder_gives_one_item_per_image(tmp_path, rng):
     ('scene = "base.toml"\nsamples = 100\n[grid]\n"sampling.peroid" = [0.1]\n', "grid.sampling.peroid"),
     ('scene = "base.toml"\nsamples = 100\n[grid]\n"sampling.period" = [0.1, -0.1]\n', "grid.sampling.period"),
     ('scene = "base.toml"\nsamples = 100\n[grid]\n"sampling.period" = 0.1\n', "grid.sampling.period"),
-    ('scene = "base.toml"\nsamples = 100\n[grid]\n"illumination.waveform" = ["gaussian"]\n',
+    ('scene = "base.toml"\nsamples = 100\n[grid]\n"illumination.waveform" = ["lorentzian"]\n',
      "grid.illumination.waveform"),
+    ('scene = "base.toml"\nsamples = 100\n[grid]\n"illumination.waveform" = ["gaussian"]\n',
+     "illumination.fwhm"),                          # a waveform's own key, missing from the base scene
     ('scene = "base.toml"\nsamples = 100\n[grid]\nperiod = [0.1]\n', "grid.period"),
     ('scene = "base.toml"\nsamples = 1\n', "samples"),
     ('scene = "base.toml"\nsamples = 100\nchunk = 0\n', "chunk"),

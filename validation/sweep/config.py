@@ -19,6 +19,7 @@ from typing import Any
 from analytic.errors import SceneError
 from analytic.scene import Scene
 from analytic.scene_file import read_toml, scene_from_dict, scene_to_tables
+from analytic.waveforms import make_waveform
 from validation.compare import MIN_CHECK_SAMPLES
 
 __all__ = ["Sweep", "SweepItem", "load_sweep", "sweep_from_dict", "default_scene_table",
@@ -238,6 +239,9 @@ def sweep_from_dict(data: dict, base_dir: str | Path = ".") -> Sweep:
         name = _folder_name(index, parameters)
         try:
             scene = scene_from_dict(table, scene_dir, name=name)
+            if isinstance(scene, Scene):
+                # a waveform's own keys are checked when it is built (e.g. a gaussian's fwhm), not by the scene
+                make_waveform(scene.illumination, scene.sampling.bin_width_opl)
         except SceneError as error:
             key = f"grid.{error.key}" if error.key in grid else error.key
             raise SceneError(key, f"{error.problem} (item {name})") from None

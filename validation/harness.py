@@ -214,8 +214,10 @@ def reconstruct_from_noisy_data(matrix, scene: Scene, model: np.ndarray, rendere
         "noise": None if noise is None else {"kind": noise.kind, "sigma": noise.sigma,
                                              "photons": noise.photons, "seed": noise.seed},
         "rule": rule_name,
-        "data": (f"The model's and the render's transients, each with the scene's {what} added "
-                 f"(the same draw), reconstructed with λ by the {rule_name} rule; the oracle λ "
+        "data": (f"The model's and the render's transients, "
+                 + (f"each with the scene's {what} added (the same draw), " if noise is not None
+                    else "as they are (the scene has no [noise]), ")
+                 + f"reconstructed with λ by the {rule_name} rule; the oracle λ "
                  f"(the truth's) on the model's noisy data is a bound, the best flat image the floor."),
         **results,
         "oracle": {"image": oracle.image, "lambda": float(oracle.lam),

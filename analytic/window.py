@@ -31,7 +31,7 @@ from .isochrone import LAMBERTIAN, PixelBox, pair_frame, rectangle_range
 from .scene import Sampling, Scene, SceneError
 
 __all__ = ["response_range", "pairs_range", "covering_sampling", "auto_sampling", "window_share", "empty_bins",
-           "warn_if_cut", "warn_if_mostly_empty", "WindowWarning", "FULL_SHARE"]
+           "warn_if_cut", "warn_if_mostly_empty", "WindowWarning", "FULL_SHARE", "impulse_totals"]
 
 #: The share of the light a window must hold not to be warned about.
 FULL_SHARE = 0.999
@@ -164,16 +164,29 @@ def window_share(scene: Scene) -> float:
         return 1.0
     if end <= low + waveform.lead:
         return 0.0
-    margin = 1e-6 * max(high - low, abs(high))
-    paths = Sampling(bin_width_opl=(high - low) + 2 * margin, start_opl=low - margin, count=1)
     window = Sampling(bin_width_opl=sampling.count * sampling.bin_width_opl, start_opl=sampling.start_opl,
                       count=1)
     # the one-bin window's pulse must be the scene's, whose defaults follow the scene's period
     pinned = Illumination(waveform=scene.illumination.waveform, **waveform.parameters)
-    total = waveform.energy * float(np.sum(forward(scene.replace(sampling=paths,
-                                                                 illumination=Illumination()))))
+    total = waveform.energy * float(np.sum(impulse_totals(scene)))
     held = float(np.sum(forward(scene.replace(sampling=window, illumination=pinned))))
     return held / total if total > 0 else 0.0
+
+
+def impulse_totals(scene: Scene) -> np.ndarray:
+    """Per sensor (or pair), all the light of an impulse over every path: ``(K,)``, W/sr x m⁻¹ of y's unit.
+
+    The one-bin impulse model whose bin holds every path length (:func:`response_range`, widened by
+    a millionth); a bin of the scene's y, of any pulse of unit peak, is at most this times
+    min(T, ∫|s| dt) (the bin's kernel is ∫_bin s, |s| <= 1), or this for the impulse.
+    """
+    from .scene import Illumination
+    from .system import forward
+
+    low, high = response_range(scene)
+    margin = 1e-6 * max(high - low, abs(high))
+    paths = Sampling(bin_width_opl=(high - low) + 2 * margin, start_opl=low - margin, count=1)
+    return np.asarray(forward(scene.replace(sampling=paths, illumination=Illumination())), dtype=np.float64)[:, 0]
 
 
 def warn_if_cut(scene: Scene, share: float) -> None:

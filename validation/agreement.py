@@ -47,9 +47,10 @@ class Agreement:
         α, the probability that pure noise fails the check.
     relative_l2 : float
         ||y_render - y_model|| / ||y_model||.
-    worst : list of (sensor, bin, z)
-        The largest |z|, worst first.
-    unsampled_light : list of (sensor, bin, model value)
+    worst : list of (k, bin, z)
+        The largest |z|, worst first; k is the sensor (a plane) or the pair
+        (a relay-wall capture), the row group of y.
+    unsampled_light : list of (k, bin, model value)
         Bins with se = 0 but model light above z* x max(se).
     null : {"sign-flip", "independent"}
         Where the limits come from: sign flips of the replicas (valid
@@ -83,7 +84,8 @@ class Agreement:
         """One paragraph: verdict, χ²/dof, max |z|, thresholds and their null, worst bins."""
         verdict = "AGREE" if self.agrees else "DISAGREE"
         low, high = self.chi2_interval
-        worst = ", ".join(f"(sensor {k}, bin {n}, z = {z:+.2f})" for k, n, z in self.worst[:5])
+        # k: the row's sensor (a plane) or its (laser, sensor) pair (a relay-wall capture)
+        worst = ", ".join(f"(k = {k}, bin {n}, z = {z:+.2f})" for k, n, z in self.worst[:5])
         reference = "normal" if np.isinf(self.dof) else f"Student t, {self.dof:g} degrees of freedom"
         text = (f"{verdict} ({reference}): χ²/dof = {self.chi2_per_dof:.3f} over {self.bins} bins "
                 f"({self.skipped} with too few samples not judged) "

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import analytic
+from analytic.detector import draw_counts
 from analytic.files import read_transient
 from analytic.scene_file import load_scene
 from scene_files import GOOD, write_scene
@@ -180,11 +181,27 @@ def test_render_and_run_write_counts_of_their_y(spad, tmp_path):
     np.testing.assert_allclose(np.load(tmp_path / "render" / "counts_expected.npy"), _coates(mean), rtol=1e-12)
     assert json.loads((tmp_path / "render" / "meta.json").read_text())["detector"]["cycles"] == CYCLES
     assert main(["run", str(path), "--spp", "65536", "--out", str(tmp_path / "run"), "--quiet"]) in (0, 1)
-    for part in ("model", "render"):
+    for stream, part in enumerate(("model", "render")):
         y = np.load(tmp_path / "run" / part / "transient.npy")
-        np.testing.assert_allclose(np.load(tmp_path / "run" / part / "counts_expected.npy"), _coates(y),
-                                   rtol=1e-12)
-        assert np.load(tmp_path / "run" / part / "counts.npy").sum() <= CYCLES
+        expected = _coates(y)
+        np.testing.assert_allclose(np.load(tmp_path / "run" / part / "counts_expected.npy"), expected, rtol=1e-12)
+        # the model's draw from the detector's seed, the render's from its own stream (independent draws)
+        detector = load_scene(path).detector
+        drawn = np.load(tmp_path / "run" / part / "counts.npy")
+        own = draw_counts(y, detector, rng=np.random.default_rng(3 if stream == 0 else [3, 1]))
+        np.testing.assert_array_equal(drawn, own)
+        if stream:
+            assert not np.array_equal(drawn, draw_counts(y, detector, rng=np.random.default_rng(3)))
+
+
+def test_a_render_whose_counts_could_pass_a_poissons_limit_is_refused_before_any_file(tmp_path, capsys):
+    text = (GAUSSIAN + DETECTOR).replace('dead_time = "cycle"', 'dead_time = "none"').replace("photons = 35.0",
+                                                                                                "photons = 1e30")
+    path = write_scene(tmp_path, text)
+    assert main(["render", str(path), "--spp", "65536", "--out", str(tmp_path / "out")]) == 2
+    error = capsys.readouterr().err.strip().splitlines()
+    assert len(error) == 1 and "detector.photons" in error[0] and "Traceback" not in error[0], error
+    assert not (tmp_path / "out").exists()
 
 
 def test_a_relay_wall_capture_gets_counts_in_tal_nlos_layout(tmp_path):

@@ -15,7 +15,7 @@ def test_the_summary_and_the_record_name_the_verdict_the_null_and_the_worst_bin(
     rendered[1, 7] += 10 * stderr[1, 7]
     result = compare_transients(rendered, stderr, model)
     text = result.summary()
-    assert text.startswith("DISAGREE") and "(sensor 1, bin 7, z = +" in text
+    assert text.startswith("DISAGREE") and "(k = 1, bin 7, z = +" in text
     assert "assume independent bins" in text
     record = json.loads(json.dumps(result.as_dict()))
     assert record["agrees"] is False and record["null"] == INDEPENDENT

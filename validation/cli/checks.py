@@ -138,7 +138,9 @@ def command_run(args) -> int:
                             lambdas=grid)
         show_reconstruction_warnings(check.reconstructions)
         share = check.metrics["window_share"]
-        counts = {part: draw_scene_counts(scene, y) for part, y in (("model", check.model), ("render", check.render))}
+        # independent draws: the render's from a stream of its own
+        counts = {part: draw_scene_counts(scene, y, stream=stream)
+                  for stream, (part, y) in enumerate((("model", check.model), ("render", check.render)))}
         with staged_writes():
             write_transient(out / "model", check.model, build_meta(scene, kind="model", window_share=share),
                             scene=scene)

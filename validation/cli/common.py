@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 import sys
 
 from analytic.errors import UserError
@@ -30,6 +31,8 @@ class OneLineParser(argparse.ArgumentParser):
 
     def error(self, message: str):
         hint = f"; see {self.prog} --help"
+        # "argument --x: --x: bad": our option types name their option themselves
+        message = re.sub(r"^argument (\S+): \1: ", r"\1: ", message)
         self.exit(2, f"{self.prog}: error: {message}{hint}\n")
 
 

@@ -9,7 +9,9 @@ with the detector's seed) beside ``transient.npy``, the draw again as
 ``transient.h5``, read by ``tal.io.read_capture``), and the figure
 ``counts.png``; meta.json's ``detector`` records the table. A folder
 written for a scene without one has none of the three (an earlier
-command's are removed). A render's counts are those of its estimate of y.
+command's are removed). A render's counts are those of its estimate of y;
+``run`` draws its render's from a stream of their own (the seed and 1), so
+that its model's and render's draws are independent.
 
 ``check SCENE --data FILE --counts`` judges a histogram against the
 scene's expected one by the deviance (:func:`validation.check.counts.judge_counts`:
@@ -24,7 +26,8 @@ from pathlib import Path
 
 from .common import UsageError
 
-__all__ = ["COUNTS_FILES", "COUNTS_CAPTURE", "COUNTS_FIGURE", "draw_scene_counts", "write_counts", "write_render_counts",
+__all__ = ["COUNTS_FILES", "COUNTS_CAPTURE", "COUNTS_FIGURE", "draw_scene_counts", "refuse_unreachable_counts", "write_counts",
+           "write_render_counts",
            "discard_counts", "add_counts_options",
            "check_counts_options", "command_check_counts", "counts_figure"]
 
@@ -38,17 +41,49 @@ COUNTS_FIGURE = "counts.png"
 _FIT_ALIASES = {"scale": "scale", "offset": "offset_opl", "offset_opl": "offset_opl", "fwhm": "fwhm", "tail": "tail"}
 
 
-def draw_scene_counts(scene, y) -> tuple[np.ndarray, np.ndarray] | None:
+def draw_scene_counts(scene, y, *, stream: int = 0) -> tuple[np.ndarray, np.ndarray] | None:
     """(expected, drawn) counts of y through the scene's detector, or None when it has no ``[detector]``.
 
     Called before any file is written: an expected count a Poisson draw cannot take is refused
     (:class:`analytic.errors.SceneError` naming ``detector.photons``) while the folder is still untouched.
+    ``stream`` 0 draws with the detector's seed (``numpy.random.default_rng(seed)``); another draws
+    from ``default_rng([seed, stream])``, independent of it (``run``'s render beside its model).
     """
+    import numpy as np
+
     from analytic.detector import draw_counts, expected_counts
 
     if scene.detector is None:
         return None
-    return expected_counts(y, scene.detector), draw_counts(y, scene.detector)
+    seed = scene.detector.seed
+    rng = np.random.default_rng(seed if stream == 0 else [seed, stream])
+    return expected_counts(y, scene.detector), draw_counts(y, scene.detector, rng=rng)
+
+
+def refuse_unreachable_counts(scene, *, margin: float = 4.0) -> None:
+    """Before a render: refuse a ``[detector]`` whose expected counts could pass what a Poisson draw takes.
+
+    A render's y is known only at its end, after its files; its counts are drawn then. So the
+    bins' bound :func:`analytic.window.impulse_totals` x (1 for the impulse, else the period T: a
+    pulse of unit peak) gives, with ``margin`` for the estimate's noise, the largest expected
+    count; beyond :data:`analytic.detector.MAX_MEAN` the scene is refused (``detector.photons``)
+    before any work. The dead-time detector draws multinomially from at most ``cycles``: no limit.
+    """
+    import numpy as np
+
+    from analytic.detector import MAX_MEAN
+    from analytic.errors import SceneError
+    from analytic.window import impulse_totals
+
+    detector = scene.detector
+    if detector is None or detector.dead_time != "none":
+        return
+    pulse = 1.0 if scene.illumination.waveform == "impulse" else scene.sampling.bin_width_opl
+    highest = float(np.max(impulse_totals(scene), initial=0.0)) * pulse * margin
+    largest = detector.cycles * (detector.photons * highest + detector.background)
+    if not largest <= MAX_MEAN:
+        raise SceneError("detector.photons", f"an expected count could reach {largest:.3g}, beyond the "
+                                             f"{MAX_MEAN:g} a Poisson draw supports; lower photons or cycles")
 
 
 def write_counts(out: str | Path, scene, counts: tuple[np.ndarray, np.ndarray] | None, *, label: str = "model"

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from .common import (UsageError, add_quiet, add_window_option, announce_window, apply_window, load_scene_argument,
                      samples_type, seed_type, show_progress)
-from .counts import discard_counts, write_render_counts
+from .counts import discard_counts, refuse_unreachable_counts, write_render_counts
 
 __all__ = ["add_commands", "command_render"]
 
@@ -57,6 +57,7 @@ def command_render(args) -> int:
         given, scene, variant = None, apply_window(args, load_scene_argument(args.scene)), \
             args.variant
     select_variant(variant)          # a variant that cannot run here is refused before anything is said
+    refuse_unreachable_counts(scene)  # the counts are drawn after the render's files: their limit is checked first
     folder = args.resume if args.resume else args.out
     option = "--resume" if args.resume else "--out"
     progress = show_progress(args)

@@ -22,7 +22,11 @@ python3 -m compileall -q analytic transient validation
 # the sources; Dr.Jit caches the renderer's kernels in ~/.drjit. One small run of the main job pays both
 # here, so that the first real command runs at its warm speed (the README states both times)
 warm=$(mktemp -d)
+# the tests' own routes compile beside the main job's kernels: two compiles, two cores
+python3 scripts/warm_kernels.py &
+routes=$!
 python3 -m validation.cli run examples/paper.toml --spp 4096 --out "$warm/run" --quiet
+wait "$routes"
 rm -rf "$warm"
 # tal (y-tal) pins numpy < 2: it gets its own environment, used by the tests that read our HDF5 with it
 bash scripts/setup_interop.sh

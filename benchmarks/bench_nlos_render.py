@@ -2,6 +2,8 @@
 
     python benchmarks/bench_nlos_render.py --out out/bench_nlos_render [--ours 65536 262144 1048576 4194304]
                                            [--theirs 16384 65536] [--repeats 4] [--strategy mis]
+                                           [--variant cuda_ad_mono] [--model out/bench_nlos_render/model.npz]
+    python benchmarks/bench_nlos_render.py --out out/bench_nlos_quick --quick
     python benchmarks/bench_nlos_render.py --out out/bench_nlos_strategies --near-wall
 
 The capture: an 8 x 8 single scan of the default relay-wall scene (a 1 m
@@ -14,6 +16,19 @@ at each ``--theirs`` count of samples per read point), one after the other
 on the same machine. ``--theirs`` with no value skips mitransient (to time
 another version of ours back to back: run this script with that
 version's folder first on PYTHONPATH).
+
+``--variant`` (default: :func:`transient.backend.select_variant`'s,
+``llvm_ad_mono``) is the Mitsuba variant of both renderers: ours runs in
+it and mitransient's subprocess sets it, so ``--variant cuda_ad_mono``
+compares the two on one GPU. The exact model (and mitransient's bias) is
+computed once and saved as ``model.npz`` in ``--out``; ``--model`` reads
+such a file instead (checked against the capture), for a machine where
+Numba's first compilation would cost minutes. Without the OpenEXR module
+the exported texture is written by Mitsuba's own EXR writer.
+
+``--quick`` is a smoke test, not a measurement: 2^12 and 2^14 of our
+samples, 2^8 of mitransient's per read point, 2 repeats (each unless
+given), in well under a minute on 2 CPU cores.
 
 Error: the RMS over every (pair, bin) of y_render - y_model, divided by the
 model's largest bin (its peak), against the exact model, the mean error²
@@ -63,11 +78,11 @@ from validation.bench import cpu_model
 _MITRANSIENT = r"""
 import json, sys, time
 import numpy as np, mitsuba as mi
-mi.set_variant("llvm_ad_mono")
+mi.set_variant(sys.argv[1])
 import mitransient
-xml, repeats, out = sys.argv[1], int(sys.argv[2]), sys.argv[3]
+xml, repeats, out = sys.argv[2], int(sys.argv[3]), sys.argv[4]
 timings = {}
-for spp in (int(s) for s in sys.argv[4:]):
+for spp in (int(s) for s in sys.argv[5:]):
     scene = mi.load_file(xml, spp=spp)
     np.array(mi.render(scene, seed=10**6)[1])                       # compile
     timings[spp] = []
@@ -81,16 +96,21 @@ print(json.dumps(timings))
 
 TARGET = 1e-3
 
+#: ``--quick``'s counts (a smoke test of every step, not a measurement).
+QUICK = {"ours": [2**12, 2**14], "theirs": [2**8], "repeats": 2}
+#: The full run's defaults (docs/benchmarks.md's table).
+FULL = {"ours": [2**16, 2**18, 2**20, 2**22], "theirs": [2**14, 2**16], "repeats": 4}
+
 
 def bench_scene():
     return default_relay_wall_scene(scan=Scan(type="single", grid=(8, 8)), name="bench-nlos")
 
 
-def ours(scene, samples: int, repeats: int, estimator: dict):
+def ours(scene, samples: int, repeats: int, estimator: dict, variant: str | None = None):
     """Our transient_opl_nlos estimates (units of y) and their (wall, CPU) seconds, after a warm-up render."""
     from transient.backend import select_variant
 
-    select_variant()
+    select_variant(variant)
     import mitsuba as mi
 
     from transient.chunks import ReplicaLayout
@@ -114,24 +134,94 @@ def ours(scene, samples: int, repeats: int, estimator: dict):
     return estimates, seconds
 
 
-def theirs(scene, counts, repeats: int, out: Path):
+def theirs(scene, counts, repeats: int, out: Path, variant: str):
     """mitransient's estimates of the exported scene and their (wall, CPU) seconds, per spp, after a warm-up."""
     import json
 
     from transient.backend import choose_libllvm, find_llvm_libraries
-    from transient.export import export_scene
     from validation.check import read_data
 
-    export_scene(scene, out / "xml", "mitransient")
-    environment = os.environ | {"DRJIT_LIBLLVM_PATH": choose_libllvm(os.environ.get("DRJIT_LIBLLVM_PATH"),
-                                                                     find_llvm_libraries())}
-    done = subprocess.run([sys.executable, "-c", _MITRANSIENT, str(out / "xml" / "scene.xml"), str(repeats), str(out),
-                           *(str(c) for c in counts)], capture_output=True, text=True, env=environment, timeout=3600)
+    export_for_mitransient(scene, out / "xml")
+    environment = dict(os.environ)
+    if variant.startswith("llvm_"):
+        environment["DRJIT_LIBLLVM_PATH"] = choose_libllvm(os.environ.get("DRJIT_LIBLLVM_PATH"),
+                                                           find_llvm_libraries())
+    done = subprocess.run([sys.executable, "-c", _MITRANSIENT, variant, str(out / "xml" / "scene.xml"), str(repeats),
+                           str(out), *(str(c) for c in counts)], capture_output=True, text=True, env=environment,
+                          timeout=3600)
     if done.returncode != 0:
         raise RuntimeError(done.stderr[-3000:])
     timings = json.loads(done.stdout.strip().splitlines()[-1])
     return {int(spp): ([read_data(out / f"film_{spp}_{seed}.npy", scene) for seed in range(repeats)], seconds)
             for spp, seconds in timings.items()}
+
+
+def export_for_mitransient(scene, folder: Path) -> None:
+    """``export --format mitransient`` into ``folder``; without the OpenEXR module (as on the GPU machines),
+    the texture is written by Mitsuba's own EXR writer instead and read back."""
+    from unittest import mock
+
+    import analytic.files
+    from transient.export import export_scene
+
+    try:
+        import OpenEXR  # noqa: F401
+    except ImportError:
+        with mock.patch.object(analytic.files, "save_exr", _save_exr_with_mitsuba):
+            export_scene(scene, folder, "mitransient")
+        return
+    export_scene(scene, folder, "mitransient")
+
+
+def _save_exr_with_mitsuba(path, image, attributes=None) -> Path:
+    """A one-channel float32 EXR by ``mi.Bitmap.write`` (the benchmark's fallback for a missing OpenEXR)."""
+    import mitsuba as mi
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    pixels = np.ascontiguousarray(image, dtype=np.float32)
+    mi.Bitmap(pixels[..., None], mi.Bitmap.PixelFormat.Y).write(str(path))
+    back = np.array(mi.Bitmap(str(path)), dtype=np.float32).reshape(pixels.shape)
+    if not np.array_equal(back, pixels):
+        raise RuntimeError(f"{path}: the EXR Mitsuba wrote reads back different")
+    return path
+
+
+def exact_model(scene, path: Path | None, out: Path, bias: bool):
+    """(The exact model (P, N), mitransient's bias RMS / peak or None): from ``path`` (``--model``), else computed;
+    saved to ``out/model.npz`` either way."""
+    from analytic.system import forward
+
+    if path is not None:
+        with np.load(path) as saved:
+            model, name = saved["model"], str(saved["scene"])
+            offset = saved["offset"] if "offset" in saved.files else None
+        if model.shape != (scene.sensor_count, scene.sampling.count) or name != scene.name:
+            raise SystemExit(f"{path}: not the model of this capture ({scene.name}, {scene.sensor_count} pairs x "
+                             f"{scene.sampling.count} bins)")
+    else:
+        model, offset = forward(scene), None
+    if bias and offset is None:
+        from validation.check import offset_model
+
+        offset = offset_model(scene)
+    out.mkdir(parents=True, exist_ok=True)
+    arrays = {"model": model, "scene": np.array(scene.name)} | ({} if offset is None else {"offset": offset})
+    np.savez(out / "model.npz", **arrays)
+    return model, (None if offset is None else float(np.sqrt(np.mean((offset - model) ** 2)) / model.max()))
+
+
+def device(variant: str) -> str:
+    """The machine: the CPU, and for a CUDA variant the GPU (nvidia-smi's name, if it answers)."""
+    if not variant.startswith("cuda_"):
+        return cpu_model()
+    try:
+        done = subprocess.run(["nvidia-smi", "--query-gpu=name", "--format=csv,noheader"], capture_output=True,
+                              text=True, timeout=30)
+        gpu = done.stdout.strip().splitlines()[0]
+    except (OSError, IndexError, subprocess.SubprocessError):
+        gpu = "a CUDA GPU"
+    return f"{gpu} (host {cpu_model()})"
 
 
 def summary(name: str, samples: int, evaluations: int, estimates, seconds, model, bias: float = 0.0) -> dict:
@@ -160,7 +250,7 @@ def seconds_to_target(rows, stratified: bool) -> float:
     return float(np.mean([t * (e / TARGET) ** 2 for _, t, e in points]))
 
 
-def near_wall_strategies(samples: int = 2**16, seeds: int = 6) -> list[dict]:
+def near_wall_strategies(variant: str | None = None, samples: int = 2**16, seeds: int = 6) -> list[dict]:
     """Each strategy's variance gain over area sampling on near-wall single scans (module docstring)."""
     from analytic.relay_wall import RelayWallScene
     from analytic.scene import Sampling
@@ -177,7 +267,7 @@ def near_wall_strategies(samples: int = 2**16, seeds: int = 6) -> list[dict]:
                                                 count=int((high - low) / 0.02) + 3))
         model = forward(scene)
         error2 = {strategy: float(np.mean([np.mean((estimate - model) ** 2) for estimate in
-                                           ours(scene, samples, seeds, {"strategy": strategy})[0]]))
+                                           ours(scene, samples, seeds, {"strategy": strategy}, variant)[0]]))
                   for strategy in ("area", "source", "mis")}
         rows.append({"distance": distance, "techniques": len(_plan(scene)),
                      **{f"gain_{strategy}": error2["area"] / error2[strategy] for strategy in error2}})
@@ -195,44 +285,57 @@ def _plan(scene):
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", required=True, type=Path)
-    parser.add_argument("--ours", type=int, nargs="+", default=[2**16, 2**18, 2**20, 2**22],
-                        help="our samples per render (each serves every pair)")
-    parser.add_argument("--theirs", type=int, nargs="*", default=[2**14, 2**16],
-                        help="mitransient's samples per read point (none: skip mitransient)")
-    parser.add_argument("--repeats", type=int, default=4)
+    parser.add_argument("--ours", type=int, nargs="+", default=None,
+                        help="our samples per render (each serves every pair); default 2^16 2^18 2^20 2^22")
+    parser.add_argument("--theirs", type=int, nargs="*", default=None,
+                        help="mitransient's samples per read point (none: skip mitransient); default 2^14 2^16")
+    parser.add_argument("--repeats", type=int, default=None, help="renders of different seeds per count (default 4)")
     parser.add_argument("--strategy", default=None, help="our sampling strategy (default: the plugin's)")
+    parser.add_argument("--variant", default=None,
+                        help="Mitsuba variant of both renderers, e.g. cuda_ad_mono (default: llvm_ad_mono)")
+    parser.add_argument("--model", type=Path, default=None,
+                        help="the exact model from an earlier run's model.npz (default: computed here)")
+    parser.add_argument("--quick", action="store_true", help="a smoke test with small counts (not a measurement)")
     parser.add_argument("--label", default="ours (transient_opl_nlos)")
     parser.add_argument("--near-wall", action="store_true", help="measure our strategies on near-wall scans instead")
     args = parser.parse_args(argv)
+    for key, value in (QUICK if args.quick else FULL).items():
+        if getattr(args, key) is None:
+            setattr(args, key, value)
+    from transient.backend import BackendError, select_variant
+
+    try:
+        variant = select_variant(args.variant)       # before anything imports Dr.Jit
+    except BackendError as error:
+        raise SystemExit(f"bench_nlos_render: {error}") from None
     if args.near_wall:
-        rows = near_wall_strategies()
-        print(f"machine: {cpu_model()}; squared error of area sampling over each strategy's, 6 seeds of 2^16 samples")
+        rows = near_wall_strategies(variant)
+        print(f"machine: {device(variant)}; squared error of area sampling over each strategy's, 6 seeds of 2^16 "
+              f"samples")
         print("| rectangle's distance to the wall (m) | techniques (mis) | l's solid angle | MIS |")
         print("|---|---|---|---|")
         for row in rows:
             print(f"| {row['distance']} | {row['techniques']} | {row['gain_source']:.3g} | {row['gain_mis']:.3g} |")
         args.out.mkdir(parents=True, exist_ok=True)
-        save_json(args.out / "results.json", {"machine": cpu_model(), "near_wall": rows})
+        save_json(args.out / "results.json", {"machine": device(variant), "variant": variant, "near_wall": rows})
         return 0
-    from analytic.system import forward
-    from validation.check import offset_model
-
     scene = bench_scene()
-    model = forward(scene)
+    model, bias = exact_model(scene, args.model, args.out, bool(args.theirs))
     pairs = scene.sensor_count
     estimator = {} if args.strategy is None else {"strategy": args.strategy}
     load = os.getloadavg()[0]
-    rows = [summary(args.label, n, n * pairs, *ours(scene, n, args.repeats, estimator), model) for n in args.ours]
+    rows = [summary(args.label, n, n * pairs, *ours(scene, n, args.repeats, estimator, variant), model)
+            for n in args.ours]
     theirs_rows = []
     if args.theirs:
-        args.out.mkdir(parents=True, exist_ok=True)
-        bias = float(np.sqrt(np.mean((offset_model(scene) - model) ** 2)) / model.max())
         theirs_rows = [summary("mitransient (transient_nlos_path)", spp, spp * pairs, estimates, seconds, model, bias)
-                       for spp, (estimates, seconds) in theirs(scene, args.theirs, args.repeats, args.out).items()]
-    results = {"machine": cpu_model(), "load_average_at_start": load, "load_average_at_end": os.getloadavg()[0],
+                       for spp, (estimates, seconds) in theirs(scene, args.theirs, args.repeats, args.out,
+                                                               variant).items()]
+    results = {"machine": device(variant), "variant": variant, "quick": args.quick, "load_average_at_start": load, "load_average_at_end": os.getloadavg()[0],
                "scene": "8 x 8 single scan, 140 bins of 1 cm, 32 x 32 hidden image", "repeats": args.repeats,
                "ours": rows, "theirs": theirs_rows, "ours_seconds_to_1e-3": seconds_to_target(rows, True)}
-    print(f"machine: {cpu_model()}; load average {load:.1f} at the start, {os.getloadavg()[0]:.1f} at the end")
+    print(f"machine: {results['machine']}; variant {variant}; load average {load:.1f} at the start, "
+          f"{os.getloadavg()[0]:.1f} at the end{'; --quick: a smoke test, not a measurement' if args.quick else ''}")
     print(f"capture: {results['scene']}; error = RMS of (render - model) over pairs and bins / the model's peak")
     print("| renderer | samples | seconds (CPU) | RMS error / peak | bias RMS / peak | efficiency 1/(error² s) "
           "(CPU s) | ns per evaluation (CPU) | variance per sample |")

@@ -31,7 +31,7 @@ def test_a_single_biased_bin_is_found(rng):
     rendered[2, 17] += 8 * stderr[2, 17]
     result = compare_transients(rendered, stderr, model)
     assert not result.agrees and result.worst[0][:2] == (2, 17)
-    with pytest.raises(AssertionError, match="sensor 2, bin 17"):
+    with pytest.raises(AssertionError, match="k = 2, bin 17"):
         assert_transients_agree(rendered, stderr, model)
 
 

@@ -172,13 +172,32 @@ def test_unknown_strategy_is_refused():
         _loaded(CASES["confocal"], strategy="solid_angle")
 
 
-def test_chunks_add_up_to_the_whole_render_and_share_one_kernel():
+def test_texture_density_with_the_wrong_weights_fails(monkeypatch):
+    """Points drawn by the texture but weighted as if uniform (1 / area) are biased: caught."""
+    import transient.nlos as nlos
+
+    class Uniform(nlos.PixelDensity):
+        def sample(self, u, v):
+            u, v, density = super().sample(u, v)
+            return u, v, density * 0.0 + float(np.mean(np.array(self._density)))
+
+    scene = _covering(CASES["confocal"])
+    monkeypatch.setattr(nlos, "PixelDensity", Uniform)
+    replicas = _render(scene, 2**18, seed=8)
+    *_, passes = _agrees(replicas, _model(scene))
+    assert not passes
+
+
+@pytest.mark.parametrize("sampler", ["sobol", "stratified"])
+@pytest.mark.parametrize("case", ["near the wall (MIS)", "confocal (the texture's density)"])
+def test_chunks_add_up_to_the_whole_render_and_share_one_kernel(case, sampler):
     """Sample g's numbers depend on (seed, g) only; seeds, offsets and technique blocks are opaque."""
     import drjit as dr
 
     from transient.chunks import ReplicaLayout
 
-    loaded = _loaded(_covering(NEAR_WALL_SINGLE))
+    scene = NEAR_WALL_SINGLE if case.startswith("near") else CASES["confocal"]
+    loaded = _loaded(_covering(scene), sampler=sampler)
     integrator = loaded.integrator()
     layout = ReplicaLayout.for_samples(2**14)                  # 32 replicas of 512 samples
 

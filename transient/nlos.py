@@ -81,6 +81,10 @@ SAMPLERS = ("sobol", "stratified", "independent")
 #: up to ~100 do (measured in docs/renderer.md).
 MIS_PEAK_RATIO = 256.0
 
+#: Read points along a grid row that one iteration of the kernel's loop handles, unrolled (a divisor of the
+#: grid's width): their positions become literal offsets from the first, and the loop's bookkeeping is shared.
+UNROLLED_READS = 16
+
 # Agreement demanded between the double-precision rectangle this plugin is given and the float32 copy
 # Mitsuba built the shape from.
 _FLOAT32_MATCH = 1e-6
@@ -123,6 +127,11 @@ class _Grid(NamedTuple):
 
 def _vector(props, name: str) -> np.ndarray:
     return np.array(props.get(name), dtype=np.float64).reshape(3)
+
+
+def _plus(value, amount: float):
+    """value + amount, the addition left out for 0 (a literal 0 is not folded away)."""
+    return value if amount == 0.0 else value + amount
 
 
 def _wall_factor(point: _Point, wall):
@@ -234,6 +243,8 @@ class TransientNlosIntegrator(mi.SamplingIntegrator):
             self.leg = np.repeat(self._lasers.leg, count)
             self.offsets = np.repeat(self._lasers.offset, count) + np.tile(reads.offset, lasers)
         self.plan = self._techniques()
+        self._taps = self.waveform.bins_touched(self.bin_width_opl, self.bins)
+        self._pixel_cache = (None, None)             # (texture values, their PixelDensity)
 
     def _wall_points(self, points: np.ndarray, origin: np.ndarray) -> _WallPoints:
         """Wall points in the hidden frame, the leg from the laser if lit from ``origin``, the offset to it."""
@@ -389,11 +400,13 @@ class TransientNlosIntegrator(mi.SamplingIntegrator):
         # and 1.5 x faster than Local (the deposits of one sample spread over P rows; docs/renderer.md).
         # CUDA: as reduce_mode().
         mode = reduce_mode() if dr.backend_v(mi.Float64) == dr.JitBackend.CUDA else dr.ReduceMode.Direct
-        taps = self.waveform.bins_touched(self.bin_width_opl, bins)
+        taps = self._taps
         # The impulse's bin, floor((τ + lead - t_0) / T), as a product by 1/T: it differs from the model's
         # quotient (analytic.binning.bin_index) only for τ within an ulp of a bin edge, a null set.
         inverse_width = 1.0 / self.bin_width_opl
         shift = float(self.waveform.terms.lead) - self.start_opl
+        # read points per loop iteration: the largest divisor of the grid's width up to UNROLLED_READS
+        group = max(d for d in range(1, UNROLLED_READS + 1) if grid.width % d == 0)
 
         def deposit_reads(row, weight, base_length, laser_offset):
             """Loop over the read points: one distance, one factor, one deposit each."""
@@ -405,30 +418,36 @@ class TransientNlosIntegrator(mi.SamplingIntegrator):
             base = extra if base_length is None else base_length + extra
 
             def body(b, column, line, slot):
-                wall = [grid.origin[k] + column * grid.column[k] + line * grid.row[k] for k in range(3)]
-                squared = dr.square(point.x - wall[0]) + dr.square(point.y - wall[1]) + dr.square(wall[2])
-                inverse = 1.0 / squared
-                distance = dr.sqrt(squared)
-                if self.scan_type == "confocal":
-                    factor = wall[2] * point.z * dr.square(inverse)
-                    weight_b = weight * dr.gather(mi.Float64, self._read_leg, b) * dr.square(factor)
-                    length = 2.0 * distance + base
-                else:
-                    weight_b, length = weight * wall[2] * dr.square(inverse), base + distance
-                if self.account:
-                    length += dr.gather(mi.Float64, self._read_offset, b)
-                if taps == 1:                        # the impulse: one bin, found by a product
-                    index = dr.floor(length * inverse_width)
-                    dr.scatter_reduce(dr.ReduceOp.Add, histogram, weight_b,
-                                      slot + mi.UInt32(dr.clip(index, 0.0, bins - 1.0)),
-                                      active=(index >= 0.0) & (index < bins), mode=mode)
-                else:
-                    deposit(histogram, row + b, weight_b, length, mi.Bool(True), bins=bins,
-                            start_opl=self.start_opl, bin_width_opl=self.bin_width_opl,
-                            terms=self.waveform.terms, taps=taps, mode=mode)
-                column += 1.0
+                # a group of read points along a grid row, unrolled: each one's offset from the first is a literal
+                first = [grid.origin[k] + column * grid.column[k] + line * grid.row[k] for k in range(3)]
+                offsets = (point.x - first[0], point.y - first[1], first[2])
+                for j in range(group):
+                    dx, dy, height = (_plus(offsets[k], -j * grid.column[k] if k < 2 else j * grid.column[k])
+                                      for k in range(3))
+                    squared = dr.square(dx) + dr.square(dy) + dr.square(height)
+                    inverse = 1.0 / squared
+                    distance = dr.sqrt(squared)
+                    if self.scan_type == "confocal":
+                        factor = height * point.z * dr.square(inverse)
+                        weight_b = weight * dr.gather(mi.Float64, self._read_leg, b + j) * dr.square(factor)
+                        length = 2.0 * distance + base
+                    else:
+                        weight_b, length = weight * height * dr.square(inverse), base + distance
+                    if self.account:
+                        length += dr.gather(mi.Float64, self._read_offset, b + j)
+                    if taps == 1:                    # the impulse: one bin, found by a product
+                        index = dr.floor(length * inverse_width)
+                        dr.scatter_reduce(dr.ReduceOp.Add, histogram, weight_b,
+                                          slot + (mi.UInt32(dr.clip(index, 0.0, bins - 1.0)) + j * bins),
+                                          active=(index >= 0.0) & (index < bins), mode=mode)
+                    else:
+                        deposit(histogram, row + b + j, weight_b, length, mi.Bool(True), bins=bins,
+                                start_opl=self.start_opl, bin_width_opl=self.bin_width_opl,
+                                terms=self.waveform.terms, taps=taps, mode=mode)
+                column += float(group)
                 wrap = column == float(grid.width)
-                return b + 1, dr.select(wrap, 0.0, column), dr.select(wrap, line + 1.0, line), slot + bins
+                return (b + group, dr.select(wrap, 0.0, column), dr.select(wrap, line + 1.0, line),
+                        slot + group * bins)
 
             dr.while_loop((mi.UInt32(0), mi.Float64(0.0), mi.Float64(0.0), row * bins),
                           lambda b, column, line, slot: b < opaque_u32(len(self.read_points)), body,
@@ -459,11 +478,14 @@ class TransientNlosIntegrator(mi.SamplingIntegrator):
         parameters = mi.traverse(hidden.bsdf())
         if "reflectance.data" not in parameters or len(parameters["reflectance.data"].shape) != 3:
             return None                              # a constant reflectance: area sampling is the density
-        data = parameters["reflectance.data"]
-        rows, columns = data.shape[0], data.shape[1]
-        centre_u, centre_v = np.meshgrid((np.arange(columns) + 0.5) / columns, (np.arange(rows) + 0.5) / rows)
-        reflectance = self._reflectance(hidden, mi.Float64(centre_u.ravel()), mi.Float64(centre_v.ravel()))
-        return PixelDensity(np.array(reflectance).reshape(rows, columns), self.width * self.height)
+        # texel (row j, column i) covers v in [j / H, (j + 1) / H), u in [i / W, (i + 1) / W) (the texture's values
+        # as stored: any positive density is unbiased, these make it efficient)
+        data = np.array(parameters["reflectance.data"], dtype=np.float64)[..., 0]
+        values, density = self._pixel_cache
+        if values is None or not np.array_equal(values, data):     # built once per texture
+            density = PixelDensity(data, self.width * self.height)
+            self._pixel_cache = (data, density)
+        return density
 
     def _reflectance(self, hidden, u, v):
         """ρ_h at (u, v) of the hidden rectangle's texture (float32 as Mitsuba stores it), Float64."""

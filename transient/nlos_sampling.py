@@ -48,12 +48,14 @@ def reverse_bits(value):
 
 
 def sobol_second(index):
-    """The second dimension of the Sobol sequence at ``index`` (UInt32): direction v_0 = 2^31, v_k = v_{k-1}
-    xor v_{k-1} / 2 (the generator matrix is Pascal's triangle mod 2)."""
-    value, direction = mi.UInt32(0), 1 << 31
-    for bit in range(32):
-        value ^= dr.select((index & (1 << bit)) != 0, mi.UInt32(direction), mi.UInt32(0))
-        direction ^= direction >> 1
+    """The second dimension of the Sobol sequence at ``index`` (UInt32).
+
+    Its generator matrix is Pascal's triangle mod 2 (directions v_0 = 2^31, v_k = v_{k-1} xor v_{k-1} / 2):
+    on the bit-reversed index, a sum over bit subsets, done by five xor-shifts.
+    """
+    value = reverse_bits(index)
+    for shift, mask in ((1, 0x55555555), (2, 0x33333333), (4, 0x0F0F0F0F), (8, 0x00FF00FF), (16, 0x0000FFFF)):
+        value ^= (value & mask) << shift
     return value
 
 

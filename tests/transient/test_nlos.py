@@ -172,6 +172,28 @@ def test_unknown_strategy_is_refused():
         _loaded(CASES["confocal"], strategy="solid_angle")
 
 
+def test_texture_density_follows_the_reflectance_the_plugin_reads():
+    """The density of each texel is ρ + 1 % of the mean ρ over their sum, per texel area, with ρ looked up at the
+    texel's centre as the kernel looks it up (so the texture's rows are not read upside down)."""
+    import mitsuba as mi
+
+    from transient.nlos_sampling import FLOOR
+
+    scene = CASES["confocal"]
+    loaded = _loaded(scene)
+    integrator = loaded.integrator()
+    hidden = integrator._hidden_shape(loaded)
+    density = integrator._pixel_density(hidden)
+    assert (density.height, density.width) == scene.reflectance.shape
+    u, v = np.meshgrid((np.arange(density.width) + 0.5) / density.width,
+                       (np.arange(density.height) + 0.5) / density.height)
+    reflectance = np.array(integrator._reflectance(hidden, mi.Float64(u.ravel()), mi.Float64(v.ravel())))
+    weights = reflectance + FLOOR * reflectance.mean()
+    area = np.linalg.norm(scene.u) * np.linalg.norm(scene.v)
+    assert np.allclose(np.array(density._density), weights / weights.sum() * weights.size / area, rtol=1e-6)
+    assert np.ptp(reflectance) > 0.1                   # a texture with contrast: a flipped lookup would differ
+
+
 def test_texture_density_with_the_wrong_weights_fails(monkeypatch):
     """Points drawn by the texture but weighted as if uniform (1 / area) are biased: caught."""
     import transient.nlos as nlos

@@ -192,8 +192,6 @@ def _save_exr_with_mitsuba(path, image, attributes=None) -> Path:
 def exact_model(scene, path: Path | None, out: Path, bias: bool):
     """(The exact model (P, N), mitransient's bias RMS / peak or None): from ``path`` (``--model``), else computed;
     saved to ``out/model.npz`` either way."""
-    from analytic.system import forward
-
     if path is not None:
         with np.load(path) as saved:
             model, name = saved["model"], str(saved["scene"])
@@ -202,6 +200,8 @@ def exact_model(scene, path: Path | None, out: Path, bias: bool):
             raise SystemExit(f"{path}: not the model of this capture ({scene.name}, {scene.sensor_count} pairs x "
                              f"{scene.sampling.count} bins)")
     else:
+        from analytic.system import forward
+
         model, offset = forward(scene), None
     if bias and offset is None:
         from validation.check import offset_model

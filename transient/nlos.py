@@ -29,15 +29,11 @@ in the source's place and the read points in the sensors'):
   scans share no laser point and sample by area;
 - ``source``: l's technique alone; ``area``: uniformly (kept to measure
   the others against);
-- a plan of area sampling alone (the rectangle far enough from the wall,
-  every confocal and exhaustive scan) draws its points by the hidden
-  texture instead, in proportion to the reflectance
-  (:class:`transient.nlos_sampling.PixelDensity`): as unbiased, less
-  variance where the reflectance varies;
+- a plan of area sampling alone draws its points by the hidden texture,
+  in proportion to the reflectance (:class:`transient.nlos_sampling.PixelDensity`);
 - each technique's share of a replica is an Owen-scrambled Sobol set
   (``sampler = sobol``, the default, :func:`transient.nlos_sampling.owen_sobol_point`),
-  or jittered-stratified in Morton order as ``transient_opl`` does
-  (``stratified``), or independent (``independent``).
+  jittered-stratified in Morton order (``stratified``) or ``independent``.
 
 The kernel's lanes are samples: the per-sample work (random stream,
 stratified point, texture, density) is done once and a loop over the scan

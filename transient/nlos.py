@@ -29,8 +29,11 @@ in the source's place and the read points in the sensors'):
   scans share no laser point and sample by area;
 - ``source``: l's technique alone; ``area``: uniformly (kept to measure
   the others against);
-- each technique's share of a replica jittered-stratified in Morton order
-  (``sampler = stratified``), as ``transient_opl`` does.
+- a plan of area sampling alone draws its points by the hidden texture,
+  in proportion to the reflectance (:class:`transient.nlos_sampling.PixelDensity`);
+- each technique's share of a replica is an Owen-scrambled Sobol set
+  (``sampler = sobol``, the default, :func:`transient.nlos_sampling.owen_sobol_point`),
+  jittered-stratified in Morton order (``stratified``) or ``independent``.
 
 The kernel's lanes are samples: the per-sample work (random stream,
 stratified point, texture, density) is done once and a loop over the scan
@@ -54,8 +57,9 @@ from analytic.relay_wall import WALL_NORMAL, grid_points
 from .chunks import ReplicaLayout, checked_chunk
 from .common import deposit, is_diffuse, jittered_point, opaque_f64, opaque_u32, reduce_mode, replica_of, \
     sample_stream, time_axis_and_waveform
-from .plane import SAMPLERS, STRATEGIES, plane_frame, techniques
-from .plane_sampling import block_bounds, mixture_density, peak_ratio, warp
+from .nlos_sampling import PixelDensity, owen_sobol_point
+from .plane import STRATEGIES, plane_frame, techniques
+from .plane_sampling import AREA, block_bounds, mixture_density, peak_ratio, warp
 
 __all__ = ["TransientNlosIntegrator", "PLUGIN_NAME", "SCAN_TYPES", "STRATEGIES", "SAMPLERS", "MIS_PEAK_RATIO"]
 
@@ -63,12 +67,19 @@ PLUGIN_NAME = "transient_opl_nlos"
 
 SCAN_TYPES = ("single", "confocal", "exhaustive")
 
+#: How each technique's share of a replica places its points in the unit square (module docstring).
+SAMPLERS = ("sobol", "stratified", "independent")
+
 #: A single scan mixes in techniques of its read points only when, with points drawn for l alone, some
 #: read point's largest weight exceeds its mean by more than this factor; then every read point over the
 #: plane's :data:`transient.plane.PEAK_RATIO_LIMIT` (16) gets one, as on the plane. Below it l's technique
 #: alone does better: each technique's share is stratified on its own, which costs more than peaks of
 #: up to ~100 do (measured in docs/renderer.md).
 MIS_PEAK_RATIO = 256.0
+
+#: Read points along a grid row that one iteration of the kernel's loop handles, unrolled (a divisor of the
+#: grid's width): their positions become literal offsets from the first, and the loop's bookkeeping is shared.
+UNROLLED_READS = 16
 
 # Agreement demanded between the double-precision rectangle this plugin is given and the float32 copy
 # Mitsuba built the shape from.
@@ -112,6 +123,11 @@ class _Grid(NamedTuple):
 
 def _vector(props, name: str) -> np.ndarray:
     return np.array(props.get(name), dtype=np.float64).reshape(3)
+
+
+def _plus(value, amount: float):
+    """value + amount, the addition left out for 0 (a literal 0 is not folded away)."""
+    return value if amount == 0.0 else value + amount
 
 
 def _wall_factor(point: _Point, wall):
@@ -169,8 +185,8 @@ class TransientNlosIntegrator(mi.SamplingIntegrator):
          ``source`` (l's alone) or ``area`` (Default: ``mis``).
      * - sampler
        - |string|
-       - ``stratified`` (jittered, Morton order) or ``independent``
-         (Default: ``stratified``).
+       - ``sobol`` (Owen-scrambled Sobol points), ``stratified`` (jittered,
+         Morton order) or ``independent`` (Default: ``sobol``).
 
     Render with :meth:`render_chunk_per_unit_intensity` (or
     :func:`transient.render.render`), not ``mi.render``.
@@ -197,7 +213,7 @@ class TransientNlosIntegrator(mi.SamplingIntegrator):
         self.strategy = str(props.get("strategy", "mis"))
         if self.strategy not in STRATEGIES:
             raise ValueError(f"{PLUGIN_NAME}: strategy must be one of {STRATEGIES}, got {self.strategy!r}")
-        self.sampler = str(props.get("sampler", "stratified"))
+        self.sampler = str(props.get("sampler", "sobol"))
         if self.sampler not in SAMPLERS:
             raise ValueError(f"{PLUGIN_NAME}: sampler must be one of {SAMPLERS}, got {self.sampler!r}")
         grid = (int(props.get("grid_width")), int(props.get("grid_height")))
@@ -223,6 +239,8 @@ class TransientNlosIntegrator(mi.SamplingIntegrator):
             self.leg = np.repeat(self._lasers.leg, count)
             self.offsets = np.repeat(self._lasers.offset, count) + np.tile(reads.offset, lasers)
         self.plan = self._techniques()
+        self._taps = self.waveform.bins_touched(self.bin_width_opl, self.bins)
+        self._pixel_cache = (None, None)             # (texture values, their PixelDensity)
 
     def _wall_points(self, points: np.ndarray, origin: np.ndarray) -> _WallPoints:
         """Wall points in the hidden frame, the leg from the laser if lit from ``origin``, the offset to it."""
@@ -320,14 +338,24 @@ class TransientNlosIntegrator(mi.SamplingIntegrator):
             block_start = dr.select(later, opaque_u32(bounds[t]), block_start)
             block_size = dr.select(later, opaque_u32(bounds[t + 1] - bounds[t]), block_size)
         jitter_u, jitter_v = rng.next_float64(), rng.next_float64()
-        if self.sampler == "stratified":
+        if self.sampler == "sobol":
+            # one scramble per (render seed, replica, technique): the replicas stay independent
+            code = (replica + dr.opaque(mi.UInt32, first_replica)) * len(plan) + technique
+            seed_u, seed_v = mi.sample_tea_32(opaque_u32(seed), code, 16)
+            u, v = owen_sobol_point(in_replica - block_start, seed_u, seed_v, jitter_u, jitter_v)
+        elif self.sampler == "stratified":
             u, v = jittered_point(in_replica - block_start, block_size, jitter_u, jitter_v)
         else:
             u, v = jitter_u, jitter_v
-        x, y = warp(plan, technique, u, v, self.width, self.height)
-        shares = [opaque_f64((bounds[t + 1] - bounds[t]) / size) for t in range(len(plan))]
-        # the balance heuristic: each point weighted by the density of all techniques together
-        density = mixture_density(plan, shares, x, y, self.width, self.height)
+        pixels = self._pixel_density(hidden)
+        if pixels is not None:                       # area alone: by the texture instead
+            u, v, density = pixels.sample(u, v)
+            x, y = u * self.width, v * self.height
+        else:
+            x, y = warp(plan, technique, u, v, self.width, self.height)
+            shares = [opaque_f64((bounds[t + 1] - bounds[t]) / size) for t in range(len(plan))]
+            # the balance heuristic: each point weighted by the density of all techniques together
+            density = mixture_density(plan, shares, x, y, self.width, self.height)
         scale = self._reflectance(hidden, x / self.width, y / self.height) / (math.pi * density)
         height = float(self.corner[2]) + x * float(self.axes[0][2]) + y * float(self.axes[1][2])  # x's z
 
@@ -365,30 +393,63 @@ class TransientNlosIntegrator(mi.SamplingIntegrator):
         """
         grid, bins = self._read_grid, self.bins
         # LLVM: plain atomics, 1.1 to 1.8 x faster here than the per-thread copies of reduce_mode()'s Auto
-        # (the deposits of one sample spread over P rows; docs/renderer.md). CUDA: as reduce_mode().
+        # and 1.5 x faster than Local (the deposits of one sample spread over P rows; docs/renderer.md).
+        # CUDA: as reduce_mode().
         mode = reduce_mode() if dr.backend_v(mi.Float64) == dr.JitBackend.CUDA else dr.ReduceMode.Direct
+        taps = self._taps
+        # The impulse's bin, floor((τ + lead - t_0) / T), as a product by 1/T: it differs from the model's
+        # quotient (analytic.binning.bin_index) only for τ within an ulp of a bin edge, a null set.
+        inverse_width = 1.0 / self.bin_width_opl
+        shift = float(self.waveform.terms.lead) - self.start_opl
+        # read points per loop iteration: the largest divisor of the grid's width up to UNROLLED_READS
+        group = max(d for d in range(1, UNROLLED_READS + 1) if grid.width % d == 0)
 
         def deposit_reads(row, weight, base_length, laser_offset):
             """Loop over the read points: one distance, one factor, one deposit each."""
-            def body(b, column, line):
-                wall = [grid.origin[k] + column * grid.column[k] + line * grid.row[k] for k in range(3)]
-                distance, factor = _wall_factor(point, wall)
-                if self.scan_type == "confocal":
-                    weight_b = weight * dr.gather(mi.Float64, self._read_leg, b) * dr.square(factor)
-                    length = 2.0 * distance
-                else:
-                    weight_b, length = weight * factor, base_length + distance
-                if self.account:
-                    length += laser_offset + dr.gather(mi.Float64, self._read_offset, b)
-                deposit(histogram, row + b, weight_b, length, mi.Bool(True), bins=bins,
-                        start_opl=self.start_opl, bin_width_opl=self.bin_width_opl, terms=self.waveform.terms,
-                        taps=self.waveform.bins_touched(self.bin_width_opl, bins), mode=mode)
-                column += 1.0
-                wrap = column == float(grid.width)
-                return b + 1, dr.select(wrap, 0.0, column), dr.select(wrap, line + 1.0, line)
+            if self.scan_type != "confocal":
+                weight = weight * point.z            # g_s = h_s z_x / |x - s|⁴: z_x once per sample
+            # the path's length less |x - s| (less 2 |x - s| confocal), shifted for the product below
+            extra = (shift if taps == 1 else 0.0) + (laser_offset if self.account and laser_offset is not None
+                                                     else 0.0)
+            base = extra if base_length is None else base_length + extra
 
-            dr.while_loop((mi.UInt32(0), mi.Float64(0.0), mi.Float64(0.0)),
-                          lambda b, column, line: b < opaque_u32(len(self.read_points)), body, label="nlos_reads")
+            def body(b, column, line, slot):
+                # a group of read points along a grid row, unrolled: each one's offset from the first is a literal
+                first = [grid.origin[k] + column * grid.column[k] + line * grid.row[k] for k in range(3)]
+                offsets = (point.x - first[0], point.y - first[1], first[2])
+                for j in range(group):
+                    dx, dy, height = (_plus(offsets[k], -j * grid.column[k] if k < 2 else j * grid.column[k])
+                                      for k in range(3))
+                    squared = dr.square(dx) + dr.square(dy) + dr.square(height)
+                    inverse = 1.0 / squared
+                    distance = dr.sqrt(squared)
+                    if self.scan_type == "confocal":
+                        factor = height * point.z * dr.square(inverse)
+                        weight_b = weight * dr.gather(mi.Float64, self._read_leg, b + j) * dr.square(factor)
+                        length = 2.0 * distance + base
+                    else:
+                        weight_b, length = weight * height * dr.square(inverse), base + distance
+                    if self.account:
+                        length += dr.gather(mi.Float64, self._read_offset, b + j)
+                    if taps == 1:                    # the impulse: one bin, found by a product
+                        position = length * inverse_width
+                        inside = (position >= 0.0) & (position < bins)
+                        # truncation is the floor where inside; a signed conversion is one AVX2 instruction
+                        index = mi.UInt32(dr.select(inside, mi.Int32(position), 0))
+                        dr.scatter_reduce(dr.ReduceOp.Add, histogram, weight_b, slot + (index + j * bins),
+                                          active=inside, mode=mode)
+                    else:
+                        deposit(histogram, row + b + j, weight_b, length, mi.Bool(True), bins=bins,
+                                start_opl=self.start_opl, bin_width_opl=self.bin_width_opl,
+                                terms=self.waveform.terms, taps=taps, mode=mode)
+                column += float(group)
+                wrap = column == float(grid.width)
+                return (b + group, dr.select(wrap, 0.0, column), dr.select(wrap, line + 1.0, line),
+                        slot + group * bins)
+
+            dr.while_loop((mi.UInt32(0), mi.Float64(0.0), mi.Float64(0.0), row * bins),
+                          lambda b, column, line, slot: b < opaque_u32(len(self.read_points)), body,
+                          label="nlos_reads")
 
         if self.scan_type == "confocal":
             deposit_reads(row_base, scale, None, None)
@@ -407,6 +468,22 @@ class TransientNlosIntegrator(mi.SamplingIntegrator):
             return (a + 1,)
 
         dr.while_loop((mi.UInt32(0),), lambda a: a < opaque_u32(len(lasers.leg)), body, label="nlos_lasers")
+
+    def _pixel_density(self, hidden):
+        """The texture's :class:`PixelDensity` when the plan is area sampling alone and ρ is a bitmap, else None."""
+        if len(self.plan) != 1 or self.plan[0].kind != AREA:
+            return None
+        parameters = mi.traverse(hidden.bsdf())
+        if "reflectance.data" not in parameters or len(parameters["reflectance.data"].shape) != 3:
+            return None                              # a constant reflectance: area sampling is the density
+        # texel (row j, column i) covers v in [j / H, (j + 1) / H), u in [i / W, (i + 1) / W) (the texture's values
+        # as stored: any positive density is unbiased, these make it efficient)
+        data = np.array(parameters["reflectance.data"], dtype=np.float64)[..., 0]
+        values, density = self._pixel_cache
+        if values is None or not np.array_equal(values, data):     # built once per texture
+            density = PixelDensity(data, self.width * self.height)
+            self._pixel_cache = (data, density)
+        return density
 
     def _reflectance(self, hidden, u, v):
         """ρ_h at (u, v) of the hidden rectangle's texture (float32 as Mitsuba stores it), Float64."""

@@ -172,13 +172,54 @@ def test_unknown_strategy_is_refused():
         _loaded(CASES["confocal"], strategy="solid_angle")
 
 
-def test_chunks_add_up_to_the_whole_render_and_share_one_kernel():
+def test_texture_density_follows_the_reflectance_the_plugin_reads():
+    """The density of each texel is ρ + 1 % of the mean ρ over their sum, per texel area, with ρ looked up at the
+    texel's centre as the kernel looks it up (so the texture's rows are not read upside down)."""
+    import mitsuba as mi
+
+    from transient.nlos_sampling import FLOOR
+
+    scene = CASES["confocal"]
+    loaded = _loaded(scene)
+    integrator = loaded.integrator()
+    hidden = integrator._hidden_shape(loaded)
+    density = integrator._pixel_density(hidden)
+    assert (density.height, density.width) == scene.reflectance.shape
+    u, v = np.meshgrid((np.arange(density.width) + 0.5) / density.width,
+                       (np.arange(density.height) + 0.5) / density.height)
+    reflectance = np.array(integrator._reflectance(hidden, mi.Float64(u.ravel()), mi.Float64(v.ravel())))
+    weights = reflectance + FLOOR * reflectance.mean()
+    area = np.linalg.norm(scene.u) * np.linalg.norm(scene.v)
+    assert np.allclose(np.array(density._density), weights / weights.sum() * weights.size / area, rtol=1e-6)
+    assert np.ptp(reflectance) > 0.1                   # a texture with contrast: a flipped lookup would differ
+
+
+def test_texture_density_with_the_wrong_weights_fails(monkeypatch):
+    """Points drawn by the texture but weighted as if uniform (1 / area) are biased: caught."""
+    import transient.nlos as nlos
+
+    class Uniform(nlos.PixelDensity):
+        def sample(self, u, v):
+            u, v, density = super().sample(u, v)
+            return u, v, density * 0.0 + float(np.mean(np.array(self._density)))
+
+    scene = _covering(CASES["confocal"])
+    monkeypatch.setattr(nlos, "PixelDensity", Uniform)
+    replicas = _render(scene, 2**18, seed=8)
+    *_, passes = _agrees(replicas, _model(scene))
+    assert not passes
+
+
+@pytest.mark.parametrize("sampler", ["sobol", "stratified"])
+@pytest.mark.parametrize("case", ["near the wall (MIS)", "confocal (the texture's density)"])
+def test_chunks_add_up_to_the_whole_render_and_share_one_kernel(case, sampler):
     """Sample g's numbers depend on (seed, g) only; seeds, offsets and technique blocks are opaque."""
     import drjit as dr
 
     from transient.chunks import ReplicaLayout
 
-    loaded = _loaded(_covering(NEAR_WALL_SINGLE))
+    scene = NEAR_WALL_SINGLE if case.startswith("near") else CASES["confocal"]
+    loaded = _loaded(_covering(scene), sampler=sampler)
     integrator = loaded.integrator()
     layout = ReplicaLayout.for_samples(2**14)                  # 32 replicas of 512 samples
 

@@ -21,7 +21,10 @@ smooth pixel: for a step-function S (the impulse) its entries are the
 kernels' constant values (one set per settled segment) times ∫_pixel a
 (:func:`analytic.moments.pixel_integral`, a few nodes for a small pixel),
 otherwise its moments over the bound
-(:func:`analytic.moments.smooth_by_moments`); every other pair goes to
+(:func:`analytic.moments.smooth_by_moments`). For a step-function S, a pixel
+clear of the feet and of x* that one kernel breakpoint's isochrone cuts takes
+:func:`analytic.strips.single_cut` (a real call on scalars: the two parts' ∫ a),
+its kernels once per part; every other pair goes to
 :func:`analytic.kernels.pair_entries` (a real call) with its exact range.
 """
 
@@ -32,11 +35,12 @@ from typing import NamedTuple
 import numpy as np
 from numba import prange
 
-from .bins import BinRun, TimeAxis, bin_of, pixel_bins, step_cut, step_kernels, step_table
+from .bins import BinRun, TimeAxis, bin_edge, bin_of, pixel_bins, step_cut, step_kernels, step_table
 from .isochrone import PixelBox, pair_frame, range_bound, rectangle_range
 from .kernel_cache import njit
-from .kernels import clear_of_feet, make_scratch, pair_entries, scratch_failures
+from .kernels import clear_of_feet, clear_of_birth, make_scratch, pair_entries, scratch_failures
 from .moments import pixel_integral, smooth_by_moments
+from .strips import single_cut
 
 __all__ = ["ImageGrid", "pixel_box", "settled_run", "pixel_run", "SEGMENT", "auto_entries", "block_bounds", "dealt", "count", "fill"]
 
@@ -144,6 +148,37 @@ def _step_column(frame, box, lead, duration, kinked, steps, starts, constants, f
 
 
 @njit(cache=True, error_model="numpy", inline="always")
+def _single_cut_column(frame, box, low, high, kinked, starts, constants, forms, axis, run, rtol, out, upper):
+    """Whether a step-function S's (pixel, pair) that one kernel breakpoint cuts was served by :func:`single_cut`.
+
+    [low, high] is the pixel's exact range of d; ``kinked`` ... ``forms`` the waveform's
+    :class:`~analytic.bins.StepTable` (``steps`` True); ``upper`` a second array as long as ``out``.
+    When served, out[:run.bins] holds the entries: each part's constant kernels (their values at
+    the middle of its range of d, as :func:`analytic.strips.strip_entries` takes them) times its
+    ∫ a_k. False (out left as it is) when no breakpoint or more than one lies inside (low, high),
+    the pixel is near a foot or x*, or :func:`single_cut` does not serve.
+    """
+    tau = 0.0
+    cuts = 0
+    for n in range(run.first, run.first + run.bins + 1):
+        edge = bin_edge(axis, n)
+        for i in range(kinked.size):
+            if low < edge - kinked[i] < high:
+                tau = edge - kinked[i]
+                cuts += 1
+    if cuts != 1 or not clear_of_birth(frame, box, clear_of_feet(frame, box)):
+        return False
+    below, above, served = single_cut(frame, box, tau, rtol)
+    if not served:
+        return False
+    step_kernels(starts, constants, forms, axis, run, 0.5 * (low + tau), below, out)
+    step_kernels(starts, constants, forms, axis, run, 0.5 * (tau + high), above, upper)
+    for i in range(run.bins):
+        out[i] += upper[i]
+    return True
+
+
+@njit(cache=True, error_model="numpy", inline="always")
 def _finish(outcome, frame, box, low, high, exact, terms, axis, run, rtol, out, scratch):
     """The entries :func:`_step_column` left (outcome ``_MOMENTS`` or ``_OTHER``); True if the smooth route served.
 
@@ -167,6 +202,10 @@ def auto_entries(frame, box, terms, axis, rtol, out, scratch):
                                                   table.starts, table.constants, table.forms, axis, rtol, out)
     if run.bins == 0 or outcome == _SERVED:
         return run, run.bins > 0
+    if (table.steps and exact
+            and _single_cut_column(frame, box, low, high, table.kinked, table.starts, table.constants, table.forms,
+                                   axis, run, rtol, out, np.empty(run.bins))):
+        return run, False
     return run, _finish(outcome, frame, box, low, high, exact, terms, axis, run, rtol, out, scratch)
 
 
@@ -271,6 +310,7 @@ def _fill_block(pairs, mode, grid, axis, terms, rtol, begin, end, width, scales,
     scratch = make_scratch(width)
     values = np.empty(max(width, 1))
     kernels = np.empty(max(width, 1))
+    upper = np.empty(max(width, 1))
     frames, offsets = _frames(pairs, mode)
     table = step_table(terms)
     kinked, steps, starts, constants, forms = table.kinked, table.steps, table.starts, table.constants, table.forms
@@ -307,7 +347,9 @@ def _fill_block(pairs, mode, grid, axis, terms, rtol, begin, end, width, scales,
                     if run.bins == 0:
                         continue
                     smooth = outcome == _SERVED
-                    if not smooth:
+                    if not smooth and not (steps and exact and _single_cut_column(
+                            frame, box, low, high, kinked, starts, constants, forms, pair_axis, run, rtol, values,
+                            upper)):
                         smooth = _finish(outcome, frame, box, low, high, exact, terms, pair_axis, run, rtol, values,
                                          scratch)
                 reached += 1

@@ -33,7 +33,7 @@ from .strips import strip_entries
 from .taylor import MAX_TERMS, kernel_taylor
 
 __all__ = ["TimeAxis", "BinRun", "Scratch", "RouteOutcome", "make_scratch", "pixel_bins", "pair_entries",
-           "pair_by_method", "clear_of_feet", "scratch_failures", "bin_of", "FOOT_CLEARANCE", "SAFETY", "AUTO", "SMOOTH", "ISOCHRONE", "ADAPTIVE", "STRIP"]
+           "pair_by_method", "clear_of_feet", "clear_of_birth", "scratch_failures", "bin_of", "FOOT_CLEARANCE", "SAFETY", "AUTO", "SMOOTH", "ISOCHRONE", "ADAPTIVE", "STRIP"]
 
 #: A pixel is integrated as a smooth 2-D function only if every foot is at
 #: least this many pixel sides away, counting its height: sqrt(δ² + h²) >=
@@ -331,8 +331,8 @@ def _piece_by_moments(frame, box, terms, axis, run, kind, tau_a, span, rtol, smo
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _smooth_arcs(frame, box, clear):
-    """Whether the arcs inside the pixel are smooth enough for the (τ, φ) tensor rule.
+def clear_of_birth(frame, box, clear):
+    """Whether the pixel is ``clear`` (of the feet) and clear of x*: its arcs are smooth enough for the (τ, φ) tensor rule.
 
     Near x* the isochrones are small (and, with low points, needles): an arc
     inside the pixel is a large part of its ellipse and varies faster in φ
@@ -388,7 +388,7 @@ def pair_entries(frame, box, low, high, terms, axis, run, rtol, out, scratch):
             return True
         if _smooth_direct(frame, box, terms, axis, run, rtol, out, scratch.work):
             return True
-    smooth_arcs = _smooth_arcs(frame, box, clear)
+    smooth_arcs = clear_of_birth(frame, box, clear)
     if smooth_arcs and strip_entries(frame, box, low, high, terms, axis, run, rtol, out, scratch.work):
         return False
     _cut_entries(frame, box, low, high, terms, axis, run, rtol, smooth_arcs, True, out, scratch)
@@ -425,7 +425,7 @@ def pair_by_method(frame, box, low, high, terms, axis, run, rtol, method, taylor
         elif not _smooth_direct(frame, box, terms, axis, run, rtol, out, scratch.work):
             return RouteOutcome(True, False, 0)
     elif method == STRIP:
-        if not _smooth_arcs(frame, box, clear_of_feet(frame, box)):
+        if not clear_of_birth(frame, box, clear_of_feet(frame, box)):
             return RouteOutcome(False, False, 0)
         if not strip_entries(frame, box, low, high, terms, axis, run, rtol, out, scratch.work):
             return RouteOutcome(True, False, 0)

@@ -26,7 +26,8 @@ three images are also scored divided by each hidden pixel's known gain,
 the weight its reflectance has in the capture:
 g(x) = Σ_(l, s) laser leg(l) · cos θ_l^x cos θ_x^l cos θ_s^x cos θ_x^s / (|x - l|² |x - s|²)
 (``gain``; the model's integrand at the pixel's centre, summed over the
-scan), which bp, fbp and f-k leave in their images ("÷ gain"). PSNR and
+scan's pairs whose path lies in the window), which bp, fbp and f-k leave
+in their images ("÷ gain"). PSNR and
 SSIM are :func:`analytic.inversion.image_metrics` (data range 1). Times are
 each method's own (tal's inside its process, without Python's start-up and
 imports; ours without A's assembly, reported apart).
@@ -138,18 +139,25 @@ def gain(scene) -> np.ndarray:
 
     Σ over the scan's pairs (l, s) of the laser leg I cos θ_l^las / |o_l - l|² (ρ_w / π)² times
     cos θ_l^x cos θ_x^l cos θ_s^x cos θ_x^s / (|x - l|² |x - s|²): the model's integrand without the
-    time kernel, κ's 1/π and the pixel's area (the same for every pixel). bp, fbp and f-k leave it in.
+    time kernel, κ's 1/π and the pixel's area (the same for every pixel), over the pairs whose path from
+    the pixel's centre falls in the window (the rest never reach the capture). bp, fbp and f-k leave it in.
     """
     centres = pixel_centres(scene)[:, :, None, :]                       # (M, M, 1, 3)
     lit, read = scene.pair_points
     normal = scene.rectangle().normal
-    factors = []
+    factors, path = [], 0.0
     for ends in (lit, read):
         toward = ends[None, None] - centres                              # x -> wall point
         distance = np.linalg.norm(toward, axis=-1)
         cosines = np.clip(toward @ normal / distance, 0, None) * np.clip(-toward[..., 2] / distance, 0, None)
         factors.append(cosines / distance**2)
-    return (scene.laser_leg(lit) * factors[0] * factors[1]).sum(axis=-1)
+        path = path + distance
+    if scene.scan.account_first_and_last_bounces:
+        path = path + np.linalg.norm(scene.laser_position - lit, axis=1) + np.linalg.norm(read - scene.sensor_position,
+                                                                                           axis=1)
+    sampling = scene.sampling
+    seen = (path >= sampling.start_opl) & (path < sampling.start_opl + sampling.count * sampling.bin_width_opl)
+    return (scene.laser_leg(lit) * factors[0] * factors[1] * seen).sum(axis=-1)
 
 
 def ours(matrix, y, scene, sigma: float | None):
@@ -274,8 +282,10 @@ def figure(shown: dict, cases: list[str], path: Path, also: Path | None, scene) 
     width, height = scene.scan.grid
     fig.suptitle(f"hidden plane (M = {scene.pixels}) from a {width} x {height} confocal capture, each image its "
                  f"best affine map to [0, 1]; right: tal's images divided by each pixel's known gain\n"
-                 f"Σ laser leg · cos θ_l^x cos θ_x^l cos θ_s^x cos θ_x^s / (|x - l|² |x - s|²) over the scan "
-                 f"(the 1/r⁴ fall-off and cosines that bp, fbp and f-k leave in)", fontsize=9)
+                 f"Σ laser leg · cos θ_l^x cos θ_x^l cos θ_s^x cos θ_x^s / (|x - l|² |x - s|²) over the scan's"
+                 f" pairs whose path lies in the window (the 1/r⁴ fall-off and cosines that bp, fbp and f-k leave "
+                 f"in)",
+                 fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     if also is not None:

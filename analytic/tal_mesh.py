@@ -161,7 +161,10 @@ def planar_polygon(vertices: np.ndarray, faces: list[list[int]], stated_normals:
         if np.any(stated_normals[given] @ normal <= 0):
             raise SceneError(key, f"{shown}: a face's vn normal points against its winding; Mitsuba would shade "
                                   f"it from the other side: make the vn agree with the vertex order")
-    ends = _outline(faces)
+    # vertices at one position are one vertex (exporters such as Blender's repeat them per face)
+    _, first, same = np.unique(np.round((vertices - points.min(axis=0)) / (_TOLERANCE * size)), axis=0,
+                               return_index=True, return_inverse=True)
+    ends = _outline([[int(first[same.ravel()[i]]) for i in face] for face in faces])
     steps = vertices[ends[:, 1]] - vertices[ends[:, 0]]
     e1 = steps[np.argmax(np.linalg.norm(steps, axis=1))]
     e1 = e1 - (e1 @ normal) * normal

@@ -11,7 +11,10 @@ means there, and so here (docs/tal.md has the table):
 - every geometry's ``to_world`` is scale, then rotate about x, y, z (degrees,
   right-handed), then translate: T Rz Ry Rx S, each value through Python's
   ``or`` (a scale of 0 is 1); a ``rectangle`` is [-1, 1]² at z = 0 with normal
-  +z; an OBJ ``filename`` is resolved against the working directory;
+  +z; an OBJ ``filename`` is resolved against the working directory, and a
+  planar OBJ polygon is its bounding rectangle with the polygon's indicator
+  image as the reflectance, exact when its sides lie on the pixel grid
+  (:mod:`analytic.tal_mesh`; refused otherwise);
 - the relay wall is a ``rectangle`` of ``scale_x`` x ``scale_y`` half sides at
   the origin facing +z; read points are the cell centres of a
   ``sensor_width`` x ``sensor_height`` grid over it; confocal and exhaustive
@@ -56,6 +59,7 @@ import numpy as np
 
 from .errors import SceneError
 from .relay_wall import RelayWallScene, Scan, grid_points
+from .resources import require_memory
 from .scene import Noise, Sampling, _integer, _number
 
 __all__ = ["TalScene", "TalConfigWarning", "load_tal_config", "tal_config_scene", "is_tal_config",
@@ -259,18 +263,21 @@ def _transform(geometry: dict, key: str) -> tuple[np.ndarray, np.ndarray]:
     return matrix, translation
 
 
-def _hidden_rectangle(geometry: dict, key: str, cwd: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The hidden geometry's (corner, u, v), u x v along its lit normal, in world metres."""
-    from .tal_mesh import planar_rectangle, read_obj
+def _hidden_rectangle(geometry: dict, key: str, cwd: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, Any]:
+    """The hidden geometry's (corner, u, v), u x v along its lit normal, in world metres, and an OBJ's
+    outline (``(E, 2, 3)`` directed sides, for :func:`analytic.tal_mesh.indicator_image`; None for a rectangle)."""
+    from .tal_mesh import planar_polygon, read_obj
 
     mesh = geometry.get("mesh")
     kind = mesh.get("type") if isinstance(mesh, dict) else None
     matrix, translation = _transform(geometry, key)
     if kind == "rectangle":
-        return (matrix @ [-1.0, -1.0, 0.0] + translation, matrix @ [2.0, 0.0, 0.0], matrix @ [0.0, 2.0, 0.0])
+        return (matrix @ [-1.0, -1.0, 0.0] + translation, matrix @ [2.0, 0.0, 0.0], matrix @ [0.0, 2.0, 0.0],
+                None)
     if kind != "obj":
-        raise SceneError(f"{key}.mesh.type", f"{kind!r}: the model holds one planar Lambertian rectangle (a "
-                                             f"rectangle, or an OBJ whose faces cover one); refused")
+        raise SceneError(f"{key}.mesh.type", f"{kind!r}: the model holds one planar Lambertian polygon (a "
+                                             f"rectangle, or a planar OBJ whose sides follow a pixel grid); "
+                                             f"refused")
     filename = mesh.get("filename")
     if not isinstance(filename, str) or not filename:
         raise SceneError(f"{key}.mesh.filename", "an OBJ mesh needs its filename")
@@ -283,13 +290,13 @@ def _hidden_rectangle(geometry: dict, key: str, cwd: Path) -> tuple[np.ndarray, 
     world = vertices @ matrix.T + translation
     if normals is not None:
         normals = normals @ np.linalg.inv(matrix)             # normals go by the inverse transpose
-    corner, u, v = planar_rectangle(world, faces, normals, f"{key}.mesh.filename", filename)
+    corner, u, v, outline = planar_polygon(world, faces, normals, f"{key}.mesh.filename", filename)
     # start at the corner whose u runs most nearly along +x (the image's columns), v along -y if it can
     for _ in range(4):
         if u[0] >= max(abs(u[1]), abs(v[0])) - 1e-12 * np.linalg.norm(u):
             break
         corner, u, v = corner + u, v, -u
-    return corner, u, v
+    return corner, u, v, outline
 
 
 def _geometries(config: dict) -> tuple[dict, dict, str]:
@@ -306,7 +313,7 @@ def _geometries(config: dict) -> tuple[dict, dict, str]:
     hidden = [g for g in geometry if g.get("name") != wall_name]
     if len(hidden) != 1:
         raise SceneError("geometry", f"{len(hidden)} hidden geometries; the model holds one planar hidden "
-                                     f"rectangle")
+                                     f"polygon")
     for g in geometry:
         unknown = sorted(set(g) - _GEOMETRY_KEYS)
         if unknown:
@@ -479,7 +486,7 @@ def tal_config_scene(data: dict, *, name: str = "tal", config: str = "",
     wall, hidden, hidden_key = _geometries(merged)
     halves = _wall(wall, f"geometry[{merged['relay_wall']}]")
     scan = _scan(merged, halves)
-    corner, u, v = _hidden_rectangle(hidden, hidden_key, Path(os.getcwd() if cwd is None else cwd))
+    corner, u, v, outline = _hidden_rectangle(hidden, hidden_key, Path(os.getcwd() if cwd is None else cwd))
     emission = _emission(merged, count)
     wall_channels = _material(wall, f"geometry[{merged['relay_wall']}]", count)
     hidden_channels = _material(hidden, hidden_key, count)
@@ -498,6 +505,14 @@ def tal_config_scene(data: dict, *, name: str = "tal", config: str = "",
     if noise is not None and not isinstance(noise, dict):
         raise SceneError(f"{_OURS}.noise", "expected a mapping (kind, sigma or photons, seed)")
     pixels = _integer(f"{_OURS}.pixels", ours.get("pixels", 32))
+    if outline is not None:
+        from .tal_mesh import indicator_image
+
+        require_memory(8 * 8 * pixels**2, f"{_OURS}.pixels = {pixels}", "use fewer pixels")
+        covered = indicator_image(outline, corner, u, v, pixels, f"{hidden_key}.mesh.filename",
+                                  hidden["mesh"]["filename"], f"{_OURS}.pixels")
+        if covered is not None:
+            rho_h = rho_h * covered
     _facing(corner, u, v, halves, scan, np.array(position["laser"], dtype=float), hidden_key)
     try:
         scene = TalScene(

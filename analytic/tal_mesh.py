@@ -1,35 +1,43 @@
-"""A hidden OBJ mesh of a tal configuration as one planar rectangle, or a one-line refusal.
+"""A hidden OBJ mesh of a tal configuration as a planar polygon on a pixel grid, or a one-line refusal.
 
 tal (y-tal) hands an OBJ file to Mitsuba, which renders each face with
 the face's own orientation (its vertices counter-clockwise about the lit
 normal; Mitsuba's ``diffuse`` is one-sided). The exact model holds a
-Lambertian rectangle: a mesh is accepted when its faces are coplanar, all
-face the same side, and together cover a rectangle exactly once.
+Lambertian rectangle imaged as M x M pixels, each pixel a column of A
+scaled by its reflectance. A planar polygon is held exactly as its
+bounding rectangle with the polygon's indicator image (1 on the pixels it
+covers, 0 elsewhere) as the reflectance, when every side of its outline
+lies on a line of that rectangle's pixel grid: then each pixel is wholly
+in or wholly out, and the columns of the pixels outside are multiplied by
+0. A rectangle is the case where the image is all ones; an L or a
+notched rectangle whose corners fall on pixel corners is another. Any
+other planar polygon (a triangle, a slanted side, a corner between grid
+lines) is refused: its pixels would need clipping, which the model does not do.
 
-Why the test below is exact: with every face oriented the same way, the
-number of faces over a point of the plane is the winding number of the
-mesh's boundary (the directed edges that no face's reverse edge cancels)
-about it. When that boundary runs once counter-clockwise along the convex
-hull's sides, every point of the hull is covered exactly once, and the
-union of the faces is the hull; the hull must then be a rectangle. A
-non-rectangular polygon (tal's ``Z.obj``) is refused, as is a mesh with a
-T-junction (its boundary keeps an inner edge), a fold or a hole.
+Why the coverage is exact: with every face (and every triangle of each
+face's fan from its first vertex) facing the lit side, the number of faces
+over a point of the plane is the winding number, about it, of the mesh's
+outline (the directed edges that no face's reverse edge cancels). With the
+outline on grid lines that number is constant over each pixel, so its
+value at the pixel's centre is the pixel's; a value other than 0 or 1
+(overlapping faces) is refused.
 """
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
 
 from .errors import SceneError
 
-__all__ = ["read_obj", "planar_rectangle", "MAX_OBJ_BYTES"]
+__all__ = ["read_obj", "planar_polygon", "indicator_image", "MAX_OBJ_BYTES"]
 
-#: Largest OBJ file read, bytes: a rectangle needs a few lines.
+#: Largest OBJ file read, bytes: a planar polygon needs a few lines.
 MAX_OBJ_BYTES = 1 << 24
 
-#: Relative tolerance of coplanarity, right angles and coverage (OBJ files hold 6 decimals).
+#: Relative tolerance of coplanarity, right angles and the pixel grid (OBJ files hold 6 decimals).
 _TOLERANCE = 1e-5
 
 
@@ -47,7 +55,7 @@ def read_obj(path: Path, key: str) -> tuple[np.ndarray, list[list[int]], np.ndar
     """
     try:
         if path.stat().st_size > MAX_OBJ_BYTES:
-            raise SceneError(key, f"{path}: larger than {MAX_OBJ_BYTES >> 20} MiB; a planar hidden rectangle "
+            raise SceneError(key, f"{path}: larger than {MAX_OBJ_BYTES >> 20} MiB; a planar hidden polygon "
                                   f"needs a few lines")
         text = path.read_text(encoding="utf-8", errors="replace")
     except OSError as error:
@@ -94,29 +102,19 @@ def _face_normal(points: np.ndarray) -> np.ndarray:
     return total
 
 
-def _hull(points: np.ndarray) -> np.ndarray:
-    """Indices of the 2-D convex hull, counter-clockwise, collinear points dropped (Andrew's monotone chain)."""
-    order = sorted(range(len(points)), key=lambda i: (points[i, 0], points[i, 1]))
-    scale = float(np.ptp(points, axis=0).max()) or 1.0
-
-    def turn(o, a, b):
-        return ((points[a, 0] - points[o, 0]) * (points[b, 1] - points[o, 1])
-                - (points[a, 1] - points[o, 1]) * (points[b, 0] - points[o, 0]))
-
-    def chain(indices):
-        kept = []
-        for i in indices:
-            while len(kept) >= 2 and turn(kept[-2], kept[-1], i) <= _TOLERANCE * scale**2:
-                kept.pop()
-            kept.append(i)
-        return kept
-    lower, upper = chain(order), chain(order[::-1])
-    return np.array(lower[:-1] + upper[:-1])
+def _refuse_plane(key: str, shown: str, what: str) -> SceneError:
+    return SceneError(key, f"{shown}: {what}; the model's hidden surface is one planar Lambertian polygon")
 
 
-def planar_rectangle(vertices: np.ndarray, faces: list[list[int]], stated_normals: np.ndarray | None,
-                     key: str, shown: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The rectangle that a mesh's faces cover: ``(corner, u, v)`` with u x v along the lit normal.
+def planar_polygon(vertices: np.ndarray, faces: list[list[int]], stated_normals: np.ndarray | None,
+                   key: str, shown: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The bounding rectangle of a planar mesh and its outline: ``(corner, u, v, edges)``.
+
+    The rectangle's sides run along the outline's sides (``u`` along its
+    longest one), u x v along the lit normal; ``edges`` ``(E, 2, 3)`` holds
+    the outline's directed sides in world metres (each face's edges, those
+    that a face's reverse edge cancels removed), counter-clockwise about the
+    lit normal. :func:`indicator_image` turns them into the pixels covered.
 
     Parameters
     ----------
@@ -133,87 +131,111 @@ def planar_rectangle(vertices: np.ndarray, faces: list[list[int]], stated_normal
     Raises
     ------
     SceneError
-        Faces that are not coplanar, that face both ways, that do not cover
-        a rectangle exactly once (a Z, a T-junction, a hole), or whose
-        stated normals contradict their winding.
+        Faces that are not coplanar, that face both ways (a face's fan of
+        triangles from its first vertex included), whose stated normals
+        contradict their winding, or an outline with a side that is not
+        parallel or perpendicular to the others (a triangle, a slanted side).
     """
     used = sorted({i for face in faces for i in face})
     points = vertices[used]
     size = float(np.ptp(points, axis=0).max())
     if not size > 0:
         raise SceneError(key, f"{shown}: its faces have no extent")
-    areas = np.array([_face_normal(vertices[face]) for face in faces])
-    lengths = np.linalg.norm(areas, axis=1)
-    if np.any(lengths <= _TOLERANCE * size**2):
-        raise SceneError(key, f"{shown}: a face of zero area (degenerate); remove it")
-    normal = areas.sum(axis=0)
-    normal /= np.linalg.norm(normal)
-    if np.any(areas @ normal <= (1 - _TOLERANCE) * lengths):
-        raise SceneError(key, f"{shown}: its faces are not coplanar and facing one side; the model's hidden "
-                              f"surface is one planar Lambertian rectangle")
     centre = points.mean(axis=0)
+    normal = np.linalg.svd(points - centre, full_matrices=False)[2][-1]
     if np.max(np.abs((points - centre) @ normal)) > _TOLERANCE * size:
-        raise SceneError(key, f"{shown}: its vertices do not lie in one plane; the model's hidden surface is one "
-                              f"planar Lambertian rectangle")
+        raise _refuse_plane(key, shown, "its vertices do not lie in one plane (a solid or a curved surface)")
+    if any(np.linalg.norm(_face_normal(vertices[face])) <= _TOLERANCE * size**2 for face in faces):
+        raise SceneError(key, f"{shown}: a face of zero area (degenerate); remove it")
+    # every triangle of every face's fan: the pieces a renderer covers, each counted once if it faces the lit side
+    fans = np.array([np.cross(vertices[face[i]] - vertices[face[0]], vertices[face[i + 1]] - vertices[face[0]])
+                     for face in faces for i in range(1, len(face) - 1)])
+    if fans.sum(axis=0) @ normal < 0:
+        normal = -normal
+    lengths = np.linalg.norm(fans, axis=1)
+    if np.any((lengths > _TOLERANCE * size**2) & (fans @ normal <= (1 - _TOLERANCE) * lengths)):
+        raise _refuse_plane(key, shown, "its faces do not all face one side (each face's vertices run "
+                                        "counter-clockwise about the lit side)")
     if stated_normals is not None:
         given = ~np.isnan(stated_normals[:, 0])
         if np.any(stated_normals[given] @ normal <= 0):
             raise SceneError(key, f"{shown}: a face's vn normal points against its winding; Mitsuba would shade "
                                   f"it from the other side: make the vn agree with the vertex order")
-    # plane coordinates, (e1, e2, normal) right-handed
-    e1 = points[np.argmax(np.linalg.norm(points - points[0], axis=1))] - points[0]
-    e1 -= (e1 @ normal) * normal
+    # vertices at one position are one vertex (exporters such as Blender's repeat them per face)
+    _, first, same = np.unique(np.round((vertices - points.min(axis=0)) / (_TOLERANCE * size)), axis=0,
+                               return_index=True, return_inverse=True)
+    ends = _outline([[int(first[same.ravel()[i]]) for i in face] for face in faces])
+    steps = vertices[ends[:, 1]] - vertices[ends[:, 0]]
+    e1 = steps[np.argmax(np.linalg.norm(steps, axis=1))]
+    e1 = e1 - (e1 @ normal) * normal
     e1 /= np.linalg.norm(e1)
     e2 = np.cross(normal, e1)
-    flat = np.column_stack([(vertices - centre) @ e1, (vertices - centre) @ e2])
-    hull = [used[i] for i in _hull(flat[used])]
-    corners = flat[hull]
-    if len(corners) != 4:
-        raise SceneError(key, f"{shown}: its faces cover a polygon of {len(corners)} corners, not a rectangle; "
-                              f"the model holds a planar rectangle (other polygons are refused)")
-    sides = np.roll(corners, -1, axis=0) - corners
-    lengths4 = np.linalg.norm(sides, axis=1)
-    cosines = np.abs(np.sum(sides * np.roll(sides, -1, axis=0), axis=1)) / (lengths4 * np.roll(lengths4, -1))
-    if np.any(cosines > _TOLERANCE):
-        raise SceneError(key, f"{shown}: its faces cover a quadrilateral that is not a rectangle (corner angles "
-                              f"off 90 degrees); the model holds a planar rectangle")
-    _covers_once(flat, faces, corners, sides, lengths4, key, shown)
-    corner = centre + corners[0, 0] * e1 + corners[0, 1] * e2
-    u = sides[0, 0] * e1 + sides[0, 1] * e2
-    v = -(sides[3, 0] * e1 + sides[3, 1] * e2)
-    return corner, u, v
+    flat = steps @ np.column_stack([e1, e2])
+    slanted = np.minimum(np.abs(flat[:, 0]), np.abs(flat[:, 1])) > _TOLERANCE * np.linalg.norm(flat, axis=1)
+    if slanted.any():
+        i = int(np.argmax(slanted))
+        angle = math.degrees(math.atan2(abs(flat[i, 1]), abs(flat[i, 0])))
+        raise SceneError(key, f"{shown}: a side of its outline (from {np.round(vertices[ends[i, 0]], 6).tolist()} "
+                              f"to {np.round(vertices[ends[i, 1]], 6).tolist()} m) runs at {angle:.4g} degrees to "
+                              f"its longest side; the model holds a planar polygon only where its indicator image "
+                              f"is exact: sides along the pixel grid of its bounding rectangle (a rectangle, an L, "
+                              f"a notched rectangle), not a triangle or a slanted side")
+    lo = (points - centre) @ np.column_stack([e1, e2])
+    low, high = lo.min(axis=0), lo.max(axis=0)
+    corner = centre + low[0] * e1 + low[1] * e2
+    return corner, (high[0] - low[0]) * e1, (high[1] - low[1]) * e2, vertices[ends]
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The z component of 2-D cross products (NumPy 2 retired np.cross of 2-vectors)."""
-    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-
-
-def _covers_once(flat, faces, corners, sides, lengths, key: str, shown: str) -> None:
-    """Refuse unless the faces' uncancelled edges run once, counter-clockwise, along the rectangle's sides."""
+def _outline(faces: list[list[int]]) -> np.ndarray:
+    """``(E, 2)`` the faces' directed edges that no reverse edge cancels (repeated as often as they remain)."""
     edges: dict[tuple[int, int], int] = {}
     for face in faces:
         for a, b in zip(face, face[1:] + face[:1]):
-            if (b, a) in edges:
+            if edges.get((b, a), 0) > 0:
                 edges[(b, a)] -= 1
-                if not edges[(b, a)]:
-                    del edges[(b, a)]
             else:
                 edges[(a, b)] = edges.get((a, b), 0) + 1
-    scale = float(lengths.max())
-    covered = np.zeros(4)
-    for (a, b), count in edges.items():
-        step = flat[b] - flat[a]
-        # which side holds the edge, running its way
-        offsets = _cross(sides, flat[a] - corners) / lengths
-        along = _cross(sides, flat[b] - corners) / lengths
-        side = np.flatnonzero((np.abs(offsets) <= _TOLERANCE * scale) & (np.abs(along) <= _TOLERANCE * scale)
-                              & (sides @ step > 0))
-        if count != 1 or len(side) != 1:
-            raise SceneError(key, f"{shown}: its faces do not cover one rectangle exactly once (an inner edge "
-                                  f"left open: a hole, an overlap or a T-junction); the model holds a planar "
-                                  f"rectangle")
-        covered[side[0]] += np.linalg.norm(step)
-    if np.any(np.abs(covered - lengths) > _TOLERANCE * scale):
-        raise SceneError(key, f"{shown}: its faces do not cover one rectangle exactly once; the model holds a "
-                              f"planar rectangle")
+    return np.array([edge for edge, count in edges.items() for _ in range(count)], dtype=np.int64).reshape(-1, 2)
+
+
+def indicator_image(edges: np.ndarray, corner: np.ndarray, u: np.ndarray, v: np.ndarray, pixels: int,
+                    key: str, shown: str, pixels_key: str) -> np.ndarray | None:
+    """The M x M image of the pixels a polygon covers (1) and leaves out (0), or None when it covers them all.
+
+    Exact when every side of the outline lies on a line of the rectangle's
+    M x M pixel grid: the faces' coverage (the outline's winding number) is
+    then constant over each pixel, and a pixel's column of A times 0 or 1 is
+    the light of the part of the polygon over it. Row 0 is at v's far end
+    (the image convention of :class:`analytic.relay_wall.RelayWallScene`).
+
+    Raises
+    ------
+    SceneError
+        Under ``key``: a side between grid lines (naming ``pixels_key`` values
+        that would fit), or faces that cover a pixel twice.
+    """
+    coords = np.stack([(edges - corner) @ axis / (axis @ axis) for axis in (u, v)], axis=-1)   # (E, 2, 2) fractions
+    vertical = np.abs(coords[:, 1, 0] - coords[:, 0, 0]) <= _TOLERANCE      # along v: u-fraction constant
+    lines = np.where(vertical, coords[:, 0, 0], coords[:, 0, 1])
+
+    def on_grid(m: int) -> bool:
+        return bool(np.all(np.abs(lines * m - np.round(lines * m)) <= _TOLERANCE * m))
+
+    if not on_grid(pixels):
+        fits = [m for m in range(1, 1025) if on_grid(m)][:3]
+        hint = f"choose {pixels_key} so that they do (e.g. {', '.join(map(str, fits))}), or" if fits else \
+            "no pixel count up to 1024 fits:"
+        raise SceneError(key, f"{shown}: its corners do not lie on the {pixels} x {pixels} pixel grid of its "
+                              f"bounding rectangle ({np.linalg.norm(u):.6g} x {np.linalg.norm(v):.6g} m), so its "
+                              f"indicator image would not be exact; {hint} use a rectangle")
+    # winding number at each pixel centre: a ray toward +u crosses the sides along v to its right
+    centre_u = (np.arange(pixels) + 0.5) / pixels
+    centre_v = (pixels - np.arange(pixels) - 0.5) / pixels            # row 0 at the top
+    winding = np.zeros((pixels, pixels), dtype=np.int64)
+    for (a, _), (b0, b1) in zip(coords[vertical, 0], coords[vertical][:, :, 1]):
+        rows = (np.minimum(b0, b1) < centre_v) & (centre_v < np.maximum(b0, b1))
+        winding += np.sign(b1 - b0).astype(np.int64) * (rows[:, None] & (centre_u[None, :] < a))
+    if winding.min() < 0 or winding.max() > 1:
+        raise SceneError(key, f"{shown}: its faces cover part of the plane {winding.max()} times (they overlap); "
+                              f"the model holds each point of the polygon covered once")
+    return None if winding.min() == 1 else winding.astype(np.float64)

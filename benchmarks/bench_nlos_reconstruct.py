@@ -21,12 +21,19 @@ reconstructed by:
 
 tal's images are in arbitrary units, so every method is scored after the
 least-squares affine map a r + b onto the true image (an oracle
-calibration, generous to all); ours is scored as it comes, too. PSNR and
+calibration, generous to all); ours is scored as it comes, too. tal's
+three images are also scored divided by each hidden pixel's known gain,
+the weight its reflectance has in the capture:
+g(x) = Σ_(l, s) laser leg(l) · cos θ_l^x cos θ_x^l cos θ_s^x cos θ_x^s / (|x - l|² |x - s|²)
+(``gain``; the model's integrand at the pixel's centre, summed over the
+scan's pairs whose path lies in the window), which bp, fbp and f-k leave
+in their images ("÷ gain"). PSNR and
 SSIM are :func:`analytic.inversion.image_metrics` (data range 1). Times are
 each method's own (tal's inside its process, without Python's start-up and
 imports; ours without A's assembly, reported apart).
 
     python benchmarks/bench_nlos_reconstruct.py --out out/bench-nlos-reconstruct
+    python benchmarks/bench_nlos_reconstruct.py --quick --out out/bench-nlos-quick   # 16 x 16, M = 16
 """
 
 from __future__ import annotations
@@ -45,6 +52,8 @@ ROOT = Path(__file__).resolve().parents[1]
 TAL_PYTHON = ROOT / ".venv-tal" / "bin" / "python"
 SCENE = ROOT / "examples" / "tal" / "plane-confocal.yaml"
 METHODS = ("ours", "tal bp", "tal fbp", "tal fk")
+#: tal's images divided by each hidden pixel's gain (see ``gain``).
+GAINED = tuple(f"{method} ÷ gain" for method in METHODS[1:])
 
 #: Runs tal's reconstructions on one capture (argv: capture.h5, pixel centres .npy, output folder).
 _TAL_SCRIPT = r"""
@@ -125,6 +134,32 @@ def pixel_centres(scene) -> np.ndarray:
     return (rectangle.corner + fraction_v[:, None, None] * rectangle.v + fraction_u[None, :, None] * rectangle.u)
 
 
+def gain(scene) -> np.ndarray:
+    """``(M, M)`` the weight of each hidden pixel's reflectance in the capture, at its centre.
+
+    Σ over the scan's pairs (l, s) of the laser leg I cos θ_l^las / |o_l - l|² (ρ_w / π)² times
+    cos θ_l^x cos θ_x^l cos θ_s^x cos θ_x^s / (|x - l|² |x - s|²): the model's integrand without the
+    time kernel, κ's 1/π and the pixel's area (the same for every pixel), over the pairs whose path from
+    the pixel's centre falls in the window (the rest never reach the capture). bp, fbp and f-k leave it in.
+    """
+    centres = pixel_centres(scene)[:, :, None, :]                       # (M, M, 1, 3)
+    lit, read = scene.pair_points
+    normal = scene.rectangle().normal
+    factors, path = [], 0.0
+    for ends in (lit, read):
+        toward = ends[None, None] - centres                              # x -> wall point
+        distance = np.linalg.norm(toward, axis=-1)
+        cosines = np.clip(toward @ normal / distance, 0, None) * np.clip(-toward[..., 2] / distance, 0, None)
+        factors.append(cosines / distance**2)
+        path = path + distance
+    if scene.scan.account_first_and_last_bounces:
+        path = path + np.linalg.norm(scene.laser_position - lit, axis=1) + np.linalg.norm(read - scene.sensor_position,
+                                                                                           axis=1)
+    sampling = scene.sampling
+    seen = (path >= sampling.start_opl) & (path < sampling.start_opl + sampling.count * sampling.bin_width_opl)
+    return (scene.laser_leg(lit) * factors[0] * factors[1] * seen).sum(axis=-1)
+
+
 def ours(matrix, y, scene, sigma: float | None):
     from analytic.inversion import RankDeficiencyWarning, reconstruct
 
@@ -152,14 +187,20 @@ def main(argv=None) -> int:
     from analytic.inversion import image_metrics
     from analytic.noise import add_noise
     from analytic.reflectance import builtin_reflectance
+    from analytic.relay_wall import Scan
     from validation.bench import cpu_model
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("out/bench-nlos-reconstruct"))
     parser.add_argument("--figure", type=Path, default=None, help="also save the figure here (docs/)")
+    parser.add_argument("--quick", action="store_true",
+                        help="a 16 x 16 confocal scan and M = 16 (the same geometry; minutes, not half an hour)")
     args = parser.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     scene = load_scene(SCENE)
+    if args.quick:
+        scene = scene.replace(scan=Scan(type="confocal", grid=(16, 16)), pixels=16, reflectance=1.0)
+    weights = gain(scene)
     started = time.perf_counter()
     matrix = system_matrix(scene)
     assembly = time.perf_counter() - started
@@ -183,6 +224,8 @@ def main(argv=None) -> int:
                 results["tal bp"] = (np.load(folder / "tal bp.npy"), told["times"]["tal bp"])
                 results["tal fbp"] = (np.load(folder / f"tal {best}.npy"), told["times"][best])
                 results["tal fk"] = (np.load(folder / "tal fk.npy"), told["times"]["tal fk"])
+                for method, name in zip(METHODS[1:], GAINED):
+                    results[name] = (results[method][0] / weights, results[method][1])
             for method, (estimate, seconds) in results.items():
                 fitted = affine_fit(estimate, truth)
                 metrics = image_metrics(fitted, truth)
@@ -191,14 +234,15 @@ def main(argv=None) -> int:
                 if method == "ours":
                     raw = image_metrics(estimate, truth)
                     row.update(psnr_as_is=raw["psnr"], ssim_as_is=raw["ssim"], rule=rule, lam=lam)
-                if method == "tal fbp":
+                if method.startswith("tal fbp"):
                     row["filter"] = f"wl_mean = {best.split()[1]} scan pitches"
-                if method == "tal fk":
+                if method.startswith("tal fk"):
                     row["fk_shift_bins"] = told["fk_shift_bins"]
                 rows.append(row)
                 shown[(case, method)] = fitted
             shown[(case, "truth")] = truth
-    record = {"machine": cpu_model(), "scene": str(SCENE.relative_to(ROOT)), "pixels": scene.pixels,
+    record = {"machine": cpu_model(), "scene": str(SCENE.relative_to(ROOT)), "quick": args.quick,
+              "scan": list(scene.scan.grid), "pixels": scene.pixels,
               "pairs": scene.sensor_count, "bins": scene.sampling.count, "sigma": scene.noise.sigma,
               "assembly_seconds": assembly, "nonzeros": int(matrix.nnz), "rows": rows}
     save_json(args.out / "bench_nlos_reconstruct.json", record)
@@ -213,17 +257,17 @@ def main(argv=None) -> int:
         print(f"| {row['case']} | {row['method']} | {row['psnr']:.1f} | {row['ssim']:.3f} | {row['seconds']:.2f} | "
               f"{note} |")
     figure(shown, list(dict.fromkeys(row["case"] for row in rows)), args.out / "nlos_tal_reconstructions.png",
-           args.figure)
+           args.figure, scene)
     return 0
 
 
-def figure(shown: dict, cases: list[str], path: Path, also: Path | None) -> None:
+def figure(shown: dict, cases: list[str], path: Path, also: Path | None, scene) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    columns = ("truth",) + METHODS
+    columns = ("truth",) + METHODS + GAINED
     fig, axes = plt.subplots(len(cases), len(columns), figsize=(2.1 * len(columns), 2.2 * len(cases)))
     for i, case in enumerate(cases):
         for j, method in enumerate(columns):
@@ -235,8 +279,13 @@ def figure(shown: dict, cases: list[str], path: Path, also: Path | None) -> None
                 axis.set_title(method, fontsize=10)
             if j == 0:
                 axis.set_ylabel(case, fontsize=9)
-    fig.suptitle("hidden plane from a 32 x 32 confocal capture (each image: its best affine map to [0, 1])",
-                 fontsize=10)
+    width, height = scene.scan.grid
+    fig.suptitle(f"hidden plane (M = {scene.pixels}) from a {width} x {height} confocal capture, each image its "
+                 f"best affine map to [0, 1]; right: tal's images divided by each pixel's known gain\n"
+                 f"Σ laser leg · cos θ_l^x cos θ_x^l cos θ_s^x cos θ_x^s / (|x - l|² |x - s|²) over the scan's"
+                 f" pairs whose path lies in the window (the 1/r⁴ fall-off and cosines that bp, fbp and f-k leave "
+                 f"in)",
+                 fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     if also is not None:

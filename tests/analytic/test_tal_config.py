@@ -123,7 +123,7 @@ def test_obj_rectangle_two_triangles_and_refusals(tmp_path):
     for name in ("center", "u", "v"):
         np.testing.assert_allclose(getattr(split, name), getattr(scene, name), atol=1e-15)
     refused = {
-        # an L (a Z-like polygon): six corners
+        # a Z-like polygon: slanted sides, no exact indicator image
         "ell.obj": "v 0 0 0\nv -1 0 0\nv -1 -1 0\nv 0 -2 0\nv 0 -1 0\nv -2 -2 0\nf 1 2 5\nf 2 3 5\nf 3 6 4\nf 3 4 5\n",
         "bent.obj": "v 1 -1 0\nv -1 -1 0\nv 1 1 0\nv -1 1 0.3\nf 1 2 4\nf 1 4 3\n",          # not coplanar
         "gap.obj": "v 1 -1 0\nv -1 -1 0\nv 1 1 0\nv -1 1 0\nv 0 0 0\nf 1 2 5\nf 2 4 5\nf 4 3 5\n",  # a hole
@@ -137,6 +137,42 @@ def test_obj_rectangle_two_triangles_and_refusals(tmp_path):
         assert name in message
     assert "working directory" in refusal(config({**hidden, "mesh": {"type": "obj", "filename": "none.obj"}}),
                                           "geometry[w].mesh.filename", tmp_path)
+
+
+def test_notched_rectangle_is_its_box_with_the_notch_left_out(tmp_path):
+    # [0, 4] x [0, 2] less the notch [1, 2] x [1, 2], as three convex faces whose shared sides are split
+    # differently (the outline keeps collinear pieces)
+    vertices = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 1 2 0\nv 0 2 0\nv 2 0 0\nv 2 1 0\nv 4 0 0\nv 4 2 0\nv 2 2 0\n"
+    (tmp_path / "notch.obj").write_text(vertices + "f 1 2 3 4 5\nf 2 6 7 3\nf 6 8 9 10 7\n")
+    # the same as one non-convex face: its fan from (0, 0) has a triangle turned over, refused
+    (tmp_path / "fan.obj").write_text(vertices + "f 1 8 9 10 7 3 4 5\n")
+    hidden = {"name": "n", "mesh": {"type": "obj", "filename": "notch.obj"}, "rot_degrees_x": 180.0,
+              "scale_x": 0.25, "scale_y": 0.25, "displacement_x": -0.5, "displacement_y": 0.25,
+              "displacement_z": 1.0, "material": {"id": "white"}}
+    scene = scene_of(config(hidden, diffuse_imaging={"pixels": 4}), tmp_path)
+    # x -> x, y -> -y: the box [-0.5, 0.5] x [-0.25, 0.25], u along +x, v along -y (its rows run top to bottom
+    # in -y, so row 0 is at y = -0.25 where the notch, local y in [1, 2], lies)
+    np.testing.assert_allclose(scene.center, [0, 0, 1], atol=1e-15)
+    np.testing.assert_allclose(scene.u, [1, 0, 0], atol=1e-15)
+    np.testing.assert_allclose(scene.v, [0, -0.5, 0], atol=1e-15)
+    expected = np.ones((4, 4))
+    expected[:2, 1] = 0.0                      # local x in [1, 2]: column 1 of 4; local y in [1, 2]: rows 0-1
+    np.testing.assert_array_equal(scene.reflectance, expected)
+    message = refusal(config(hidden, diffuse_imaging={"pixels": 6}), "geometry[n].mesh.filename", tmp_path)
+    assert "e.g. 4, 8, 12" in message
+    # the faces as fans of triangles, each with its own copies of its vertices (as Blender's exporter writes
+    # them): the diagonals inside cancel only when equal positions count as one vertex
+    rows = [line.split()[1:] for line in vertices.splitlines()]
+    triangles = [(face[0], face[i], face[i + 1]) for face in ([1, 2, 3, 4, 5], [2, 6, 7, 3], [7, 6, 8, 9, 10])
+                 for i in range(1, len(face) - 1)]
+    split = "".join(f"v {' '.join(rows[i - 1])}\n" for triangle in triangles for i in triangle)
+    split += "".join(f"f {3 * k + 1} {3 * k + 2} {3 * k + 3}\n" for k in range(len(triangles)))
+    (tmp_path / "split.obj").write_text(split)
+    again = scene_of(config({**hidden, "mesh": {"type": "obj", "filename": "split.obj"}},
+                            diffuse_imaging={"pixels": 4}), tmp_path)
+    np.testing.assert_array_equal(again.reflectance, expected)
+    assert "do not all face one side" in refusal(config({**hidden, "mesh": {"type": "obj", "filename": "fan.obj"}}),
+                                                 "geometry[n].mesh.filename", tmp_path)
 
 
 def test_example_obj_matches_rectangle_example():

@@ -4,7 +4,9 @@
 What the round trip pins: tal's capture of a white hidden square through an RGB variant is the model's
 H with I = 3π (π E per channel, the three channels summed), the geometry as read (poses, grid, lookat),
 bins and flag as stated, up to mitransient's float32 ray offset (+1e-4 m of path, 0.1 % of the light:
-docs/interop.md). A model with the mono intensity (one channel) fails it by a factor of three.
+docs/interop.md, stated in closed form by ``--expect transient_nlos_path``: the check agrees then). The
+rectangle is off-centre and turned about x and z: a model with the mono intensity (one channel) fails it
+by a factor of three, and one with the z rotation's sign flipped disagrees.
 """
 
 import json
@@ -59,7 +61,9 @@ def test_tal_render_agrees_with_the_model_up_to_mitransients_offset(tmp_path):
         captures.append((made / "trip.hdf5").rename(tmp_path / f"rep-{seed}.hdf5"))
         shutil.rmtree(made)
     out = tmp_path / "check"
-    main(["check", str(scene), "--data", *map(str, captures), "--out", str(out), "--quiet"])
+    verdict = main(["check", str(scene), "--data", *map(str, captures), "--expect", "transient_nlos_path",
+                    "--out", str(out), "--quiet"])
+    assert verdict == 0, json.loads((out / "metrics.json").read_text())     # agrees, the offset stated
     fit = json.loads((out / "metrics.json").read_text())["fit"]
     assert abs(fit["scale"] - 1) < 0.01 + 5 * fit["scale_stderr"], fit
     assert 0 < fit["offset_opl"] < 5e-4, fit
@@ -69,3 +73,9 @@ def test_tal_render_agrees_with_the_model_up_to_mitransients_offset(tmp_path):
     main(["check", str(mono), "--data", *map(str, captures), "--out", str(tmp_path / "mono"), "--quiet"])
     wrong = json.loads((tmp_path / "mono" / "metrics.json").read_text())["fit"]
     assert abs(wrong["scale"] - 3) < 0.05, wrong
+    # the hidden rectangle turned the other way about z (a sign error in a rotation): the same captures disagree
+    flipped = run / "flipped.yaml"
+    plane = {**CONFIG["geometry"][0], "rot_degrees_z": -CONFIG["geometry"][0]["rot_degrees_z"]}
+    flipped.write_text(yaml.safe_dump({**CONFIG, "geometry": [plane, CONFIG["geometry"][1]]}))
+    assert main(["check", str(flipped), "--data", *map(str, captures), "--out", str(tmp_path / "flipped"),
+                 "--quiet"]) == 1

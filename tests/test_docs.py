@@ -273,5 +273,5 @@ def test_no_document_cites_the_folders_beside_the_repository(document):
 
 
 def test_the_readme_stays_a_tour():
-    """The long reference lives in docs/; the README keeps to about 250 lines."""
-    assert len((ROOT / "README.md").read_text(encoding="utf-8").splitlines()) <= 260
+    """The long reference lives in docs/; the README keeps to about 260 lines (270 at most)."""
+    assert len((ROOT / "README.md").read_text(encoding="utf-8").splitlines()) <= 270

@@ -349,6 +349,11 @@ def reduce_mode():
     return dr.ReduceMode.Local if dr.backend_v(mi.Float64) == dr.JitBackend.CUDA else dr.ReduceMode.Auto
 
 
+def is_impulse(terms: WaveformTerms) -> bool:
+    """Whether the waveform is the impulse (no duration): a path reaches its own bin only, with κ = 1."""
+    return float(terms.duration) == float(terms.lead)
+
+
 def deposit(histogram, row, weight, length, active, *, bins: int, start_opl: float, bin_width_opl: float,
             terms: WaveformTerms, taps: int, mode) -> None:
     """Add w κ_n(τ) to the bins n a path of length τ reaches, in one histogram row.
@@ -384,8 +389,9 @@ def deposit(histogram, row, weight, length, active, *, bins: int, start_opl: flo
     Neighbouring taps share an edge, so S is evaluated taps + 1 times.
     """
     first, _ = bin_index(length + terms.lead, start_opl, bin_width_opl, bins, floor=dr.floor)
-    if taps == 1:
-        # The impulse: κ_n is 1 in τ's own bin and 0 elsewhere.
+    if is_impulse(terms):
+        # The impulse: κ_n is 1 in τ's own bin and 0 elsewhere. (One tap alone does not say so: a
+        # one-bin window caps every pulse at one tap, and that tap is still ∫_bin s.)
         inside = active & (first >= 0.0) & (first < bins)
         slot = mi.UInt32(dr.clip(first, 0.0, bins - 1.0)) + row * bins
         dr.scatter_reduce(dr.ReduceOp.Add, histogram, weight, slot, active=inside, mode=mode)

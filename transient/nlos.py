@@ -55,7 +55,7 @@ import numpy as np
 from analytic.relay_wall import WALL_NORMAL, grid_points
 
 from .chunks import ReplicaLayout, checked_chunk
-from .common import deposit, is_diffuse, jittered_point, opaque_f64, opaque_u32, reduce_mode, replica_of, \
+from .common import deposit, is_diffuse, is_impulse, jittered_point, opaque_f64, opaque_u32, reduce_mode, replica_of, \
     sample_stream, time_axis_and_waveform
 from .nlos_sampling import PixelDensity, owen_sobol_point
 from .plane import STRATEGIES, plane_frame, techniques
@@ -397,6 +397,7 @@ class TransientNlosIntegrator(mi.SamplingIntegrator):
         # CUDA: as reduce_mode().
         mode = reduce_mode() if dr.backend_v(mi.Float64) == dr.JitBackend.CUDA else dr.ReduceMode.Direct
         taps = self._taps
+        impulse = is_impulse(self.waveform.terms)   # not taps == 1: a one-bin window caps every pulse at one tap
         # The impulse's bin, floor((τ + lead - t_0) / T), as a product by 1/T: it differs from the model's
         # quotient (analytic.binning.bin_index) only for τ within an ulp of a bin edge, a null set.
         inverse_width = 1.0 / self.bin_width_opl
@@ -409,7 +410,7 @@ class TransientNlosIntegrator(mi.SamplingIntegrator):
             if self.scan_type != "confocal":
                 weight = weight * point.z            # g_s = h_s z_x / |x - s|⁴: z_x once per sample
             # the path's length less |x - s| (less 2 |x - s| confocal), shifted for the product below
-            extra = (shift if taps == 1 else 0.0) + (laser_offset if self.account and laser_offset is not None
+            extra = (shift if impulse else 0.0) + (laser_offset if self.account and laser_offset is not None
                                                      else 0.0)
             base = extra if base_length is None else base_length + extra
 
@@ -431,7 +432,7 @@ class TransientNlosIntegrator(mi.SamplingIntegrator):
                         weight_b, length = weight * height * dr.square(inverse), base + distance
                     if self.account:
                         length += dr.gather(mi.Float64, self._read_offset, b + j)
-                    if taps == 1:                    # the impulse: one bin, found by a product
+                    if impulse:                      # one bin, found by a product
                         position = length * inverse_width
                         inside = (position >= 0.0) & (position < bins)
                         # truncation is the floor where inside; a signed conversion is one AVX2 instruction

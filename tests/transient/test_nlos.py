@@ -260,3 +260,13 @@ def test_default_chunks_shrink_with_the_pairs_so_that_checkpoints_stay_frequent(
     assert default_chunk(100, False) == 2**19          # a power of two at or below 2^26 / 100
     assert default_chunk(2**20, False) == 64 and default_chunk(2**40, False) == 1
     assert default_chunk(1024, True) == DEFAULT_CHUNK_GPU // 64
+
+
+def test_a_pulse_in_a_one_bin_window_is_integrated_as_the_pulse():
+    """One bin caps every pulse at one tap; the deposit must still weigh each path by ∫_bin s, not by 1."""
+    scene = _covering(CASES["confocal"]).replace(illumination=Illumination(waveform="gaussian", fwhm=0.05))
+    low, _ = pairs_range(*scene.geometry())
+    scene = scene.replace(sampling=Sampling(bin_width_opl=0.01, start_opl=low + 0.2, count=1))
+    replicas = _render(scene, 2**18, seed=8)
+    chi2, max_z, bins, passes = _agrees(replicas, _model(scene))
+    assert passes and bins == scene.sensor_count, (chi2, max_z, bins)

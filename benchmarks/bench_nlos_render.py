@@ -226,15 +226,20 @@ def device(variant: str) -> str:
     return f"{gpu} (host {cpu_model()})"
 
 
-def summary(name: str, samples: int, evaluations: int, estimates, seconds, model, bias: float = 0.0) -> dict:
-    """One row: errors, seconds, efficiencies, cost per evaluation and variance per sample."""
+def summary(name: str, samples: int, evaluations: int, estimates, seconds, model, bias: float | None = None) -> dict:
+    """One row: errors, seconds, efficiencies, cost per evaluation and variance per sample.
+
+    ``bias``: the renderer's known bias RMS / peak (mitransient's), None for ours (unbiased: not
+    measured, taken as 0). An error at or below the bias leaves no variance to measure: inf efficiency.
+    """
     peak = float(model.max())
     error2 = float(np.mean([np.mean((estimate - model) ** 2) for estimate in estimates])) / peak**2
     wall, cpu = (float(np.mean([s[i] for s in seconds])) for i in (0, 1))
-    variance = max(error2 - bias**2, 0.0)
+    variance = max(error2 - (bias or 0.0)**2, 0.0)
+    efficiency = (lambda time: 1.0 / (variance * time) if variance > 0 else math.inf)
     return {"renderer": name, "samples": samples, "seconds": wall, "cpu_seconds": cpu,
             "rms_error_of_peak": math.sqrt(error2), "bias_rms_of_peak": bias,
-            "efficiency": 1.0 / (variance * wall), "efficiency_cpu": 1.0 / (variance * cpu),
+            "efficiency": efficiency(wall), "efficiency_cpu": efficiency(cpu),
             "ns_per_evaluation": 1e9 * wall / evaluations, "cpu_ns_per_evaluation": 1e9 * cpu / evaluations,
             "variance_per_sample": variance * samples}
 
@@ -302,6 +307,12 @@ def main(argv=None) -> int:
     parser.add_argument("--label", default="ours (transient_opl_nlos)")
     parser.add_argument("--near-wall", action="store_true", help="measure our strategies on near-wall scans instead")
     args = parser.parse_args(argv)
+    if args.near_wall:
+        ignored = [flag for flag, given in (("--quick", args.quick), ("--model", args.model), ("--ours", args.ours),
+                                            ("--theirs", args.theirs), ("--repeats", args.repeats),
+                                            ("--strategy", args.strategy)) if given]
+        if ignored:
+            parser.error(f"--near-wall measures its own fixed cases; leave out {', '.join(ignored)}")
     for key, value in (QUICK if args.quick else FULL).items():
         if getattr(args, key) is None:
             setattr(args, key, value)
@@ -347,7 +358,9 @@ def main(argv=None) -> int:
     for row in rows + theirs_rows:
         unit = "every pair" if row in rows else "per point"
         print(f"| {row['renderer']} | {row['samples']} ({unit}) | {row['seconds']:.3g} ({row['cpu_seconds']:.3g}) | "
-              f"{row['rms_error_of_peak']:.3e} | {row['bias_rms_of_peak']:.1e} | {row['efficiency']:.3e} "
+              f"{row['rms_error_of_peak']:.3e} | "
+              f"{'- (unbiased)' if row['bias_rms_of_peak'] is None else format(row['bias_rms_of_peak'], '.1e')} | "
+              f"{row['efficiency']:.3e} "
               f"({row['efficiency_cpu']:.3e}) | {row['ns_per_evaluation']:.3g} ({row['cpu_ns_per_evaluation']:.3g}) | "
               f"{row['variance_per_sample']:.3e} |")
     print(f"seconds to 1e-3: ours {results['ours_seconds_to_1e-3']:.3g} "

@@ -179,6 +179,10 @@ def test_render_and_run_write_counts_of_their_y(spad, tmp_path):
     assert main(["render", str(path), "--spp", "65536", "--out", str(tmp_path / "render"), "--quiet"]) == 0
     mean = np.load(tmp_path / "render" / "transient.npy")
     np.testing.assert_allclose(np.load(tmp_path / "render" / "counts_expected.npy"), _coates(mean), rtol=1e-12)
+    # a render's draw is from its own stream (the seed and 1), independent of forward's from the same seed
+    detector = load_scene(path).detector
+    np.testing.assert_array_equal(np.load(tmp_path / "render" / "counts.npy"),
+                                  draw_counts(mean, detector, rng=np.random.default_rng([3, 1])))
     assert json.loads((tmp_path / "render" / "meta.json").read_text())["detector"]["cycles"] == CYCLES
     assert main(["run", str(path), "--spp", "65536", "--out", str(tmp_path / "run"), "--quiet"]) in (0, 1)
     for stream, part in enumerate(("model", "render")):
@@ -192,6 +196,26 @@ def test_render_and_run_write_counts_of_their_y(spad, tmp_path):
         np.testing.assert_array_equal(drawn, own)
         if stream:
             assert not np.array_equal(drawn, draw_counts(y, detector, rng=np.random.default_rng(3)))
+
+
+def test_a_render_near_the_poisson_limit_is_judged_by_the_model_not_the_bound(tmp_path):
+    """The cheap bound (all of a sensor's light in one bin) would refuse it; the exact y does not."""
+    from analytic.window import impulse_totals
+
+    covered = GOOD.replace("start = 0.0", "start = 2.0").replace("count = 40", "count = 7")    # the light's bins
+    plain = load_scene(write_scene(tmp_path, covered, name="plain.toml"))
+    cycles = 1000.0
+    photons = 3e14 / (cycles * float(np.max(analytic.forward(plain))))     # the largest expected count: 3e14
+    assert 2.0 * cycles * photons * float(np.max(impulse_totals(plain))) > 1e15   # the bound alone would refuse
+    text = covered + f"\n[detector]\nphotons = {photons!r}\ncycles = {cycles!r}\ndead_time = \"none\"\n"
+    path = write_scene(tmp_path, text)
+    assert main(["render", str(path), "--spp", "65536", "--out", str(tmp_path / "render"), "--quiet"]) == 0
+    assert np.load(tmp_path / "render" / "counts.npy").max() > 1e14
+    # ... and beyond it, refused before any file, naming the exact largest count
+    path = write_scene(tmp_path, text.replace(f"photons = {photons!r}", f"photons = {2 * photons!r}"),
+                       name="over.toml")
+    assert main(["render", str(path), "--spp", "65536", "--out", str(tmp_path / "over")]) == 2
+    assert not (tmp_path / "over").exists()
 
 
 def test_a_render_whose_counts_could_pass_a_poissons_limit_is_refused_before_any_file(tmp_path, capsys):

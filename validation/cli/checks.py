@@ -8,7 +8,7 @@ from pathlib import Path
 
 from .common import (UsageError, add_quiet, add_window_option, announce_window, apply_window, check_samples_type,
                      load_scene_argument, seed_type, show_progress)
-from .counts import draw_scene_counts, write_counts
+from .counts import RENDER_STREAM, draw_scene_counts, refuse_unreachable_counts, write_counts
 from .reconstruct import add_lambda_options
 
 __all__ = ["add_commands", "command_validate", "command_run", "show_reconstruction_warnings"]
@@ -132,6 +132,7 @@ def command_run(args) -> int:
     scene = apply_window(args, load_scene_argument(args.scene))
     data_driven_rule(scene, args.rule)            # a rule the scene cannot serve is refused before any work
     grid = lambda_grid_of(args)
+    refuse_unreachable_counts(scene)              # before the model and render, not after them
     with output_folder(args.out) as out:
         announce_window(args, scene)              # check_scene's own warning of a cut window is the same line
         check = check_scene(scene, spp=args.spp, seed=args.seed, progress=show_progress(args), rule=args.rule,
@@ -140,7 +141,7 @@ def command_run(args) -> int:
         share = check.metrics["window_share"]
         # independent draws: the render's from a stream of its own
         counts = {part: draw_scene_counts(scene, y, stream=stream)
-                  for stream, (part, y) in enumerate((("model", check.model), ("render", check.render)))}
+                  for part, y, stream in (("model", check.model, 0), ("render", check.render, RENDER_STREAM))}
         with staged_writes():
             write_transient(out / "model", check.model, build_meta(scene, kind="model", window_share=share),
                             scene=scene)

@@ -9,9 +9,9 @@ with the detector's seed) beside ``transient.npy``, the draw again as
 ``transient.h5``, read by ``tal.io.read_capture``), and the figure
 ``counts.png``; meta.json's ``detector`` records the table. A folder
 written for a scene without one has none of the three (an earlier
-command's are removed). A render's counts are those of its estimate of y;
-``run`` draws its render's from a stream of their own (the seed and 1), so
-that its model's and render's draws are independent.
+command's are removed). A render's counts are those of its estimate of y,
+drawn (by ``render`` and by ``run``) from a stream of their own, the seed
+and 1, so that a model's and a render's draws are independent.
 
 ``check SCENE --data FILE --counts`` judges a histogram against the
 scene's expected one by the deviance (:func:`validation.check.counts.judge_counts`:
@@ -26,7 +26,7 @@ from pathlib import Path
 
 from .common import UsageError
 
-__all__ = ["COUNTS_FILES", "COUNTS_CAPTURE", "COUNTS_FIGURE", "draw_scene_counts", "refuse_unreachable_counts", "write_counts",
+__all__ = ["COUNTS_FILES", "COUNTS_CAPTURE", "COUNTS_FIGURE", "draw_scene_counts", "refuse_unreachable_counts", "RENDER_STREAM", "write_counts",
            "write_render_counts",
            "discard_counts", "add_counts_options",
            "check_counts_options", "command_check_counts", "counts_figure"]
@@ -37,6 +37,8 @@ COUNTS_FILES = ("counts_expected.npy", "counts.npy")
 COUNTS_CAPTURE = "counts.h5"
 #: The figure of both, beside them.
 COUNTS_FIGURE = "counts.png"
+#: The stream a render's counts are drawn from (``render`` and ``run``): independent of ``forward``'s, the seed's own.
+RENDER_STREAM = 1
 # --fit's names (offset is offset_opl, as check's fit names it).
 _FIT_ALIASES = {"scale": "scale", "offset": "offset_opl", "offset_opl": "offset_opl", "fwhm": "fwhm", "tail": "tail"}
 
@@ -47,7 +49,7 @@ def draw_scene_counts(scene, y, *, stream: int = 0) -> tuple[np.ndarray, np.ndar
     Called before any file is written: an expected count a Poisson draw cannot take is refused
     (:class:`analytic.errors.SceneError` naming ``detector.photons``) while the folder is still untouched.
     ``stream`` 0 draws with the detector's seed (``numpy.random.default_rng(seed)``); another draws
-    from ``default_rng([seed, stream])``, independent of it (``run``'s render beside its model).
+    from ``default_rng([seed, stream])``, independent of it (a render's, :data:`RENDER_STREAM`).
     """
     import numpy as np
 
@@ -60,30 +62,38 @@ def draw_scene_counts(scene, y, *, stream: int = 0) -> tuple[np.ndarray, np.ndar
     return expected_counts(y, scene.detector), draw_counts(y, scene.detector, rng=rng)
 
 
-def refuse_unreachable_counts(scene, *, margin: float = 4.0) -> None:
-    """Before a render: refuse a ``[detector]`` whose expected counts could pass what a Poisson draw takes.
+def refuse_unreachable_counts(scene, *, margin: float = 2.0) -> None:
+    """Before a render: refuse a ``[detector]`` whose expected counts would pass what a Poisson draw takes.
 
-    A render's y is known only at its end, after its files; its counts are drawn then. So the
-    bins' bound :func:`analytic.window.impulse_totals` x (1 for the impulse, else the period T: a
-    pulse of unit peak) gives, with ``margin`` for the estimate's noise, the largest expected
-    count; beyond :data:`analytic.detector.MAX_MEAN` the scene is refused (``detector.photons``)
-    before any work. The dead-time detector draws multinomially from at most ``cycles``: no limit.
+    A render's y is known only at its end, after its files; its counts are drawn then. A cheap
+    bound comes first: :func:`analytic.window.impulse_totals` x (1 for the impulse, else the period
+    T: a pulse of unit peak) bounds every bin of y. Only when that bound, with ``margin`` for the
+    estimate's noise, would pass :data:`analytic.detector.MAX_MEAN` is the exact model's y
+    computed, and the scene refused (``detector.photons``) when its largest bin, with the margin,
+    does. The dead-time detector draws multinomially from at most ``cycles``: no limit.
     """
     import numpy as np
 
     from analytic.detector import MAX_MEAN
     from analytic.errors import SceneError
+    from analytic.system import forward
     from analytic.window import impulse_totals
 
     detector = scene.detector
     if detector is None or detector.dead_time != "none":
         return
+
+    def largest(y_bound: float) -> float:
+        return detector.cycles * (detector.photons * y_bound * margin + detector.background)
+
     pulse = 1.0 if scene.illumination.waveform == "impulse" else scene.sampling.bin_width_opl
-    highest = float(np.max(impulse_totals(scene), initial=0.0)) * pulse * margin
-    largest = detector.cycles * (detector.photons * highest + detector.background)
-    if not largest <= MAX_MEAN:
-        raise SceneError("detector.photons", f"an expected count could reach {largest:.3g}, beyond the "
-                                             f"{MAX_MEAN:g} a Poisson draw supports; lower photons or cycles")
+    if largest(float(np.max(impulse_totals(scene), initial=0.0)) * pulse) <= MAX_MEAN:
+        return
+    expected = largest(float(np.max(forward(scene), initial=0.0)))
+    if not expected <= MAX_MEAN:
+        raise SceneError("detector.photons", f"the largest expected count, {expected / margin:.6g} (x {margin:g} "
+                                             f"for a render's noise), is beyond the {MAX_MEAN:g} a Poisson draw "
+                                             f"supports; lower photons or cycles")
 
 
 def write_counts(out: str | Path, scene, counts: tuple[np.ndarray, np.ndarray] | None, *, label: str = "model"
@@ -151,7 +161,7 @@ def write_render_counts(out: str | Path, scene, mean) -> None:
     (and an earlier command's removed) for a scene without ``[detector]``."""
     from analytic.files import staged_writes
 
-    counts = draw_scene_counts(scene, mean)
+    counts = draw_scene_counts(scene, mean, stream=RENDER_STREAM)
     with staged_writes():
         write_counts(out, scene, counts, label="render")
 

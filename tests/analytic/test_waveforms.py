@@ -231,9 +231,7 @@ def test_butterworth_cumulative_matches_the_reference_for_every_order(order, cut
         assert error <= AREA_TOLERANCE, (order, cutoff, scaled, error)
 
 
-# MAX_ORDER is slow (~35 s: the reference's 20 x 20 mpmath expm finds the peak); orders 1, 3 and 8
-# keep the property in the default suite.
-@pytest.mark.parametrize("order", [1, 3, 8, pytest.param(MAX_ORDER, marks=pytest.mark.slow)])
+@pytest.mark.parametrize("order", [1, 3, 8, MAX_ORDER])
 def test_butterworth_series_keeps_relative_accuracy_near_zero(order):
     """S ~ u^order: relative accuracy down to the smallest normal S, and around the switch."""
     waveform = _butterworth(order, DEFAULT_CUTOFF, 1e300)

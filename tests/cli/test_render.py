@@ -35,10 +35,21 @@ def _cli(*args, env=None):
                           text=True, timeout=300, env=env)
 
 
-def test_render_command_writes_files_that_agree_with_forward(tmp_path):
+def _in_process(capsys, *args):
+    """`_cli` without a new interpreter (~4 s of imports each), for tests not about the process itself."""
+    from validation.cli import main
+
+    capsys.readouterr()
+    status = main([*map(str, args)])
+    captured = capsys.readouterr()
+    return subprocess.CompletedProcess(args, status, captured.out, captured.err)
+
+
+def test_render_command_writes_files_that_agree_with_forward(tmp_path, capsys):
     scene_path = tmp_path / "scene.toml"
     scene_path.write_text(SCENE)
-    result = _cli("render", scene_path, "--spp", 2**20, "--seed", 3, "--out", tmp_path / "r", "--quiet")
+    result = _in_process(capsys, "render", scene_path, "--spp", 2**20, "--seed", 3, "--out", tmp_path / "r",
+                         "--quiet")
     assert result.returncode == 0, result.stderr
     names = {p.name for p in (tmp_path / "r").iterdir()}
     # the figure too, as forward draws it
@@ -51,7 +62,7 @@ def test_render_command_writes_files_that_agree_with_forward(tmp_path):
     replicas = np.load(tmp_path / "r" / "replicas.npy")
     assert replicas.shape == (32, 2, 30)
     np.testing.assert_allclose(replicas.mean(axis=0), np.load(tmp_path / "r" / "transient.npy"), rtol=1e-13)
-    result = _cli("forward", scene_path, "--out", tmp_path / "f", "--quiet")
+    result = _in_process(capsys, "forward", scene_path, "--out", tmp_path / "f", "--quiet")
     assert result.returncode == 0, result.stderr
     agreement = compare_transients(np.load(tmp_path / "r" / "transient.npy"),
                                    np.load(tmp_path / "r" / "stderr.npy"),
@@ -59,14 +70,16 @@ def test_render_command_writes_files_that_agree_with_forward(tmp_path):
     assert agreement.agrees, agreement.summary()
 
 
-def test_terminated_render_resumes_to_the_same_numbers(tmp_path):
+def test_terminated_render_resumes_to_the_same_numbers(tmp_path, capsys):
     """SIGTERM after the first checkpoint: exit 130, one line with the exact resume command (the folder as
     given), no complete-looking output; `--resume DIR` alone finishes it, and its samples/s counts only
     the samples it drew."""
     scene_path = tmp_path / "scene.toml"
     scene_path.write_text(SCENE)
     samples = 2**24
-    whole = _cli("render", scene_path, "--spp", samples, "--seed", 9, "--out", tmp_path / "whole", "--quiet")
+    # the signalled render is a process of its own; the two others need not be
+    whole = _in_process(capsys, "render", scene_path, "--spp", samples, "--seed", 9, "--out", tmp_path / "whole",
+                        "--quiet")
     assert whole.returncode == 0, whole.stderr
     child = subprocess.Popen([sys.executable, "-m", "validation.cli", "render", str(scene_path), "--spp",
                               str(samples), "--seed", "9", "--out", "./part/", "--quiet"],
@@ -86,7 +99,7 @@ def test_terminated_render_resumes_to_the_same_numbers(tmp_path):
     assert not (tmp_path / "part" / "transient.png").exists()
     with np.load(tmp_path / "part" / "render_state.npz") as state:
         done_before = int(state["done"])
-    resumed = _cli("render", "--resume", tmp_path / "part")
+    resumed = _in_process(capsys, "render", "--resume", tmp_path / "part")
     assert resumed.returncode == 0, resumed.stderr
     np.testing.assert_allclose(np.load(tmp_path / "part" / "transient.npy"),
                                np.load(tmp_path / "whole" / "transient.npy"), rtol=1e-12, atol=0)
@@ -162,14 +175,15 @@ def test_a_new_render_into_a_finished_folder_leaves_no_complete_looking_files_un
     assert json.loads((tmp_path / "r" / "partial" / "meta.json").read_text())["complete"] is False
 
 
-def test_window_auto_renders_the_covering_bins_and_a_resume_keeps_them(tmp_path):
+def test_window_auto_renders_the_covering_bins_and_a_resume_keeps_them(tmp_path, capsys):
     from analytic.scene_file import load_scene
     from analytic.window import covering_sampling
 
     scene_path = tmp_path / "scene.toml"
     scene_path.write_text(SCENE.replace("start = 1.0\ncount = 30", "start = 0.0\ncount = 80"))
     covering = covering_sampling(load_scene(scene_path), 0.05)
-    result = _cli("render", scene_path, "--window", "auto", "--spp", 4096, "--out", tmp_path / "r", "--quiet")
+    result = _in_process(capsys, "render", scene_path, "--window", "auto", "--spp", 4096, "--out", tmp_path / "r",
+                         "--quiet")
     assert result.returncode == 0, result.stderr
     assert result.stderr.strip().splitlines() == [
         line for line in result.stderr.strip().splitlines() if line.startswith("diffuse-imaging: window: ")]
@@ -178,9 +192,9 @@ def test_window_auto_renders_the_covering_bins_and_a_resume_keeps_them(tmp_path)
     assert (meta["start_opl"], meta["bins"], meta["window_share"]) == (covering.start_opl, covering.count, 1.0)
     assert np.load(tmp_path / "r" / "transient.npy").shape == (2, covering.count)
     # the scene file alone is another window: given again for a resume, the difference is named
-    refused = _cli("render", scene_path, "--resume", tmp_path / "r")
+    refused = _in_process(capsys, "render", scene_path, "--resume", tmp_path / "r")
     assert refused.returncode == 2 and "[sampling] count 80" in refused.stderr
-    assert _cli("render", scene_path, "--window", "auto", "--resume", tmp_path / "r").returncode == 0
+    assert _in_process(capsys, "render", scene_path, "--window", "auto", "--resume", tmp_path / "r").returncode == 0
 
 
 def test_new_render_needs_spp_and_help_offers_only_accepted_variants(tmp_path):

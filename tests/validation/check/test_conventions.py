@@ -96,27 +96,32 @@ def irradiancemeter_data(scene, rng, radius: float, scale: float = 0.25) -> np.n
 
 
 def test_check_expect_irradiancemeter_judges_the_stated_convention(tmp_path, scene_file, scene, rng):
+    """The command with each option where it must agree (so each option is read); the verdicts that must
+    not agree from check_transient in this process (the same judge, without ~1.5 s of figures each)."""
+    from validation.check import Convention, check_transient, irradiancemeter
+
     radius = 0.015
+    offset = 2 * radius / 3 + 1500 * 2.0**-24
+    data = irradiancemeter_data(scene, rng, radius)
     paths = []
-    for r, replica in enumerate(irradiancemeter_data(scene, rng, radius)):
+    for r, replica in enumerate(data):
         paths.append(tmp_path / f"meter_{r}.npy")
         np.save(paths[-1], replica)
-    assert run_check(scene_file, "--data", *paths, "--out", tmp_path / "plain") == 1
     assert run_check(scene_file, "--data", *paths, "--expect", "irradiancemeter", "--radius", radius,
                      "--out", tmp_path / "meter") == 0
     metrics = json.loads((tmp_path / "meter" / "metrics.json").read_text())
     assert metrics["agrees"] is False and metrics["expected"]["agrees"] is True
     assert metrics["expected"]["scale"] == 0.25
-    assert metrics["expected"]["offset_opl"] == pytest.approx(2 * radius / 3 + 1500 * 2.0**-24, rel=1e-15)
+    assert metrics["expected"]["offset_opl"] == pytest.approx(offset, rel=1e-15)
     assert "with the stated convention" in (tmp_path / "meter" / "report.md").read_text()
-    # a sphere of another radius, or data of another scale, is not the stated convention
-    assert run_check(scene_file, "--data", *paths, "--expect", "irradiancemeter", "--radius", radius / 3,
-                     "--out", tmp_path / "smaller") == 1
-    offset = 2 * radius / 3 + 1500 * 2.0**-24
     assert run_check(scene_file, "--data", *paths, "--expect-scale", 0.25, "--expect-offset", offset,
                      "--out", tmp_path / "numbers") == 0
-    assert run_check(scene_file, "--data", *paths, "--expect-scale", 0.26, "--expect-offset", offset,
-                     "--out", tmp_path / "wrong_scale") == 1
+    # as given, a sphere of another radius, or data of another scale, is not the stated convention
+    data = np.stack(data)
+    assert check_transient(scene, data, expect=irradiancemeter(scene, radius)).verdict      # as the command
+    assert not check_transient(scene, data).verdict
+    assert not check_transient(scene, data, expect=irradiancemeter(scene, radius / 3)).verdict
+    assert not check_transient(scene, data, expect=Convention(scale=0.26, offset_opl=offset, name="x")).verdict
 
 
 def test_the_irradiancemeter_convention_refuses_a_sphere_that_reaches_the_plane(scene):

@@ -25,8 +25,10 @@ warm=$(mktemp -d)
 # the tests' own routes compile beside the main job's kernels: two compiles, two cores
 python3 scripts/warm_kernels.py &
 routes=$!
+trap 'kill "$routes" 2>/dev/null || true' EXIT      # a failed warm-up leaves no compile running
 python3 -m validation.cli run examples/paper.toml --spp 4096 --out "$warm/run" --quiet
 wait "$routes"
+trap - EXIT
 rm -rf "$warm"
 # tal (y-tal) pins numpy < 2: it gets its own environment, used by the tests that read our HDF5 with it
 bash scripts/setup_interop.sh

@@ -93,6 +93,10 @@ def owen_sobol_point(index, seed_u, seed_v, jitter_u, jitter_v):
 class PixelDensity:
     """A density on the hidden rectangle, constant on each texel, proportional to ρ + :data:`FLOOR` mean ρ.
 
+    Matched to a texture read with nearest filtering (our scenes and exports set it). A bitmap
+    filtered bilinearly in a user's XML stays unbiased (the floor keeps every density above zero)
+    but can cost variance where a bright texel's light spreads onto dark neighbours.
+
     Parameters
     ----------
     reflectance : numpy.ndarray

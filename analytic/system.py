@@ -30,9 +30,11 @@ four routes:
 - *Cut pixels by strips* (clear of the feet and of x*): the slabs between
   the kinks' isochrones, each a region with conic sides whose limits are
   closed-form (:mod:`analytic.strips`), by G_4 x G_4 judged by G_3 x G_3;
-  when that rule does not meet the tolerance, the next route. For a
-  step-function S (impulse, square) and a pixel that one breakpoint cuts,
-  the common case for small pixels, first the two parts' ∫ a alone by a
+  when that rule does not meet the tolerance, the next route. For the
+  impulse (the one waveform whose S is a step, so each κ_n is constant on
+  either side of a breakpoint; the square pulse's S is a ramp) and a pixel
+  that one breakpoint cuts, the common case for small pixels, first the
+  two parts' ∫ a alone by a
   ladder from G_3 x G_3 judged by G_2 x G_2 (:func:`analytic.strips.single_cut`),
   each part's constant kernels taken once.
 - *Cut pixels*: in isochrone coordinates (τ, φ) (see :mod:`analytic.isochrone`)

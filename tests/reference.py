@@ -133,16 +133,24 @@ def attenuation(x, y, source, sensor, kind):
     return cos_s / (ds**2 * dk**2)
 
 
+def _least(function, lo, hi, xatol):
+    """(x, function(x)) where a convex ``function`` is least on [lo, hi], the ends included.
+
+    The bounded minimiser never evaluates the ends and stops about sqrt(eps) |x| short of
+    one: a level set that only touches the interval there would be lost.
+    """
+    found = optimize.minimize_scalar(function, bounds=(lo, hi), method="bounded", options={"xatol": xatol})
+    return min(((x, function(x)) for x in (lo, found.x, hi)), key=lambda pair: pair[1])
+
+
 def _line_roots(x, y0, y1, level, source, sensor):
     """y in [y0, y1] with d(x, y) = level (d is convex in y: at most two)."""
     def f(y):
         return distance_sum(x, y, source, sensor) - level
 
-    found = optimize.minimize_scalar(f, bounds=(y0, y1), method="bounded",
-                                     options={"xatol": 1e-15 * max(1.0, abs(y1))})
-    y_min = found.x
+    y_min, f_min = _least(f, y0, y1, 1e-15 * max(1.0, abs(y1)))
     roots = []
-    if f(y_min) >= 0:
+    if f_min >= 0:
         return roots
     if f(y0) > 0:
         roots.append(optimize.brentq(f, y0, y_min, xtol=1e-15, rtol=1e-15))
@@ -200,11 +208,9 @@ def pixel_entry(box, source, sensor, kernel, breakpoints, kind="lambertian", eps
     # (roots of the convex m(x) = min_y d(x, y)), so a region far narrower than
     # the pixel (a just-born isochrone) is not missed by the first rule.
     def lowest(x):
-        return optimize.minimize_scalar(lambda y: distance_sum(x, y, source, sensor), bounds=(y0, y1),
-                                        method="bounded", options={"xatol": 1e-14}).fun
+        return _least(lambda y: distance_sum(x, y, source, sensor), y0, y1, 1e-14)[1]
 
-    x_best = optimize.minimize_scalar(lowest, bounds=(x0, x1), method="bounded",
-                                      options={"xatol": 1e-14}).x
+    x_best = _least(lowest, x0, x1, 1e-14)[0]
     cuts = {x0, x1, x_best}
     for level in breakpoints:
         if lowest(x_best) >= level:

@@ -22,12 +22,20 @@ def model_title(scene, meta: dict) -> str:
 
 def command_forward(args) -> int:
     """Model the noiseless transient (and a noisy one when the scene asks); exit status 0."""
+    from validation.plots.worker import FigureWorker
+
+    scene = load_scene_argument(args.scene)
+    with FigureWorker() as drawer:      # matplotlib's import beside the model's (validation.plots.worker)
+        return _forward(args, scene, drawer)
+
+
+def _forward(args, scene, drawer) -> int:
     from analytic.files import build_meta, output_folder, staged_writes, write_transient
     from analytic.noise import add_noise
     from analytic.system import forward, system_matrix
-    from validation.plots import save_figure, scene_transient_figure
+    from validation.plots import scene_transient_figure
 
-    scene = apply_window(args, load_scene_argument(args.scene))
+    scene = apply_window(args, scene)
     if args.tolerance is not None:
         scene = scene.replace(tolerance=args.tolerance)
     with output_folder(args.out) as out:
@@ -41,10 +49,10 @@ def command_forward(args) -> int:
         meta = build_meta(scene, kind="model",
                           seed=scene.noise.seed if scene.noise is not None else None,
                           window_share=share, nonzeros=int(matrix.nnz), assembly_seconds=assembly)
-        figure = scene_transient_figure(scene, y, noisy=noisy, title=model_title(scene, meta))
+        drawer.draw(scene_transient_figure, scene, y, noisy=noisy, title=model_title(scene, meta))
         with staged_writes():
             write_transient(out, y, meta, scene=scene, noisy=noisy)
-            save_figure(figure, out / "transient.png")
+            drawer.save(out / "transient.png")
             write_counts(out, scene, counts)
     if not args.quiet:
         print(f"forward: {rows_text(scene)} x {scene.sampling.count} bins, "

@@ -43,9 +43,7 @@ def _resumed_scene(args):
 
 def command_render(args) -> int:
     """Render (or resume rendering) into a folder; exit status 0 when done, 130 when interrupted."""
-    from analytic.files import output_folder
-    from transient.backend import select_variant
-    from transient.render import FIGURE_FILE, render, resume
+    from validation.plots.worker import FigureWorker
 
     if args.resume:
         given, saved = _resumed_scene(args)
@@ -56,6 +54,15 @@ def command_render(args) -> int:
                              "only --resume DIR takes it from the folder")
         given, scene, variant = None, apply_window(args, load_scene_argument(args.scene)), \
             args.variant
+    with FigureWorker() as drawer:     # matplotlib's import beside Mitsuba's (validation.plots.worker)
+        return _render(args, scene, given, variant, drawer)
+
+
+def _render(args, scene, given, variant, drawer) -> int:
+    from analytic.files import output_folder
+    from transient.backend import select_variant
+    from transient.render import FIGURE_FILE, render, resume
+
     select_variant(variant)          # a variant that cannot run here is refused before anything is said
     refuse_unreachable_counts(scene)  # the counts are drawn after the render's files: their limit is checked first
     folder = args.resume if args.resume else args.out
@@ -71,7 +78,7 @@ def command_render(args) -> int:
                 discard_counts(out)
                 result = render(scene, spp=args.spp, seed=0 if args.seed is None else args.seed, out_dir=out,
                                 variant=args.variant, progress=progress)
-            _draw(out / FIGURE_FILE, scene, result)
+            _draw(drawer, out / FIGURE_FILE, scene, result)
             write_render_counts(out, scene, result.mean)
     except KeyboardInterrupt as interrupted:
         # a RenderInterrupted names the folder its state was saved in; a resume's folder holds one anyway
@@ -83,15 +90,15 @@ def command_render(args) -> int:
     return 0
 
 
-def _draw(path: Path, scene, result) -> None:
+def _draw(drawer, path: Path, scene, result) -> None:
     """The render's figure (as ``forward`` draws the model's), with ±1 standard error as a band."""
-    from validation.plots import save_figure, scene_transient_figure
+    from validation.plots import scene_transient_figure
 
     from .plot import render_title
 
     title = render_title(scene.name, samples=result.samples, replicas=result.replicas)
-    save_figure(scene_transient_figure(scene, result.mean, stderr=result.stderr, label="render", title=title),
-                path)
+    drawer.draw(scene_transient_figure, scene, result.mean, stderr=result.stderr, label="render", title=title)
+    drawer.save(path)
 
 
 def _summary(args, result, out) -> None:

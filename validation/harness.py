@@ -37,7 +37,7 @@ from analytic.scene import Scene
 from analytic.system import QuadratureWarning, forward, system_matrix
 from validation.compare import Agreement, compare_transients
 
-__all__ = ["SceneCheck", "check_scene", "simplification_costs", "model_convergence",
+__all__ = ["SceneCheck", "check_scene", "refuse_dark", "simplification_costs", "model_convergence",
            "data_driven_rule", "reconstruct_from_noisy_data"]
 
 TOLERANCES = (1e-2, 1e-4, 1e-6)
@@ -226,6 +226,27 @@ def reconstruct_from_noisy_data(matrix, scene: Scene, model: np.ndarray, rendere
     }
 
 
+def refuse_dark(scene, share: float) -> None:
+    """Refuse a scene whose sensors get no light in the window: model and render would both be exactly zero,
+    with nothing to judge the render by (every standard error zero) and no image to recover."""
+    from analytic.relay_wall import RelayWallScene
+
+    relay_wall = isinstance(scene, RelayWallScene)
+    surface = "hidden rectangle" if relay_wall else "plane"
+    key = "hidden.reflectance" if relay_wall else "plane.reflectance"
+    if relay_wall and scene.wall_reflectance == 0:
+        key, surface = "relay_wall.reflectance", "relay wall"
+    elif np.any(np.asarray(scene.reflectance) > 0):
+        if share > 0:
+            return
+        key, surface = "sampling", "window"
+    why, fix = (("holds none of the light", "a window that holds it (--window auto)") if key == "sampling" else
+                ("is black (reflectance 0 everywhere)", "a reflectance above 0"))
+    raise SceneError(key, f"the {surface} {why}, so the model and the render are both exactly zero in every "
+                          f"bin: there is nothing to judge or reconstruct; forward and render model such a scene, "
+                          f"or give {fix}")
+
+
 def check_scene(scene: Scene, *, spp: int, seed: int = 0, convergence: bool = True,
                 reconstruction: bool = True, progress: bool = False, rule="auto",
                 lambdas=None) -> SceneCheck:
@@ -258,6 +279,7 @@ def check_scene(scene: Scene, *, spp: int, seed: int = 0, convergence: bool = Tr
 
     timings = {}
     share = window_share(scene)
+    refuse_dark(scene, share)
     warn_if_cut(scene, share)
     started = time.perf_counter()
     matrix = _matrix(scene)

@@ -124,7 +124,8 @@ def command_run(args) -> int:
     own; :mod:`validation.report`).
     """
     from analytic.files import build_meta, output_folder, staged_writes, write_transient
-    from validation.harness import check_scene, data_driven_rule
+    from analytic.window import window_share
+    from validation.harness import check_scene, data_driven_rule, refuse_dark
     from validation.report import write_report
 
     from .reconstruct import lambda_grid_of
@@ -133,8 +134,10 @@ def command_run(args) -> int:
     data_driven_rule(scene, args.rule)            # a rule the scene cannot serve is refused before any work
     grid = lambda_grid_of(args)
     refuse_unreachable_counts(scene)              # before the model and render, not after them
+    share = window_share(scene)
+    refuse_dark(scene, share)                     # nothing to judge: one line, not a warning and then an error
     with output_folder(args.out) as out:
-        announce_window(args, scene)              # check_scene's own warning of a cut window is the same line
+        announce_window(args, scene, share)       # check_scene's own warning of a cut window is the same line
         check = check_scene(scene, spp=args.spp, seed=args.seed, progress=show_progress(args), rule=args.rule,
                             lambdas=grid)
         show_reconstruction_warnings(check.reconstructions)

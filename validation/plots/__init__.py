@@ -13,7 +13,8 @@ functions, so that the command line starts fast.
 - :mod:`.relay_wall`: a relay-wall capture's transient per pair, its light over the scan;
 - :mod:`.check`: ``check``'s data against the model and its z;
 - :mod:`.reconstruction`: images, the λ rule's criterion, spectra, the paper's panels;
-- :mod:`.convergence`: error against samples and against wall time.
+- :mod:`.convergence`: error against samples and against wall time;
+- :mod:`.worker`: a figure drawn in a second process while a command computes its data.
 
 Names are loaded on first use (``lazy_loader``); ``__all__`` lists the
 public API.
@@ -30,4 +31,5 @@ __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "reconstruction": ["reconstructions_figure", "reconstruction_figure", "criterion_figure",
                        "conditioning_figure", "panels_figure"],
     "convergence": ["convergence_figure", "speed_against_error_figure"],
+    "worker": ["FigureWorker", "figure_png"],
 })

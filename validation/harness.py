@@ -37,7 +37,7 @@ from analytic.scene import Scene
 from analytic.system import QuadratureWarning, forward, system_matrix
 from validation.compare import Agreement, compare_transients
 
-__all__ = ["SceneCheck", "check_scene", "refuse_dark", "simplification_costs", "model_convergence",
+__all__ = ["SceneCheck", "check_scene", "refuse_dark", "imaging_problem", "simplification_costs", "model_convergence",
            "data_driven_rule", "reconstruct_from_noisy_data"]
 
 TOLERANCES = (1e-2, 1e-4, 1e-6)
@@ -226,6 +226,26 @@ def reconstruct_from_noisy_data(matrix, scene: Scene, model: np.ndarray, rendere
     }
 
 
+def imaging_problem(scene) -> str | None:
+    """Why reconstructing this scene's image would measure nothing (one sentence), or None.
+
+    One sensor (or pair) sees path lengths only: each bin is an elliptical
+    annulus of the plane, so the image is known up to everything that
+    keeps each annulus' integral, and the λ rules pick λ ≈ 0 on its
+    nearly noiseless data. A uniform truth equals the flat image, so PSNR
+    against it has no floor to beat.
+    """
+    if scene.sensor_count < 2:
+        return (f"one {'pair' if hasattr(scene, 'scan') else 'sensor'} sees only path lengths (each bin is "
+                f"an elliptical annulus of the surface), which no image can be recovered from; give two or "
+                f"more to reconstruct")
+    truth = np.asarray(scene.reflectance)
+    if np.all(truth == truth.flat[0]):
+        return ("the true image is uniform, so the best flat image is the truth itself and a PSNR against it "
+                "measures nothing; give the scene an image to reconstruct")
+    return None
+
+
 def refuse_dark(scene, share: float) -> None:
     """Refuse a scene whose sensors get no light in the window: model and render would both be exactly zero,
     with nothing to judge the render by (every standard error zero) and no image to recover."""
@@ -264,7 +284,9 @@ def check_scene(scene: Scene, *, spp: int, seed: int = 0, convergence: bool = Tr
     convergence : bool
         Also run the model's tolerance sweep and the smaller renders.
     reconstruction : bool
-        Also reconstruct from both data sets (:func:`reconstruct_from_noisy_data`).
+        Also reconstruct from both data sets (:func:`reconstruct_from_noisy_data`), unless the scene
+        cannot be imaged (:func:`imaging_problem`: then ``metrics["reconstruction"]`` is ``{"skipped":
+        why}``).
     progress : bool
         Progress bars for the renders.
     rule : str or float
@@ -314,7 +336,10 @@ def check_scene(scene: Scene, *, spp: int, seed: int = 0, convergence: bool = Tr
         check.metrics["render_convergence"] = rows
     if isinstance(scene, Scene):
         check.metrics["simplifications"] = simplification_costs(scene, model)
-    if reconstruction:
+    unimageable = imaging_problem(scene) if reconstruction else None
+    if unimageable is not None:
+        check.metrics["reconstruction"] = {"skipped": unimageable}
+    elif reconstruction:
         check.reconstructions = reconstruct_from_noisy_data(matrix, scene, model, result.mean, rule=rule,
                                                             lambdas=lambdas)
         check.metrics["reconstruction"] = {

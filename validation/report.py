@@ -212,6 +212,9 @@ def _draw_scene(check, folder: Path, link: str, heading: str) -> list[str]:
                                        check.model_convergence), folder / "convergence.png")
         lines += ["", f"![convergence]({link}convergence.png)"]
     recon = check.reconstructions
+    skipped = check.metrics.get("reconstruction", {}).get("skipped")
+    if skipped:
+        lines += ["", f"No reconstruction: {skipped}."]
     if "model" in recon:
         panels = [(f"from the model's data\n({recon['rule']})", recon["model"]["image"],
                    f"PSNR {recon['model']['psnr']:.1f} dB, λ = {recon['model']['lambda']:.3g}"),

@@ -185,10 +185,15 @@ def test_run_shows_each_reconstruction_warning_naming_its_data():
 @pytest.mark.filterwarnings("default::analytic.inversion.RankDeficiencyWarning",
                             "default::analytic.inversion.RegularizationWarning")
 def test_run_shows_the_reconstructions_warnings_on_stderr_and_in_its_report(tmp_path, capsys):
-    """One sensor's 12 bins cannot fix 64 pixels: both reconstructions warn, in one line each, and the
+    """Two sensors' 24 bins cannot fix 64 pixels: both reconstructions warn, in one line each, and the
     report says so under them. In-process (the CLI's own warning policy writes the lines)."""
-    scene_path = tmp_path / "scene.toml"
-    scene_path.write_text(ONE_SENSOR)
+    from scene_files import write_scene_file
+
+    from analytic.scene import Sampling, default_scene
+
+    scene = default_scene(pixels=8, noise=None, sensors=[[0.2, 0.7, 1.0], [0.8, 0.3, 1.0]],
+                          sampling=Sampling(bin_width_opl=0.1, start_opl=1.9, count=12))
+    scene_path = write_scene_file(tmp_path, scene, name="scene.toml")
     assert main(["run", str(scene_path), "--spp", "8192", "--out", str(tmp_path / "run"), "--quiet"]) == 0
     shown = _warning_lines(capsys.readouterr().err)
     report = (tmp_path / "run" / "report.md").read_text()

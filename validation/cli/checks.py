@@ -158,6 +158,8 @@ def command_run(args) -> int:
     if not args.quiet:
         print(check.agreement.summary())
         recon = check.metrics.get("reconstruction", {})
+        if "skipped" in recon:
+            print(f"no reconstruction: {recon['skipped']}")
         if "model" in recon:
             print(f"reconstruction PSNR: {recon['model']['psnr']:.1f} dB from model data, "
                   f"{recon['render']['psnr']:.1f} dB from rendered data -> {Path(args.out) / 'report.md'}")

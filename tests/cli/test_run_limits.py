@@ -1,14 +1,20 @@
-"""``run`` and ``validate`` refuse a scene that sends no light into the window (a black plane or hidden
-rectangle, a black relay wall, a window before the first arrival) in one line, before any file: the model
-and the render would both be exactly zero, with every standard error zero and nothing to judge."""
+"""Where part of ``run``'s job would measure nothing.
 
+``run`` and ``validate`` refuse a scene that sends no light into the window (a black plane or hidden
+rectangle, a black relay wall, a window before the first arrival) in one line, before any file: the model
+and the render would both be exactly zero, with every standard error zero and nothing to judge. ``run``
+skips the reconstruction, saying why, where no image can be recovered (one sensor) or the truth is uniform."""
+
+import json
+
+import numpy as np
 import pytest
 from scene_files import write_relay_wall_file, write_scene_file
 
 from analytic.relay_wall import default_relay_wall_scene
 from analytic.scene import Sampling, default_scene
 from validation.cli import main
-from validation.harness import refuse_dark
+from validation.harness import imaging_problem, refuse_dark
 
 DARK = {
     "black plane": (default_scene(pixels=8, reflectance=0.0, noise=None), "plane.reflectance: the plane is black"),
@@ -41,3 +47,25 @@ def test_a_dark_scene_is_refused_in_one_line_before_any_file(tmp_path, capsys, c
 def test_a_lit_scene_is_not_refused():
     assert refuse_dark(default_scene(pixels=8), 1.0) is None
     assert refuse_dark(default_relay_wall_scene(pixels=8), 0.3) is None
+
+
+def test_imaging_problem_names_one_sensor_and_a_uniform_truth():
+    textured = default_scene(pixels=8)
+    assert imaging_problem(textured) is None
+    assert imaging_problem(default_relay_wall_scene(pixels=8)) is None
+    one = textured.replace(sensors=np.asarray(textured.sensors)[:1])
+    assert imaging_problem(one).startswith("one sensor sees only path lengths")
+    assert imaging_problem(textured.replace(reflectance=0.5)).startswith("the true image is uniform")
+
+
+def test_run_on_one_sensor_judges_the_render_and_says_why_it_does_not_reconstruct(tmp_path, capsys):
+    scene = default_scene(pixels=8, noise=None)
+    scene = scene.replace(sensors=np.asarray(scene.sensors)[:1])
+    path = write_scene_file(tmp_path, scene, name="one.toml")
+    status = main(["run", str(path), "--out", str(tmp_path / "out"), "--spp", "65536"])
+    metrics = json.loads((tmp_path / "out" / "metrics.json").read_text())
+    assert status == (0 if metrics["agreement"]["agrees"] else 1) and "agrees" in metrics["agreement"]
+    assert metrics["reconstruction"] == {"skipped": imaging_problem(scene)}
+    assert f"No reconstruction: {imaging_problem(scene)}." in (tmp_path / "out" / "report.md").read_text()
+    assert f"no reconstruction: {imaging_problem(scene)}" in capsys.readouterr().out
+    assert not (tmp_path / "out" / "reconstructions.png").exists()

@@ -1,7 +1,7 @@
 """validation.plots.worker: a figure drawn in a second process is the figure drawn here, byte for byte,
 and anything but a clean drawing (an error, a warning, a dead worker, one core) is drawn here instead."""
 
-import warnings
+import sys
 
 import pytest
 from plot_builds import failing, sampling, transient, warning
@@ -16,7 +16,7 @@ def _here(tmp_path, *args, **kwargs) -> bytes:
 
 
 def test_the_worker_draws_the_same_bytes_as_this_process(tmp_path):
-    with FigureWorker() as drawer:
+    with FigureWorker(start=True) as drawer:
         drawer.draw(transient_figure, sampling(), transient(), title="a test's title, ünïcode")
         drawer.save(tmp_path / "there.png")
         assert drawer.drawn_there == 1
@@ -30,7 +30,7 @@ def test_the_worker_draws_the_same_bytes_as_this_process(tmp_path):
 
 
 def test_an_error_in_the_figure_is_raised_here_as_itself():
-    with FigureWorker() as drawer:
+    with FigureWorker(start=True) as drawer:
         drawer.draw(failing, "no such figure")
         with pytest.raises(ValueError, match="no such figure"):
             drawer.png()
@@ -38,7 +38,7 @@ def test_an_error_in_the_figure_is_raised_here_as_itself():
 
 
 def test_a_warning_while_drawing_is_warned_here(tmp_path):
-    with FigureWorker() as drawer:
+    with FigureWorker(start=True) as drawer:
         drawer.draw(warning, "a notice from the figure")
         with pytest.warns(UserWarning, match="a notice from the figure"):
             png = drawer.png()
@@ -47,7 +47,7 @@ def test_a_warning_while_drawing_is_warned_here(tmp_path):
 
 
 def test_a_dead_worker_is_replaced_by_drawing_here(tmp_path):
-    with FigureWorker() as drawer:
+    with FigureWorker(start=True) as drawer:
         drawer._process.kill()
         drawer._process.wait()
         drawer.draw(transient_figure, sampling(), transient())
@@ -56,7 +56,14 @@ def test_a_dead_worker_is_replaced_by_drawing_here(tmp_path):
     assert png == _here(tmp_path, sampling(), transient())
 
 
-def test_one_core_draws_here_without_a_worker(monkeypatch, tmp_path):
+def test_one_core_or_matplotlib_already_here_draws_here_without_a_worker(monkeypatch, tmp_path):
+    _here(tmp_path, sampling(), transient())             # matplotlib imported here: nothing to overlap
+    with FigureWorker() as drawer:
+        assert drawer._process is None
+    monkeypatch.delitem(sys.modules, "matplotlib.figure")
+    monkeypatch.setattr(worker_module, "_cores", lambda: 2)
+    with FigureWorker() as drawer:
+        assert drawer._process is not None                # a command's start: matplotlib not yet imported
     monkeypatch.setattr(worker_module, "_cores", lambda: 1)
     with FigureWorker() as drawer:
         assert drawer._process is None
@@ -66,7 +73,7 @@ def test_one_core_draws_here_without_a_worker(monkeypatch, tmp_path):
 
 
 def test_leaving_the_block_ends_the_worker():
-    with FigureWorker() as drawer:
+    with FigureWorker(start=True) as drawer:
         process = drawer._process
         assert process is not None and process.poll() is None
     assert process.poll() == 0

@@ -73,13 +73,22 @@ class FigureWorker:
     :meth:`save` (in the same :func:`analytic.files.staged_writes` block).
     """
 
-    def __init__(self):
+    def __init__(self, start: bool | None = None):
+        """
+        Parameters
+        ----------
+        start : bool, optional
+            Start the second process: by default only where it saves time, on two or more cores when
+            this process has not imported matplotlib yet (a notebook's or a test's call draws here).
+        """
         self._process = None
         self._request = None
         #: Figures the worker drew (the others were drawn in this process).
         self.drawn_there = 0
-        if _cores() < 2:
-            return      # nothing to overlap with: draw here
+        if start is None:
+            start = _cores() >= 2 and "matplotlib.figure" not in sys.modules
+        if not start:
+            return
         environment = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
         try:
             self._process = subprocess.Popen([sys.executable, "-m", "validation.plots.worker"],

@@ -32,6 +32,7 @@ from analytic.window import FULL_SHARE
 from analytic.relay_wall import RelayWallScene
 from validation.plots import (WallScan, convergence_figure, reconstructions_figure, relay_wall_figure, save_figure,
                               transients_figure, z_map_figure)
+from validation.plots.worker import FigureWorker
 
 __all__ = ["write_report", "write_markdown", "scene_folder_names", "FIGURE_FILES", "RESERVED_NAMES",
            "MAX_FOLDER_NAME"]
@@ -181,18 +182,20 @@ def _cost_row(check) -> str:
     return f"| {_markdown_text(check.name)} | {attenuation} | {coarea} | {cells} |"
 
 
-def _draw_scene(check, folder: Path, link: str, heading: str) -> list[str]:
-    """One scene's figures in ``folder`` (linked as ``link`` + file name) and its report section."""
+def _draw_scene(check, folder: Path, link: str, heading: str, drawer: FigureWorker) -> list[str]:
+    """One scene's figures in ``folder`` (linked as ``link`` + file name) and its report section.
+
+    The first two figures (about half of the drawing) go to ``drawer``, the others are drawn here meanwhile.
+    """
     sampling = check.scene.sampling
     agreement = check.agreement
     relay_wall = isinstance(check.scene, RelayWallScene)
     row_kind = "pair" if relay_wall else "sensor"      # what the transient's rows are
-    save_figure(transients_figure(sampling, {"model": check.model, "render": check.render},
-                                  errors={"render": check.stderr}, z_limit=agreement.z_threshold,
-                                  title=f"{check.name}: the model (steps) against the render (points)",
-                                  row_kind=row_kind), folder / "transients.png")
-    save_figure(z_map_figure(agreement.z, agreement.z_threshold, sampling,
-                             f"{check.name}: z over {row_kind}s x bins", row_kind=row_kind), folder / "z_map.png")
+    drawer.draw(transients_figure, sampling, {"model": check.model, "render": check.render},
+                errors={"render": check.stderr}, z_limit=agreement.z_threshold,
+                title=f"{check.name}: the model (steps) against the render (points)", row_kind=row_kind)
+    drawer.draw(z_map_figure, agreement.z, agreement.z_threshold, sampling,
+                f"{check.name}: z over {row_kind}s x bins", row_kind=row_kind)
     lines = ["", heading, "", agreement.summary(), "",
              f"Transients of up to 8 {row_kind}s (named in the figure) with z below each; the z map shows "
              f"every {row_kind}.", "",
@@ -232,11 +235,13 @@ def _draw_scene(check, folder: Path, link: str, heading: str) -> list[str]:
                                       f"{recon['oracle']['lambda']:.3g}.",
                   *([""] + notes if notes else []),
                   "", f"![reconstructions]({link}reconstructions.png)"]
+    drawer.save(folder / "transients.png")
+    drawer.save(folder / "z_map.png")
     return lines
 
 
 def write_report(out: Path, checks: list, corner: dict | None = None, *, false_alarm: float = 1e-3,
-                 headline: bool = False) -> dict:
+                 headline: bool = False, drawer: FigureWorker | None = None) -> dict:
     """Write report.md, metrics.json and the figures for a list of SceneCheck (and the corner result).
 
     Parameters
@@ -255,6 +260,9 @@ def write_report(out: Path, checks: list, corner: dict | None = None, *, false_a
         ``agreement``, ``window_share`` and ``reconstruction`` at its top
         level (docs/design.md section 5). Without it each scene's figures are in
         its folder (:func:`scene_folder_names`).
+    drawer : FigureWorker, optional
+        Draws part of each scene's figures in a second process while the
+        rest are drawn here (default: all here).
 
     Returns
     -------
@@ -277,14 +285,15 @@ def write_report(out: Path, checks: list, corner: dict | None = None, *, false_a
     lines += ["", *_legend(_COST_COLUMNS)]
     metrics = {"false_alarm": false_alarm, "scenes": {}}
     folders = scene_folder_names(check.name for check in checks)
+    drawer = FigureWorker(start=False) if drawer is None else drawer
     for check, folder in zip(checks, folders):
         heading = f"## {_markdown_text(check.name)}"
         if headline:
-            lines += _draw_scene(check, out, "", heading)
+            lines += _draw_scene(check, out, "", heading, drawer)
         else:
             if folder != check.name:
                 heading += f" (files in `{folder}/`)"
-            lines += _draw_scene(check, out / folder, f"{folder}/", heading)
+            lines += _draw_scene(check, out / folder, f"{folder}/", heading, drawer)
         metrics["scenes"][folder] = {"name": check.name, **check.metrics}
     if corner is not None:
         lines += ["", "## corner (outside the one-bounce model)", "", corner["text"], "",

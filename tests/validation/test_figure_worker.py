@@ -76,4 +76,27 @@ def test_leaving_the_block_ends_the_worker():
     with FigureWorker(start=True) as drawer:
         process = drawer._process
         assert process is not None and process.poll() is None
-    assert process.poll() == 0
+    assert process.poll() is not None
+
+
+def test_queued_figures_larger_than_a_pipe_come_back_in_order(tmp_path):
+    import numpy as np
+
+    from analytic.scene import Sampling
+
+    wide = Sampling(bin_width_opl=0.001, start_opl=2.0, count=1100)
+    big = [np.random.default_rng(seed).random((8, 1100)) for seed in range(3)]       # 70 KB each, over a pipe's 64 KB
+    with FigureWorker(start=True) as drawer:
+        for y in big:
+            drawer.draw(transient_figure, wide, y)
+        drawn = [drawer.png() for _ in big]
+        assert drawer.drawn_there == 3
+    assert drawn == [_here(tmp_path, wide, y) for y in big]
+
+
+def test_leaving_with_figures_not_taken_stops_the_worker_at_once():
+    with FigureWorker(start=True) as drawer:
+        process = drawer._process
+        drawer.draw(transient_figure, sampling(), transient())
+        drawer.draw(transient_figure, sampling(), 2 * transient())
+    assert process.poll() is not None

@@ -123,19 +123,38 @@ def command_run(args) -> int:
     figures lie beside report.md in ``--out`` (one scene: no folder of its
     own; :mod:`validation.report`).
     """
-    from analytic.files import build_meta, output_folder, staged_writes, write_transient
     from analytic.window import window_share
-    from validation.harness import check_scene, data_driven_rule, refuse_dark
-    from validation.report import write_report
+    from validation.harness import data_driven_rule, refuse_dark
+    from validation.plots.worker import FigureWorker
 
     from .reconstruct import lambda_grid_of
 
-    scene = apply_window(args, load_scene_argument(args.scene))
-    data_driven_rule(scene, args.rule)            # a rule the scene cannot serve is refused before any work
-    grid = lambda_grid_of(args)
-    refuse_unreachable_counts(scene)              # before the model and render, not after them
-    share = window_share(scene)
-    refuse_dark(scene, share)                     # nothing to judge: one line, not a warning and then an error
+    scene = load_scene_argument(args.scene)
+    with FigureWorker() as drawer:                # matplotlib's import and half the drawing beside the work
+        scene = apply_window(args, scene)
+        data_driven_rule(scene, args.rule)        # a rule the scene cannot serve is refused before any work
+        grid = lambda_grid_of(args)
+        refuse_unreachable_counts(scene)          # before the model and render, not after them
+        share = window_share(scene)
+        refuse_dark(scene, share)                 # nothing to judge: one line, not a warning and then an error
+        check = _run(args, scene, share, grid, drawer)
+    if not args.quiet:
+        print(check.agreement.summary())
+        recon = check.metrics.get("reconstruction", {})
+        if "skipped" in recon:
+            print(f"no reconstruction: {recon['skipped']}")
+        if "model" in recon:
+            print(f"reconstruction PSNR: {recon['model']['psnr']:.1f} dB from model data, "
+                  f"{recon['render']['psnr']:.1f} dB from rendered data -> {Path(args.out) / 'report.md'}")
+    return 0 if check.agreement.agrees else 1
+
+
+def _run(args, scene, share: float, grid, drawer):
+    """``run``'s work once its inputs are accepted: the check, then its files, all or none."""
+    from analytic.files import build_meta, output_folder, staged_writes, write_transient
+    from validation.harness import check_scene
+    from validation.report import write_report
+
     with output_folder(args.out) as out:
         announce_window(args, scene, share)       # check_scene's own warning of a cut window is the same line
         check = check_scene(scene, spp=args.spp, seed=args.seed, progress=show_progress(args), rule=args.rule,
@@ -154,16 +173,8 @@ def command_run(args) -> int:
                             scene=scene, stderr=check.stderr)
             for part, drawn in counts.items():
                 write_counts(out / part, scene, drawn, label=part)
-            write_report(out, [check], headline=True)
-    if not args.quiet:
-        print(check.agreement.summary())
-        recon = check.metrics.get("reconstruction", {})
-        if "skipped" in recon:
-            print(f"no reconstruction: {recon['skipped']}")
-        if "model" in recon:
-            print(f"reconstruction PSNR: {recon['model']['psnr']:.1f} dB from model data, "
-                  f"{recon['render']['psnr']:.1f} dB from rendered data -> {Path(args.out) / 'report.md'}")
-    return 0 if check.agreement.agrees else 1
+            write_report(out, [check], headline=True, drawer=drawer)
+    return check
 
 
 def show_reconstruction_warnings(reconstructions: dict) -> None:

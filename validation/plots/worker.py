@@ -21,9 +21,11 @@ from __future__ import annotations
 import io
 import os
 import pickle
+import queue
 import struct
 import subprocess
 import sys
+import threading
 import warnings
 from pathlib import Path
 
@@ -39,11 +41,10 @@ def figure_png(figure) -> bytes:
     return buffer.getvalue()
 
 
-def _send(stream, value) -> None:
+def _message(value) -> bytes:
     """One message: its length (8 bytes), then its pickle, so that a reader never stops inside one."""
     data = pickle.dumps(value, protocol=pickle.HIGHEST_PROTOCOL)
-    stream.write(struct.pack("<Q", len(data)) + data)
-    stream.flush()
+    return struct.pack("<Q", len(data)) + data
 
 
 def _receive(stream) -> bytes:
@@ -68,9 +69,11 @@ def _cores() -> int:
 class FigureWorker:
     """A second process that draws figures; a context manager that stops it.
 
-    Start it before the work whose results a figure shows; :meth:`draw`
-    once they exist, then write the command's other files, then
-    :meth:`save` (in the same :func:`analytic.files.staged_writes` block).
+    Start it before the work whose results the figures show; :meth:`draw`
+    each figure once its data exist (the requests queue up, and the worker
+    draws them in turn while this process goes on), then :meth:`save` (or
+    :meth:`png`) them in the same order, in the command's
+    :func:`analytic.files.staged_writes` block.
     """
 
     def __init__(self, start: bool | None = None):
@@ -82,7 +85,7 @@ class FigureWorker:
             this process has not imported matplotlib yet (a notebook's or a test's call draws here).
         """
         self._process = None
-        self._request = None
+        self._pending = []            # (request, sent to the worker), in the order asked
         #: Figures the worker drew (the others were drawn in this process).
         self.drawn_there = 0
         if start is None:
@@ -95,7 +98,11 @@ class FigureWorker:
                                              stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                                              stderr=subprocess.DEVNULL, env=environment)
         except OSError:
-            self._process = None
+            return
+        # requests are written by a thread: a large one must not wait here while the worker is busy
+        self._outbox = queue.SimpleQueue()
+        self._sender = threading.Thread(target=_send_all, args=(self._process.stdin, self._outbox), daemon=True)
+        self._sender.start()
 
     def __enter__(self) -> "FigureWorker":
         return self
@@ -105,46 +112,60 @@ class FigureWorker:
 
     def draw(self, build, *args, **kwargs) -> None:
         """Ask for the figure ``build(*args, **kwargs)`` (a function of :mod:`validation.plots` that returns a
-        Figure); :meth:`save` or :meth:`png` takes it. One figure at a time."""
-        self._request = (build, args, kwargs)
+        Figure); :meth:`save` or :meth:`png` takes the figures in the order asked."""
+        request, message = (build, args, kwargs), None
         if self._process is not None:
             try:
-                _send(self._process.stdin, self._request)
-            except (OSError, pickle.PickleError, AttributeError, TypeError):
-                self.close()     # unpicklable arguments, or the worker is gone: drawn here
+                message = _message(request)
+            except (pickle.PickleError, AttributeError, TypeError):
+                pass             # unpicklable arguments: drawn here
+        if message is not None:
+            self._outbox.put(message)
+        self._pending.append((request, message is not None))
 
     def png(self) -> bytes:
-        """The PNG bytes of the figure :meth:`draw` asked for."""
-        build, args, kwargs = self._request
-        self._request = None
-        if self._process is not None:
+        """The PNG bytes of the earliest figure :meth:`draw` asked for and not yet taken."""
+        (build, args, kwargs), sent = self._pending.pop(0)
+        if sent and self._process is not None:
             try:
                 drawn = pickle.loads(_receive(self._process.stdout))
             except (OSError, EOFError, pickle.PickleError):
                 drawn = None
-                self.close()
+                self.close()     # the worker is gone: this figure and the rest are drawn here
             if drawn is not None:
                 self.drawn_there += 1
                 return drawn
         return figure_png(build(*args, **kwargs))
 
     def save(self, path: str | Path) -> Path:
-        """Write the figure :meth:`draw` asked for at ``path`` as PNG, atomically."""
+        """Write the earliest figure :meth:`draw` asked for and not yet taken at ``path`` as PNG, atomically."""
         png = self.png()
         return atomic_write(path, lambda temporary: Path(temporary).write_bytes(png))
 
     def close(self) -> None:
-        """Stop the worker (it ends when its input closes)."""
+        """Stop the worker at once (it writes no file: nothing of it is lost)."""
         process, self._process = self._process, None
         if process is None:
             return
+        process.kill()
+        self._outbox.put(None)
+        self._sender.join()
+        process.wait()
+        for stream in (process.stdin, process.stdout):
+            try:
+                stream.close()
+            except OSError:
+                pass         # a request the killed worker never read
+
+
+def _send_all(stream, outbox) -> None:
+    """The sender thread: write each queued message until None (or until the worker is gone)."""
+    while (message := outbox.get()) is not None:
         try:
-            process.stdin.close()
-            process.wait(timeout=5)
-        except (OSError, subprocess.TimeoutExpired):
-            process.kill()
-            process.wait()
-        process.stdout.close()
+            stream.write(message)
+            stream.flush()
+        except (OSError, ValueError):
+            return       # the worker is gone: png() finds its output ended and draws here
 
 
 def serve() -> None:
@@ -174,7 +195,8 @@ def serve() -> None:
             answer = None if caught else png
         except Exception:        # noqa: BLE001 (the caller draws it again and raises it there)
             answer = None
-        _send(answers, answer)
+        answers.write(_message(answer))
+        answers.flush()
 
 
 if __name__ == "__main__":

@@ -25,3 +25,8 @@ def failing(message: str):
 def warning(message: str):
     warnings.warn(message, UserWarning, stacklevel=1)
     return transient_figure(sampling(), transient(), title="warned")
+
+
+def sized(payload):
+    """A small figure that depends on a large argument (its mean in the title)."""
+    return transient_figure(sampling(), transient(), title=f"mean {np.mean(payload):g}")

@@ -3,7 +3,7 @@
 ``run`` and ``validate`` refuse a scene that sends no light into the window (a black plane or hidden
 rectangle, a black relay wall, a window before the first arrival) in one line, before any file: the model
 and the render would both be exactly zero, with every standard error zero and nothing to judge. ``run``
-skips the reconstruction, saying why, where no image can be recovered (one sensor) or the truth is uniform."""
+skips the reconstruction, saying why, where no image can be recovered (one sensor or pair)."""
 
 import json
 
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from scene_files import write_relay_wall_file, write_scene_file
 
-from analytic.relay_wall import default_relay_wall_scene
+from analytic.relay_wall import Scan, default_relay_wall_scene
 from analytic.scene import Sampling, default_scene
 from validation.cli import main
 from validation.harness import imaging_problem, refuse_dark
@@ -49,13 +49,15 @@ def test_a_lit_scene_is_not_refused():
     assert refuse_dark(default_relay_wall_scene(pixels=8), 0.3) is None
 
 
-def test_imaging_problem_names_one_sensor_and_a_uniform_truth():
+def test_imaging_problem_names_one_sensor_or_pair():
     textured = default_scene(pixels=8)
     assert imaging_problem(textured) is None
+    assert imaging_problem(textured.replace(reflectance=0.5)) is None      # a uniform truth: PSNR still measures
     assert imaging_problem(default_relay_wall_scene(pixels=8)) is None
     one = textured.replace(sensors=np.asarray(textured.sensors)[:1])
     assert imaging_problem(one).startswith("one sensor sees only path lengths")
-    assert imaging_problem(textured.replace(reflectance=0.5)).startswith("the true image is uniform")
+    assert imaging_problem(default_relay_wall_scene(pixels=8, scan=Scan(type="single", grid=(1, 1)))).startswith(
+        "one pair sees only path lengths")
 
 
 def test_run_on_one_sensor_judges_the_render_and_says_why_it_does_not_reconstruct(tmp_path, capsys):
@@ -69,3 +71,23 @@ def test_run_on_one_sensor_judges_the_render_and_says_why_it_does_not_reconstruc
     assert f"No reconstruction: {imaging_problem(scene)}." in (tmp_path / "out" / "report.md").read_text()
     assert f"no reconstruction: {imaging_problem(scene)}" in capsys.readouterr().out
     assert not (tmp_path / "out" / "reconstructions.png").exists()
+
+
+def test_run_refuses_lambda_options_for_a_scene_it_does_not_reconstruct(tmp_path, capsys):
+    scene = default_scene(pixels=8, noise=None)
+    path = write_scene_file(tmp_path, scene.replace(sensors=np.asarray(scene.sensors)[:1]), name="one.toml")
+    for options in (["--lambda", "gcv"], ["--lambda-range", "1e-3", "1"]):
+        assert main(["run", str(path), "--out", str(tmp_path / "out"), "--spp", "4096", *options]) == 2
+        lines = capsys.readouterr().err.splitlines()
+        assert len(lines) == 1 and "run does not reconstruct this scene (one sensor" in lines[0], lines
+    assert not (tmp_path / "out").exists()
+
+
+def test_validate_refuses_a_dark_scene_before_rendering_the_others(tmp_path, capsys, monkeypatch):
+    import validation.harness
+
+    lit = write_scene_file(tmp_path, default_scene(pixels=8, noise=None), name="lit.toml")
+    dark = write_scene_file(tmp_path, default_scene(pixels=8, noise=None, reflectance=0.0), name="dark.toml")
+    monkeypatch.setattr(validation.harness, "check_scene", lambda *a, **k: pytest.fail("rendered first"))
+    assert main(["validate", str(lit), str(dark), "--out", str(tmp_path / "out"), "--spp", "4096"]) == 2
+    assert "plane.reflectance: the plane is black" in capsys.readouterr().err

@@ -4,7 +4,7 @@ and anything but a clean drawing (an error, a warning, a dead worker, one core) 
 import sys
 
 import pytest
-from plot_builds import failing, sampling, transient, warning
+from plot_builds import failing, sampling, sized, transient, warning
 
 from validation.plots import save_figure, transient_figure
 from validation.plots import worker as worker_module
@@ -56,20 +56,54 @@ def test_a_dead_worker_is_replaced_by_drawing_here(tmp_path):
     assert png == _here(tmp_path, sampling(), transient())
 
 
-def test_one_core_or_matplotlib_already_here_draws_here_without_a_worker(monkeypatch, tmp_path):
+def test_a_worker_starts_only_with_an_idle_core_and_matplotlib_not_yet_imported(monkeypatch, tmp_path):
     _here(tmp_path, sampling(), transient())             # matplotlib imported here: nothing to overlap
+    monkeypatch.setattr(worker_module, "_idle_core", lambda: True)
     with FigureWorker() as drawer:
         assert drawer._process is None
-    monkeypatch.delitem(sys.modules, "matplotlib.figure")
-    monkeypatch.setattr(worker_module, "_cores", lambda: 2)
+    monkeypatch.delitem(sys.modules, "matplotlib")
     with FigureWorker() as drawer:
-        assert drawer._process is not None                # a command's start: matplotlib not yet imported
-    monkeypatch.setattr(worker_module, "_cores", lambda: 1)
-    with FigureWorker() as drawer:
+        assert drawer._process is not None                # a command's start on an idle machine
+    monkeypatch.setattr(worker_module, "_idle_core", lambda: False)
+    with FigureWorker() as drawer:                        # no idle core: drawn here
         assert drawer._process is None
         drawer.draw(transient_figure, sampling(), transient())
-        drawer.save(tmp_path / "one.png")
-    assert (tmp_path / "one.png").read_bytes() == _here(tmp_path, sampling(), transient())
+        drawer.save(tmp_path / "busy.png")
+    assert (tmp_path / "busy.png").read_bytes() == _here(tmp_path, sampling(), transient())
+
+
+def test_idle_core_reads_the_load(monkeypatch):
+    monkeypatch.setattr(worker_module, "_cores", lambda: 2)
+    monkeypatch.setattr(worker_module.os, "getloadavg", lambda: (0.6, 0.0, 0.0))
+    assert worker_module._idle_core()
+    monkeypatch.setattr(worker_module.os, "getloadavg", lambda: (1.2, 0.0, 0.0))
+    assert not worker_module._idle_core()
+    monkeypatch.setattr(worker_module, "_cores", lambda: 1)
+    monkeypatch.setattr(worker_module.os, "getloadavg", lambda: (0.0, 0.0, 0.0))
+    assert not worker_module._idle_core()
+
+
+def test_stray_output_on_the_workers_pipe_is_not_taken_for_a_figure(tmp_path):
+    with FigureWorker(start=True) as drawer:
+        drawer._process.stdout = _Prefixed(b"a line some start-up code printed\n", drawer._process.stdout)
+        drawer.draw(transient_figure, sampling(), transient())
+        png = drawer.png()
+        assert drawer.drawn_there == 0 and drawer._process is None
+    assert png == _here(tmp_path, sampling(), transient())
+
+
+class _Prefixed:
+    """A stream that reads ``prefix`` before the wrapped one."""
+
+    def __init__(self, prefix: bytes, stream):
+        self.prefix, self.stream = prefix, stream
+
+    def read(self, size: int) -> bytes:
+        head, self.prefix = self.prefix[:size], self.prefix[size:]
+        return head + (self.stream.read(size - len(head)) if size > len(head) else b"")
+
+    def close(self) -> None:
+        self.stream.close()
 
 
 def test_leaving_the_block_ends_the_worker():
@@ -79,19 +113,17 @@ def test_leaving_the_block_ends_the_worker():
     assert process.poll() is not None
 
 
-def test_queued_figures_larger_than_a_pipe_come_back_in_order(tmp_path):
+def test_queued_requests_larger_than_a_pipe_come_back_in_order(tmp_path):
     import numpy as np
 
-    from analytic.scene import Sampling
-
-    wide = Sampling(bin_width_opl=0.001, start_opl=2.0, count=1100)
-    big = [np.random.default_rng(seed).random((8, 1100)) for seed in range(3)]       # 70 KB each, over a pipe's 64 KB
+    payloads = [np.full(100_000, float(seed)) for seed in range(3)]        # 800 KB each, a pipe holds 64 KB
     with FigureWorker(start=True) as drawer:
-        for y in big:
-            drawer.draw(transient_figure, wide, y)
-        drawn = [drawer.png() for _ in big]
+        for payload in payloads:
+            drawer.draw(sized, payload)
+        drawn = [drawer.png() for _ in payloads]
         assert drawer.drawn_there == 3
-    assert drawn == [_here(tmp_path, wide, y) for y in big]
+    assert drawn == [save_figure(sized(payload), tmp_path / "here.png").read_bytes() for payload in payloads]
+    assert len(set(drawn)) == 3
 
 
 def test_leaving_with_figures_not_taken_stops_the_worker_at_once():
@@ -100,3 +132,14 @@ def test_leaving_with_figures_not_taken_stops_the_worker_at_once():
         drawer.draw(transient_figure, sampling(), transient())
         drawer.draw(transient_figure, sampling(), 2 * transient())
     assert process.poll() is not None
+
+
+def test_the_worker_imports_this_process_code_not_the_working_directorys(tmp_path, monkeypatch):
+    shadow = tmp_path / "validation"
+    shadow.mkdir()
+    (shadow / "__init__.py").write_text("raise ImportError('a copy of the package in the working directory')\n")
+    monkeypatch.chdir(tmp_path)
+    with FigureWorker(start=True) as drawer:
+        drawer.draw(transient_figure, sampling(), transient())
+        drawer.png()
+        assert drawer.drawn_there == 1

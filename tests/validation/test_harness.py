@@ -7,7 +7,7 @@ from analytic.system import forward
 from transient.render import render
 from validation.compare import compare_transients
 from analytic.response import binned_contour_model
-from validation.harness import check_scene, data_driven_rule
+from validation.harness import check_scene, data_driven_rule, imaging_problem
 from validation.suite import hard_cases, validation_suite
 
 SPP = dict((scene.name, spp) for scene, spp in validation_suite())["outside"]   # the suite's count
@@ -60,6 +60,10 @@ def test_wrong_models_fail(outside, wrong):
 
 def test_check_scene_reports_every_figure():
     scene = hard_cases(pixels=6)["colocated"]
+    # a second sensor beside the colocated one: one sensor's transient cannot be reconstructed (skipped, below)
+    assert check_scene(scene, spp=2**12, seed=1, convergence=False).metrics["reconstruction"] == {
+        "skipped": imaging_problem(scene)}
+    scene = scene.replace(sensors=np.vstack([scene.sensors, [[0.3, 0.6, 0.5]]]))
     check = check_scene(scene, spp=2**20, seed=1)
     assert check.agreement.agrees
     # judged with the render's replicas: limits that hold whatever the correlation between bins

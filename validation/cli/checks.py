@@ -60,8 +60,9 @@ def command_validate(args) -> int:
     """
     from analytic.errors import UserError
     from analytic.files import output_folder, staged_writes
+    from analytic.window import window_share
     from validation.corner import check_corner
-    from validation.harness import check_scene
+    from validation.harness import check_scene, refuse_dark
     from validation.report import write_report
 
     if args.scene:
@@ -70,6 +71,11 @@ def command_validate(args) -> int:
     else:
         suite = _suite_samples(args.spp)
         labels = [f"suite scene {scene.name!r}" for scene, _ in suite]
+    for (scene, spp), label in zip(suite, labels):    # a scene with no light is refused before any render
+        try:
+            refuse_dark(scene, window_share(scene))
+        except UserError as error:
+            raise _named(error, f"{label} at {spp:,} samples") from None
     with output_folder(args.out) as out:
         checks = []
         iterator = list(zip(suite, labels))
@@ -124,7 +130,7 @@ def command_run(args) -> int:
     own; :mod:`validation.report`).
     """
     from analytic.window import window_share
-    from validation.harness import data_driven_rule, refuse_dark
+    from validation.harness import data_driven_rule, imaging_problem, refuse_dark
     from validation.plots.worker import FigureWorker
 
     from .reconstruct import lambda_grid_of
@@ -133,6 +139,10 @@ def command_run(args) -> int:
     with FigureWorker() as drawer:                # matplotlib's import and half the drawing beside the work
         scene = apply_window(args, scene)
         data_driven_rule(scene, args.rule)        # a rule the scene cannot serve is refused before any work
+        unimageable = imaging_problem(scene)
+        if unimageable is not None and (args.rule != "auto" or args.lambda_range or args.lambda_count):
+            raise UsageError(f"--lambda: run does not reconstruct this scene ({unimageable}); leave out "
+                             f"--lambda, --lambda-range and --lambda-count")
         grid = lambda_grid_of(args)
         refuse_unreachable_counts(scene)          # before the model and render, not after them
         share = window_share(scene)

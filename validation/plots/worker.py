@@ -6,14 +6,18 @@ data exist a command is mostly on one core too (its own imports and
 Numba's set-up). :class:`FigureWorker` starts ``python -m
 validation.plots.worker`` when a command starts: that process imports
 matplotlib on the idle core, then turns a plotting function's arguments
-into PNG bytes while the command writes its other files. ``forward`` at
-M = 1024 ends about 1 s sooner (docs/benchmarks.md).
+into PNG bytes while the command writes its other files
+(``benchmarks/bench_model.py`` measures what ``forward`` gains). It is
+started only where a core is idle (a busy machine would only pay its
+imports twice) and imports the command's own copy of the code (its
+``sys.path``, not the working directory's).
 
 The worker writes no file: the command writes the bytes it gets back with
 :func:`analytic.files.atomic_write`, inside its staged writes. Anything
-but a clean drawing (an exception, a warning, a worker that died or never
-started, a machine with one core) is drawn again in this process, so
-errors, warnings and bytes are exactly those of :func:`save_figure`.
+but a clean drawing (an exception, a warning, a worker that died, never
+started or wrote anything else on its output) is drawn again in this
+process, so errors, warnings and bytes are exactly those of
+:func:`save_figure`.
 """
 
 from __future__ import annotations
@@ -41,18 +45,26 @@ def figure_png(figure) -> bytes:
     return buffer.getvalue()
 
 
+#: Each message starts with these bytes, then its length (8 bytes), then its pickle.
+_MAGIC = b"diffuse-imaging figure\n"
+#: The longest message read: a PNG or a request beyond it is not this protocol's.
+_LONGEST = 2**31
+
+
 def _message(value) -> bytes:
-    """One message: its length (8 bytes), then its pickle, so that a reader never stops inside one."""
+    """One message: magic, length, pickle (a reader never stops inside one, nor takes stray output for one)."""
     data = pickle.dumps(value, protocol=pickle.HIGHEST_PROTOCOL)
-    return struct.pack("<Q", len(data)) + data
+    return _MAGIC + struct.pack("<Q", len(data)) + data
 
 
 def _receive(stream) -> bytes:
-    """One message's pickle; EOFError when the stream ends first."""
-    head = stream.read(8)
-    if len(head) < 8:
+    """One message's pickle; EOFError when the stream ends first, ValueError when it is not a message."""
+    head = stream.read(len(_MAGIC) + 8)
+    if len(head) < len(_MAGIC) + 8:
         raise EOFError
-    size, = struct.unpack("<Q", head)
+    size, = struct.unpack("<Q", head[len(_MAGIC):])
+    if head[:len(_MAGIC)] != _MAGIC or size > _LONGEST:
+        raise ValueError("not a figure worker's message")
     data = stream.read(size)
     if len(data) < size:
         raise EOFError
@@ -64,6 +76,16 @@ def _cores() -> int:
         return len(os.sched_getaffinity(0))
     except AttributeError:     # not Linux
         return os.cpu_count() or 1
+
+
+def _idle_core() -> bool:
+    """Whether a core is free for the worker: two or more, and the last minute's load below one fewer."""
+    cores = _cores()
+    try:
+        load = os.getloadavg()[0]
+    except OSError:            # not available: assume the machine is ours
+        load = 0.0
+    return cores >= 2 and load < cores - 1
 
 
 class FigureWorker:
@@ -81,20 +103,23 @@ class FigureWorker:
         Parameters
         ----------
         start : bool, optional
-            Start the second process: by default only where it saves time, on two or more cores when
-            this process has not imported matplotlib yet (a notebook's or a test's call draws here).
+            Start the second process: by default only where it saves time, when a core is idle and
+            this process has not imported matplotlib yet (a notebook's or a test's call draws here,
+            with its own matplotlib settings).
         """
         self._process = None
         self._pending = []            # (request, sent to the worker), in the order asked
         #: Figures the worker drew (the others were drawn in this process).
         self.drawn_there = 0
         if start is None:
-            start = _cores() >= 2 and "matplotlib.figure" not in sys.modules
+            start = "matplotlib" not in sys.modules and _idle_core()
         if not start:
             return
-        environment = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
+        # this process's path, in its order ("" is the working directory); -P: not the child's own folder
+        path = os.pathsep.join(os.path.abspath(entry) for entry in sys.path)
+        environment = dict(os.environ, PYTHONPATH=path)
         try:
-            self._process = subprocess.Popen([sys.executable, "-m", "validation.plots.worker"],
+            self._process = subprocess.Popen([sys.executable, "-P", "-m", "validation.plots.worker"],
                                              stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                                              stderr=subprocess.DEVNULL, env=environment)
         except OSError:
@@ -129,9 +154,9 @@ class FigureWorker:
         if sent and self._process is not None:
             try:
                 drawn = pickle.loads(_receive(self._process.stdout))
-            except (OSError, EOFError, pickle.PickleError):
+            except Exception:    # noqa: BLE001 (gone, or not our protocol: this figure and the rest drawn here)
                 drawn = None
-                self.close()     # the worker is gone: this figure and the rest are drawn here
+                self.close()
             if drawn is not None:
                 self.drawn_there += 1
                 return drawn
@@ -143,14 +168,19 @@ class FigureWorker:
         return atomic_write(path, lambda temporary: Path(temporary).write_bytes(png))
 
     def close(self) -> None:
-        """Stop the worker at once (it writes no file: nothing of it is lost)."""
+        """Stop the worker now: SIGTERM, which it turns into a normal exit (matplotlib's temporary
+        configuration folder, if it made one, is removed); it writes no file, so nothing is lost."""
         process, self._process = self._process, None
         if process is None:
             return
-        process.kill()
+        process.terminate()
         self._outbox.put(None)
         self._sender.join()
-        process.wait()
+        try:
+            process.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
         for stream in (process.stdin, process.stdout):
             try:
                 stream.close()
@@ -173,9 +203,12 @@ def serve() -> None:
     by the caller (an exception or a warning); end when the input closes."""
     import signal
 
-    signal.signal(signal.SIGINT, signal.SIG_IGN)     # the command handles Ctrl-C and closes the input
-    requests, answers = sys.stdin.buffer, sys.stdout.buffer
-    sys.stdout = sys.stderr                            # only answers on the pipe
+    signal.signal(signal.SIGINT, signal.SIG_IGN)     # the command handles Ctrl-C and stops the worker
+    signal.signal(signal.SIGTERM, _exit)             # close(): exit normally, running matplotlib's clean-up
+    # answers on a descriptor of their own; anything else written to standard output goes to standard error
+    answers = os.fdopen(os.dup(1), "wb")
+    os.dup2(2, 1)
+    requests = sys.stdin.buffer
     from . import relay_wall, transients  # noqa: F401 (what forward and render draw)
     from .common import new_figure, plain_text
 
@@ -197,6 +230,10 @@ def serve() -> None:
             answer = None
         answers.write(_message(answer))
         answers.flush()
+
+
+def _exit(signal_number, frame):
+    raise SystemExit(0)
 
 
 if __name__ == "__main__":

@@ -72,14 +72,15 @@ def test_a_worker_starts_only_with_an_idle_core_and_matplotlib_not_yet_imported(
     assert (tmp_path / "busy.png").read_bytes() == _here(tmp_path, sampling(), transient())
 
 
-def test_idle_core_reads_the_load(monkeypatch):
+def test_idle_core_counts_the_others_running(monkeypatch):
+    assert worker_module._others_running() >= 0          # this process is not counted
     monkeypatch.setattr(worker_module, "_cores", lambda: 2)
-    monkeypatch.setattr(worker_module.os, "getloadavg", lambda: (0.6, 0.0, 0.0))
+    monkeypatch.setattr(worker_module, "_others_running", lambda: 0)
     assert worker_module._idle_core()
-    monkeypatch.setattr(worker_module.os, "getloadavg", lambda: (1.2, 0.0, 0.0))
+    monkeypatch.setattr(worker_module, "_others_running", lambda: 1)
     assert not worker_module._idle_core()
     monkeypatch.setattr(worker_module, "_cores", lambda: 1)
-    monkeypatch.setattr(worker_module.os, "getloadavg", lambda: (0.0, 0.0, 0.0))
+    monkeypatch.setattr(worker_module, "_others_running", lambda: 0)
     assert not worker_module._idle_core()
 
 

@@ -78,14 +78,23 @@ def _cores() -> int:
         return os.cpu_count() or 1
 
 
-def _idle_core() -> bool:
-    """Whether a core is free for the worker: two or more, and the last minute's load below one fewer."""
-    cores = _cores()
+def _others_running() -> float:
+    """How many other tasks are running now: Linux's count of runnable tasks less this one, elsewhere the
+    last minute's load average (a loop of commands would count its own earlier runs)."""
     try:
-        load = os.getloadavg()[0]
-    except OSError:            # not available: assume the machine is ours
-        load = 0.0
-    return cores >= 2 and load < cores - 1
+        with open("/proc/loadavg") as file:
+            return int(file.read().split()[3].split("/")[0]) - 1
+    except (OSError, ValueError, IndexError):
+        try:
+            return os.getloadavg()[0]
+        except OSError:     # not available: assume the machine is ours
+            return 0.0
+
+
+def _idle_core() -> bool:
+    """Whether a core is free for the worker: two or more cores, and fewer others running than cores - 1."""
+    cores = _cores()
+    return cores >= 2 and _others_running() < cores - 1
 
 
 class FigureWorker:

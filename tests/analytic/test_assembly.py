@@ -11,10 +11,15 @@ against a Gauss-Legendre product rule written in NumPy.
 """
 
 import math
+import os
+import pickle
+import subprocess
+import sys
 
 import numba
 import numpy as np
 import pytest
+import scipy.sparse
 
 from analytic.isochrone import make_frame, range_bound, rectangle_range, PixelBox
 from analytic.scene import Illumination, Sampling, Scene
@@ -52,18 +57,36 @@ def _scene(waveform="impulse", pixels=12):
                  sampling=Sampling(bin_width_opl=0.07, start_opl=0.4, count=40))
 
 
+def _matrix_on_threads(scene, threads, folder):
+    """``system_matrix(scene)`` with Numba on ``threads`` threads: here when this process may start that many,
+    else in a child told so (a pytest-xdist worker runs Numba on one thread, tests/conftest.py)."""
+    if threads <= numba.config.NUMBA_NUM_THREADS:
+        previous = numba.get_num_threads()
+        numba.set_num_threads(threads)
+        try:
+            return system_matrix(scene)
+        finally:
+            numba.set_num_threads(previous)
+    scene_file, matrix_file = folder / f"scene-{threads}.pickle", folder / f"matrix-{threads}.npz"
+    scene_file.write_bytes(pickle.dumps(scene))
+    code = ("import pickle, sys, numba, scipy.sparse\n"
+            "from analytic.system import system_matrix\n"
+            "assert numba.get_num_threads() == int(sys.argv[3])\n"
+            "scipy.sparse.save_npz(sys.argv[2], system_matrix(pickle.loads(open(sys.argv[1], 'rb').read())))\n")
+    done = subprocess.run([sys.executable, "-c", code, str(scene_file), str(matrix_file), str(threads)],
+                          env={**os.environ, "NUMBA_NUM_THREADS": str(threads)}, capture_output=True, text=True,
+                          timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    return scipy.sparse.csr_array(scipy.sparse.load_npz(matrix_file))
+
+
 @pytest.mark.parametrize("waveform", ["impulse", "butterworth"])
-def test_matrix_is_its_columns_whatever_the_threads(waveform):
+def test_matrix_is_its_columns_whatever_the_threads(waveform, tmp_path):
     """Every column is the one pair_entries(method="auto") computes alone, on 1 thread or 2, with or
     without the progress bar (which fills the blocks in many steps): the CSR slots are right."""
     scene = _scene(waveform)
-    threads = numba.get_num_threads()
-    matrix = system_matrix(scene)
-    try:
-        numba.set_num_threads(1)
-        single = system_matrix(scene)
-    finally:
-        numba.set_num_threads(threads)
+    matrix = _matrix_on_threads(scene, 2, tmp_path)
+    single = _matrix_on_threads(scene, 1, tmp_path)
     stepped = system_matrix(scene, progress=True)
     for other in (single, stepped):
         assert (matrix != other).nnz == 0

@@ -1,6 +1,7 @@
 """The kernels' cache is keyed by every module they use, not only their own file."""
 
 import os
+import shutil
 from pathlib import Path
 
 from numba.core.caching import CacheImpl
@@ -20,16 +21,20 @@ def test_closure_follows_imports_through_other_modules():
     assert "io.py" not in names and "capture.py" not in names
 
 
-def test_stamp_changes_when_an_imported_module_changes():
-    locator = PackageCacheLocator.from_function(system.forward, system.__file__)
+def test_stamp_changes_when_an_imported_module_changes(tmp_path, monkeypatch):
+    """On a copy of the package: touching the real ``pieces.py``, even for a moment, would make every cached
+    kernel stale for another process loading one meanwhile (a second pytest-xdist worker, a user's command),
+    which would recompile it (minutes, gigabytes)."""
+    copy = tmp_path / PACKAGE.name
+    shutil.copytree(PACKAGE, copy, ignore=shutil.ignore_patterns("__pycache__"))
+    monkeypatch.setattr(kernel_cache, "_PACKAGE", copy)
+    locator = PackageCacheLocator.from_function(system.forward, str(copy / "system.py"))
     before = locator.get_source_stamp()
-    dependency = PACKAGE / "waveforms" / "pieces.py"
+    dependency = copy / "waveforms" / "pieces.py"
     status = dependency.stat()
-    try:
-        os.utime(dependency, ns=(status.st_atime_ns, status.st_mtime_ns + 10**9))
-        assert locator.get_source_stamp() != before
-    finally:
-        os.utime(dependency, ns=(status.st_atime_ns, status.st_mtime_ns))
+    os.utime(dependency, ns=(status.st_atime_ns, status.st_mtime_ns + 10**9))
+    assert locator.get_source_stamp() != before
+    os.utime(dependency, ns=(status.st_atime_ns, status.st_mtime_ns))
     assert locator.get_source_stamp() == before
 
 

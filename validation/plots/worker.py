@@ -129,7 +129,7 @@ class FigureWorker:
         self.drawn_there = 0
         if start is None:
             start = "matplotlib" not in sys.modules and _idle_core()
-        if not start:
+        if not start or not sys.executable:      # an embedded Python may not know its executable
             return
         # this process's path, in its order ("" is the working directory); -P: not the child's own folder
         path = os.pathsep.join(os.path.abspath(entry) for entry in sys.path)
@@ -138,7 +138,7 @@ class FigureWorker:
             self._process = subprocess.Popen([sys.executable, "-P", "-m", "validation.plots.worker"],
                                              stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                                              stderr=subprocess.DEVNULL, env=environment)
-        except OSError:
+        except (OSError, ValueError):            # no process to be had: drawn here
             return
         # requests are written by a thread: a large one must not wait here while the worker is busy
         self._outbox = queue.SimpleQueue()

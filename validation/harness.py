@@ -235,37 +235,41 @@ def imaging_problem(scene) -> str | None:
     noiseless data (the spad example read 235 dB from the model's data and
     -26 dB from the render's).
     """
-    if scene.sensor_count < 2:
-        return (f"one {'pair' if hasattr(scene, 'scan') else 'sensor'} sees only path lengths (each bin is "
-                f"an elliptical annulus of the surface), which no image can be recovered from; give two or "
-                f"more to reconstruct")
-    return None
+    from analytic.relay_wall import RelayWallScene
+
+    if scene.sensor_count >= 2:
+        return None
+    return (f"one {'pair' if isinstance(scene, RelayWallScene) else 'sensor'} sees only path lengths (each bin "
+            f"is an elliptical annulus of the surface), which no image can be recovered from; give two or more "
+            f"to reconstruct")
 
 
 def refuse_dark(scene, share: float) -> None:
     """Refuse a scene whose sensors get no light in the window: model and render would both be exactly zero,
-    with nothing to judge the render by (every standard error zero) and no image to recover."""
+    with nothing to judge the render by (every standard error zero) and no image to recover.
+
+    ``share`` is the window's share of the light (:func:`analytic.window.window_share`).
+    """
     from analytic.relay_wall import RelayWallScene
 
     relay_wall = isinstance(scene, RelayWallScene)
-    surface = "hidden rectangle" if relay_wall else "plane"
-    key = "hidden.reflectance" if relay_wall else "plane.reflectance"
     if relay_wall and scene.wall_reflectance == 0:
-        key, surface = "relay_wall.reflectance", "relay wall"
-    elif np.any(np.asarray(scene.reflectance) > 0):
-        if share > 0:
-            return
-        key, surface = "sampling", "window"
-    why, fix = (("holds none of the light", "a window that holds it (--window auto)") if key == "sampling" else
-                ("is black (reflectance 0 everywhere)", "a reflectance above 0"))
-    raise SceneError(key, f"the {surface} {why}, so the model and the render are both exactly zero in every "
-                          f"bin: there is nothing to judge or reconstruct; forward and render model such a scene, "
-                          f"or give {fix}")
+        key, why, fix = "relay_wall.reflectance", "the relay wall is black", "a reflectance above 0"
+    elif not np.any(np.asarray(scene.reflectance) > 0):
+        key = "hidden.reflectance" if relay_wall else "plane.reflectance"
+        why = f"the {'hidden rectangle' if relay_wall else 'plane'} is black (reflectance 0 everywhere)"
+        fix = "a reflectance above 0"
+    elif share == 0:
+        key, why, fix = "sampling", "the window holds none of the light", "a window that holds it (--window auto)"
+    else:
+        return
+    raise SceneError(key, f"{why}, so the model and the render are both exactly zero in every bin: there is "
+                          f"nothing to judge or reconstruct; forward and render model such a scene, or give {fix}")
 
 
 def check_scene(scene: Scene, *, spp: int, seed: int = 0, convergence: bool = True,
                 reconstruction: bool = True, progress: bool = False, rule="auto",
-                lambdas=None) -> SceneCheck:
+                lambdas=None, share: float | None = None) -> SceneCheck:
     """Model, render and compare one scene; see the module docstring.
 
     Parameters
@@ -290,13 +294,16 @@ def check_scene(scene: Scene, *, spp: int, seed: int = 0, convergence: bool = Tr
         a rule's name, or λ itself.
     lambdas : array_like, optional
         The λ grid the rules search (default: from A's singular values).
+    share : float, optional
+        The window's share of the light, when the caller has it
+        (:func:`analytic.window.window_share`, computed here otherwise).
     """
     from transient.render import render
 
     from analytic.window import warn_if_cut, window_share
 
     timings = {}
-    share = window_share(scene)
+    share = window_share(scene) if share is None else share
     refuse_dark(scene, share)
     warn_if_cut(scene, share)
     started = time.perf_counter()

@@ -71,22 +71,25 @@ def command_validate(args) -> int:
     else:
         suite = _suite_samples(args.spp)
         labels = [f"suite scene {scene.name!r}" for scene, _ in suite]
+    shares = []
     for (scene, spp), label in zip(suite, labels):    # a scene with no light is refused before any render
+        shares.append(window_share(scene))
         try:
-            refuse_dark(scene, window_share(scene))
+            refuse_dark(scene, shares[-1])
         except UserError as error:
             raise _named(error, f"{label} at {spp:,} samples") from None
     with output_folder(args.out) as out:
         checks = []
-        iterator = list(zip(suite, labels))
+        iterator = list(zip(suite, labels, shares))
         if show_progress(args):
             from tqdm import tqdm
             iterator = tqdm(iterator, desc="validate", unit="scene", leave=False)
-        for (scene, spp), label in iterator:
+        for (scene, spp), label, share in iterator:
             try:
                 # Reconstruction needs an array of sensors; a hard case's one or two cannot image.
                 checks.append(check_scene(scene, spp=spp, seed=args.seed, convergence=not args.fast,
-                                          reconstruction=scene.pixels <= 64 and scene.sensor_count >= 4))
+                                          reconstruction=scene.pixels <= 64 and scene.sensor_count >= 4,
+                                          share=share))
             except UserError as error:
                 raise _named(error, f"{label} at {spp:,} samples") from None
         # the corner's three bounces against mitransient, an independent renderer, when it is installed
@@ -168,7 +171,7 @@ def _run(args, scene, share: float, grid, drawer):
     with output_folder(args.out) as out:
         announce_window(args, scene, share)       # check_scene's own warning of a cut window is the same line
         check = check_scene(scene, spp=args.spp, seed=args.seed, progress=show_progress(args), rule=args.rule,
-                            lambdas=grid)
+                            lambdas=grid, share=share)
         show_reconstruction_warnings(check.reconstructions)
         share = check.metrics["window_share"]
         # independent draws: the render's from a stream of its own

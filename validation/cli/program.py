@@ -194,33 +194,10 @@ def _run_guarded(run) -> int:
 
 def console() -> int:
     """The console script ``diffuse-imaging``: :func:`main` on the process's arguments, its output
-    guarded as the module docstring says; the process then ends at once (:func:`_leave`)."""
+    guarded as the module docstring says; the process then ends at once, its exit handlers run
+    (:func:`validation.process_exit.exit_without_teardown`)."""
+    from validation.process_exit import exit_without_teardown
+
     status = _run_guarded(main)
-    _leave(status)
+    exit_without_teardown(status)
     return status
-
-
-def _leave(status: int) -> None:
-    """End the process with ``status`` after its exit handlers, without the interpreter's teardown.
-
-    Tearing down NumPy, SciPy, matplotlib and the compiled kernels (Numba's LLVM modules) took 0.7 to
-    0.9 s after ``forward`` had written its files. By now every file is closed and renamed; the exit
-    handlers (``atexit``, hence weakref finalizers: temporary folders, logging, multiprocessing) still
-    run and the streams are flushed. Where that cannot be done as Python's own exit would (no handler
-    runner, or a thread of the command still running), the process exits the usual way.
-    """
-    import atexit
-    import threading
-
-    run_handlers = getattr(atexit, "_run_exitfuncs", None)
-    running = [thread for thread in threading.enumerate()
-               if thread is not threading.main_thread() and not thread.daemon and thread.is_alive()]
-    if run_handlers is None or running:
-        return
-    run_handlers()
-    for stream in (sys.stdout, sys.stderr):
-        try:
-            stream.flush()
-        except (OSError, ValueError):
-            pass
-    os._exit(status)

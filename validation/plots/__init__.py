@@ -23,7 +23,7 @@ public API.
 import lazy_loader
 
 __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
-    "common": ["new_figure", "save_figure", "NANOSECONDS_PER_METRE", "Y_LABEL"],
+    "common": ["new_figure", "save_figure", "figure_png", "save_png", "NANOSECONDS_PER_METRE", "Y_LABEL"],
     "transients": ["transients_figure", "model_figure", "z_map_figure", "transient_figure", "finish_time_figure"],
     "captures": ["capture_figure"],
     "relay_wall": ["relay_wall_figure", "scene_transient_figure", "WallScan", "RELAY_WALL_LABEL"],
@@ -31,5 +31,5 @@ __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "reconstruction": ["reconstructions_figure", "reconstruction_figure", "criterion_figure",
                        "conditioning_figure", "panels_figure"],
     "convergence": ["convergence_figure", "speed_against_error_figure"],
-    "worker": ["FigureWorker", "figure_png"],
+    "worker": ["FigureWorker"],
 })

@@ -15,12 +15,13 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import io
 import logging
 from pathlib import Path
 
 from analytic.files import atomic_write
 
-__all__ = ["new_figure", "save_figure", "plain_text", "suptitle", "columns_for_legend", "NANOSECONDS_PER_METRE",
+__all__ = ["new_figure", "save_figure", "figure_png", "save_png", "plain_text", "suptitle", "columns_for_legend", "NANOSECONDS_PER_METRE",
            "Y_LABEL"]
 
 #: Light travels 1 m of path in 3.3356 ns.
@@ -69,9 +70,21 @@ def new_figure(width: float, height: float, layout: str | None = "constrained", 
     return figure
 
 
+def figure_png(figure) -> bytes:
+    """A figure as PNG at its own resolution (``figure.dpi``): the bytes :func:`save_figure` writes."""
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png", dpi=figure.dpi)
+    return buffer.getvalue()
+
+
+def save_png(png: bytes, path: str | Path) -> Path:
+    """Write PNG bytes (:func:`figure_png`'s, here or from :mod:`.worker`) atomically."""
+    return atomic_write(path, lambda temporary: Path(temporary).write_bytes(png))
+
+
 def save_figure(figure, path: str | Path) -> Path:
     """Write a figure as PNG at its own resolution (``figure.dpi``), atomically."""
-    return atomic_write(path, lambda temporary: figure.savefig(temporary, format="png", dpi=figure.dpi))
+    return save_png(figure_png(figure), path)
 
 
 @functools.lru_cache(maxsize=1)

@@ -17,12 +17,11 @@ The worker writes no file: the command writes the bytes it gets back with
 but a clean drawing (an exception, a warning, a worker that died, never
 started or wrote anything else on its output) is drawn again in this
 process, so errors, warnings and bytes are exactly those of
-:func:`save_figure`.
+:func:`~validation.plots.common.save_figure`.
 """
 
 from __future__ import annotations
 
-import io
 import os
 import pickle
 import queue
@@ -33,16 +32,9 @@ import threading
 import warnings
 from pathlib import Path
 
-from analytic.files import atomic_write
+from .common import figure_png, save_png
 
-__all__ = ["FigureWorker", "figure_png"]
-
-
-def figure_png(figure) -> bytes:
-    """The PNG :func:`~validation.plots.common.save_figure` writes of a figure, as bytes."""
-    buffer = io.BytesIO()
-    figure.savefig(buffer, format="png", dpi=figure.dpi)
-    return buffer.getvalue()
+__all__ = ["FigureWorker"]
 
 
 #: Each message starts with these bytes, then its length (8 bytes), then its pickle.
@@ -180,8 +172,7 @@ class FigureWorker:
 
     def save(self, path: str | Path) -> Path:
         """Write the earliest figure :meth:`draw` asked for and not yet taken at ``path`` as PNG, atomically."""
-        png = self.png()
-        return atomic_write(path, lambda temporary: Path(temporary).write_bytes(png))
+        return save_png(self.png(), path)
 
     def close(self) -> None:
         """Stop the worker now: SIGTERM, which it turns into a normal exit (matplotlib's temporary
@@ -249,15 +240,12 @@ def serve() -> None:
 
 
 def _exit(signal_number, frame):
-    """SIGTERM: run the exit handlers (matplotlib's removal of a temporary configuration folder), then
-    end without the interpreter's teardown of matplotlib and NumPy (0.2-0.3 s the command would wait)."""
-    import atexit
+    """SIGTERM: end after the exit handlers (matplotlib's removal of a temporary configuration folder),
+    without the teardown the command would wait for."""
+    from validation.process_exit import exit_without_teardown
 
-    run_handlers = getattr(atexit, "_run_exitfuncs", None)
-    if run_handlers is None:
-        raise SystemExit(0)
-    run_handlers()
-    os._exit(0)
+    exit_without_teardown(0)
+    raise SystemExit(0)
 
 
 if __name__ == "__main__":

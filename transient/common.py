@@ -33,7 +33,7 @@ from analytic.waveforms import ERRORFUNCTIONS, POLYNOMIAL, WaveformTerms, make_w
 from analytic.waveforms import special
 
 __all__ = ["cumulative", "kernel_between", "attenuation", "height_over_cube", "sample_stream", "jittered_point", "replica_of", "deposit",
-           "reduce_mode", "opaque_u32", "opaque_f64", "is_diffuse", "time_axis_and_waveform"]
+           "reduce_mode", "thread_copies", "block_copy", "opaque_u32", "opaque_f64", "is_diffuse", "time_axis_and_waveform"]
 
 
 #: The attenuation of analytic.attenuation, with Dr.Jit's square root: one expression for every backend.
@@ -347,6 +347,54 @@ def reduce_mode():
     warp before one atomic.
     """
     return dr.ReduceMode.Local if dr.backend_v(mi.Float64) == dr.JitBackend.CUDA else dr.ReduceMode.Auto
+
+
+#: Lanes per block when Dr.Jit's LLVM backend splits a launch of more than 2 x this x threads lanes
+#: (drjit-core's ``jitc_llvm_block_size``); a smaller launch gets one block of count / threads per thread.
+LLVM_BLOCK_LANES = 16384
+
+
+def thread_copies(entries: int) -> int:
+    """Copies of a histogram of ``entries`` float64 that keep the LLVM backend's threads apart (1 on CUDA).
+
+    One per thread, as Dr.Jit's own ``Expand`` mode keeps, and under the
+    same limit (``dr.expand_threshold()`` entries); see :func:`block_copy`.
+    """
+    if dr.backend_v(mi.Float64) != dr.JitBackend.LLVM or entries > dr.expand_threshold():
+        return 1
+    return max(1, dr.thread_count())
+
+
+def block_copy(lane, count: int, copies: int):
+    """Which of ``copies`` histogram copies each lane of an LLVM launch of ``count`` lanes adds to.
+
+    Its block's index mod ``copies``: Dr.Jit hands a launch's blocks to its
+    threads in order, so the blocks that run at once are consecutive and,
+    with a copy per thread, add to different copies. Atomic adds from two
+    threads to one cache line make the line travel between the cores at
+    each add: 2.5 to 4 x the CPU time of the relay-wall kernel when a
+    replica spans consecutive blocks (docs/benchmarks.md). The sums do not
+    depend on it (the adds are atomic); only the speed does.
+
+    Parameters
+    ----------
+    lane : mi.UInt32
+        Lane index within the launch, 0 <= lane < count.
+    count : int
+        Lanes in the launch.
+    copies : int
+        :func:`thread_copies`.
+
+    Returns
+    -------
+    mi.UInt32
+        Copy index, 0 <= copy < copies.
+    """
+    if copies == 1:
+        return mi.UInt32(0)
+    threads = dr.thread_count()
+    block = LLVM_BLOCK_LANES if count > 2 * LLVM_BLOCK_LANES * threads else -(-count // threads)
+    return mi.UInt32(dr.floor((mi.Float64(lane) + 0.5) / opaque_f64(block))) % copies
 
 
 def is_impulse(terms: WaveformTerms) -> bool:

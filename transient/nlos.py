@@ -55,8 +55,8 @@ import numpy as np
 from analytic.relay_wall import WALL_NORMAL, grid_points
 
 from .chunks import ReplicaLayout, checked_chunk
-from .common import deposit, is_diffuse, is_impulse, jittered_point, opaque_f64, opaque_u32, reduce_mode, replica_of, \
-    sample_stream, time_axis_and_waveform
+from .common import block_copy, deposit, is_diffuse, is_impulse, jittered_point, opaque_f64, opaque_u32, reduce_mode, \
+    replica_of, sample_stream, thread_copies, time_axis_and_waveform
 from .nlos_sampling import PixelDensity, owen_sobol_point
 from .plane import STRATEGIES, plane_frame, techniques
 from .plane_sampling import AREA, block_bounds, mixture_density, peak_ratio, warp
@@ -359,10 +359,15 @@ class TransientNlosIntegrator(mi.SamplingIntegrator):
         scale = self._reflectance(hidden, x / self.width, y / self.height) / (math.pi * density)
         height = float(self.corner[2]) + x * float(self.axes[0][2]) + y * float(self.axes[1][2])  # x's z
 
-        histogram = dr.zeros(mi.Float64, layout.histogram_rows * self.pairs * self.bins)
-        self._deposit_pairs(histogram, replica * opaque_u32(self.pairs), _Point(x, y, height), scale)
+        # a copy of the histogram per LLVM thread (block_copy), summed here
+        cells = layout.histogram_rows * self.pairs * self.bins
+        copies = thread_copies(cells)
+        histogram = dr.zeros(mi.Float64, copies * cells)
+        row = block_copy(lane, count, copies) * opaque_u32(layout.histogram_rows) + replica
+        self._deposit_pairs(histogram, row * opaque_u32(self.pairs), _Point(x, y, height), scale)
         dr.eval(histogram)
-        return np.array(histogram, dtype=np.float64).reshape(-1, self.pairs, self.bins)[:rows]
+        sums = np.array(histogram, dtype=np.float64).reshape(copies, -1, self.pairs, self.bins)
+        return (sums[0] if copies == 1 else sums.sum(axis=0))[:rows]
 
     def _deposit_pairs(self, histogram, row_base, point, scale):
         """Deposit every pair's path through each sample's point: a loop over the scan, per-pair work minimal.
@@ -372,7 +377,7 @@ class TransientNlosIntegrator(mi.SamplingIntegrator):
         histogram : mi.Float64
             ``(rows, P, N)`` flat accumulator.
         row_base : mi.UInt32
-            Each sample's replica row times P.
+            Each sample's row (its histogram copy's, then its replica's) times P.
         point : _Point
             Each sample's hidden point (hidden frame x, y; world z), metres.
         scale : mi.Float64

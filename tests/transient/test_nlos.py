@@ -243,6 +243,42 @@ def test_chunks_add_up_to_the_whole_render_and_share_one_kernel(case, sampler):
     assert len(launches) == 3 and len({k["hash"] for k in launches}) == 1
 
 
+def test_each_thread_adds_to_its_own_copy_of_the_histogram_and_the_copies_sum_to_the_one_thread_render():
+    """Blocks of a launch alternate between copies as drjit-core cuts them; the copies' sum is the same render."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from transient.chunks import ReplicaLayout
+    from transient.common import block_copy
+
+    loaded = _loaded(_covering(CASES["confocal"]))          # selects the variant
+    threads = dr.thread_count()
+    for count in (1000, 2**17):
+        # drjit-core's LLVM launch: one block of count / threads lanes per thread up to 2 x 16384 x threads
+        # lanes, blocks of 16384 beyond; consecutive blocks must add to different copies
+        block = 16384 if count > 2 * 16384 * threads else -(-count // threads)
+        lanes = np.arange(count)
+        copies = np.array(block_copy(dr.arange(mi.UInt32, count), count, 2))
+        assert np.array_equal(copies, (lanes // block) % 2)
+
+    layout = ReplicaLayout.for_samples(2**17)                # 32 replicas of 4096: a replica spans no block
+    integrator = loaded.integrator()
+
+    def whole():
+        return integrator.render_chunk_per_unit_intensity(loaded, seed=4, layout=layout, first=0,
+                                                          count=layout.samples)
+
+    dr.set_thread_count(2)
+    try:
+        two = whole()
+        dr.set_thread_count(1)
+        one = whole()                                        # one thread: one copy
+    finally:
+        dr.set_thread_count(threads)
+    assert np.abs(one).max() > 0
+    assert np.allclose(two, one, rtol=1e-12, atol=1e-15 * np.abs(one).max())
+
+
 def test_render_loaded_refuses_a_capture_it_cannot_scale():
     """transient_opl_nlos holds no laser intensity: render_loaded names what to call instead."""
     from transient.render import render_loaded

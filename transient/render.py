@@ -74,8 +74,11 @@ DEFAULT_CHUNK = 2**22
 #: Largest chunk on a GPU: tracing a chunk's kernel costs 1.5 to 5 ms of
 #: Python with an impulse (up to 0.1 s for a Butterworth pulse and 64
 #: sensors, measured on a CPU), which 2^22 samples at 1e10 samples/s would
-#: not amortise.
-DEFAULT_CHUNK_GPU = 2**28
+#: not amortise. On an H100, 2^32 samples in chunks of 2^30 ran at 1.61e10
+#: samples/s (one sensor) against 1.50e10 in chunks of 2^28, and at 9.6e10
+#: against 9.4e10 sensor-samples/s with 16 (docs/benchmarks.md); a chunk
+#: then takes 0.07 to 0.2 s there.
+DEFAULT_CHUNK_GPU = 2**30
 
 #: The first chunk: small, so that the first checkpoint comes within a
 #: second; chunks then double up to the chunk size.
@@ -363,7 +366,7 @@ def render(scene: Scene, *, spp: int, seed: int = 0, out_dir: str | Path | None 
     chunk_size : int, optional
         Most samples per kernel launch (memory and checkpoint granularity),
         1 <= chunk_size <= 2^31. Default :func:`default_chunk`: 2^22 on a
-        CPU, 2^28 on a CUDA variant, fewer for scenes of more than 16
+        CPU, 2^30 on a CUDA variant, fewer for scenes of more than 16
         sensors or pairs.
     progress : bool
         Show a tqdm progress bar over samples (on stderr).

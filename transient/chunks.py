@@ -179,7 +179,7 @@ class ChunkPlan:
         return (self[i] for i in range(len(self)))
 
 
-def render_memory_bytes(layout: ReplicaLayout, shape: tuple[int, int]) -> int:
+def render_memory_bytes(layout: ReplicaLayout, shape: tuple[int, int], copies: int = 1) -> int:
     """Bytes a render of this layout holds at once: replica means, partial sums, one chunk's histogram.
 
     Parameters
@@ -187,15 +187,20 @@ def render_memory_bytes(layout: ReplicaLayout, shape: tuple[int, int]) -> int:
     layout : ReplicaLayout
     shape : (int, int)
         (K sensors, N bins).
+    copies : int
+        Copies of the kernel's histogram (the relay-wall kernel's one per
+        thread, :func:`transient.common.thread_copies`).
 
     Returns
     -------
     int
         8 K N (R + 1 + 2 h) bytes, h = :attr:`ReplicaLayout.histogram_rows`
-        (the kernel's histogram and its NumPy copy).
+        (the kernel's histogram and its NumPy copy); with c > 1 copies
+        8 K N (R + 1 + (2 c + 1) h) (the copies in both, and their sum).
     """
     cells = int(shape[0]) * int(shape[1])
-    return 8 * cells * (layout.replicas + 1 + 2 * layout.histogram_rows)
+    histograms = 2 if copies == 1 else 2 * int(copies) + 1
+    return 8 * cells * (layout.replicas + 1 + histograms * layout.histogram_rows)
 
 
 class _Folded(NamedTuple):

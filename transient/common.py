@@ -354,13 +354,19 @@ def reduce_mode():
 LLVM_BLOCK_LANES = 16384
 
 
-def thread_copies(entries: int) -> int:
+def thread_copies(entries: int, replica_size: int) -> int:
     """Copies of a histogram of ``entries`` float64 that keep the LLVM backend's threads apart (1 on CUDA).
 
-    One per thread, as Dr.Jit's own ``Expand`` mode keeps, and under the
-    same limit (``dr.expand_threshold()`` entries); see :func:`block_copy`.
+    One per thread (see :func:`block_copy`) when a replica of
+    ``replica_size`` samples is longer than a block, so that blocks running
+    at once can add to one replica's rows; 1 when it is shorter (blocks
+    running at once then hold different replicas, and each copy would cost
+    a chunk 2 to 2.5 ms of zeroing, copying and summing) or when the
+    histogram has more than ``dr.expand_threshold()`` entries (the limit of
+    Dr.Jit's own per-thread copies).
     """
-    if dr.backend_v(mi.Float64) != dr.JitBackend.LLVM or entries > dr.expand_threshold():
+    if (dr.backend_v(mi.Float64) != dr.JitBackend.LLVM or entries > dr.expand_threshold()
+            or replica_size <= LLVM_BLOCK_LANES):
         return 1
     return max(1, dr.thread_count())
 
@@ -372,9 +378,12 @@ def block_copy(lane, count: int, copies: int):
     threads in order, so the blocks that run at once are consecutive and,
     with a copy per thread, add to different copies. Atomic adds from two
     threads to one cache line make the line travel between the cores at
-    each add: 2.5 to 4 x the CPU time of the relay-wall kernel when a
-    replica spans consecutive blocks (docs/benchmarks.md). The sums do not
-    depend on it (the adds are atomic); only the speed does.
+    each add, which multiplied the relay-wall kernel's time by up to 4 on 2
+    free cores once a replica spanned consecutive blocks (docs/benchmarks.md).
+    The blocks are taken as drjit-core cuts them: 16384 lanes, or about
+    count / threads (drjit-core rounds it up to whole SIMD packets) for a
+    launch of at most 2 x 16384 x threads lanes. The sums do not depend on
+    it (the adds are atomic); only the speed does.
 
     Parameters
     ----------

@@ -361,7 +361,7 @@ class TransientNlosIntegrator(mi.SamplingIntegrator):
 
         # a copy of the histogram per LLVM thread (block_copy), summed here
         cells = layout.histogram_rows * self.pairs * self.bins
-        copies = thread_copies(cells)
+        copies = thread_copies(cells, size)
         histogram = dr.zeros(mi.Float64, copies * cells)
         row = block_copy(lane, count, copies) * opaque_u32(layout.histogram_rows) + replica
         self._deposit_pairs(histogram, row * opaque_u32(self.pairs), _Point(x, y, height), scale)
@@ -375,7 +375,7 @@ class TransientNlosIntegrator(mi.SamplingIntegrator):
         Parameters
         ----------
         histogram : mi.Float64
-            ``(rows, P, N)`` flat accumulator.
+            ``(copies x rows, P, N)`` flat accumulator.
         row_base : mi.UInt32
             Each sample's row (its histogram copy's, then its replica's) times P.
         point : _Point

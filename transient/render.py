@@ -239,7 +239,7 @@ def render_loaded(loaded, *, spp: int, seed: int = 0, replicas: int | None = Non
     import mitsuba as mi
 
     if chunk_size is None:
-        chunk_size = DEFAULT_CHUNK_GPU if mi.variant().startswith("cuda") else DEFAULT_CHUNK
+        chunk_size = default_chunk(len(loaded.sensors()), mi.variant().startswith("cuda"))
     _check_arguments(spp, seed, chunk_size, replicas)
     layout = ReplicaLayout.for_samples(int(spp), replicas)
     integrator = loaded.integrator()
@@ -409,13 +409,18 @@ def render(scene: Scene, *, spp: int, seed: int = 0, out_dir: str | Path | None 
     layout = ReplicaLayout.for_samples(spp, replicas)
     estimator = dict(estimator or {})
     shape = (scene.sensor_count, scene.sampling.count)
-    require_memory(render_memory_bytes(layout, shape),
-                   f"{layout.replicas} replicas x {shape[0]} sensors x {shape[1]} bins",
-                   "use fewer bins (sampling.count), sensors or replicas")
 
     from .backend import select_variant
 
     variant = select_variant(variant)
+    copies = 1
+    if not isinstance(scene, Scene):                  # the relay-wall kernel's histogram copies
+        from .common import thread_copies
+
+        copies = thread_copies(layout.histogram_rows * shape[0] * shape[1], layout.size)
+    require_memory(render_memory_bytes(layout, shape, copies),
+                   f"{layout.replicas} replicas x {shape[0]} sensors x {shape[1]} bins",
+                   "use fewer bins (sampling.count), sensors or replicas")
     fingerprint = scene_fingerprint(scene, estimator)
     identity = state_identity(fingerprint, seed, variant, layout, spp, estimator)
     out_dir = Path(out_dir) if out_dir is not None else None

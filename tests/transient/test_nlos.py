@@ -244,35 +244,39 @@ def test_chunks_add_up_to_the_whole_render_and_share_one_kernel(case, sampler):
 
 
 def test_each_thread_adds_to_its_own_copy_of_the_histogram_and_the_copies_sum_to_the_one_thread_render():
-    """Blocks of a launch alternate between copies as drjit-core cuts them; the copies' sum is the same render."""
+    """Replicas longer than a block get a histogram copy per thread, blocks alternating between them; the copies
+    sum to the one-thread render."""
     import drjit as dr
     import mitsuba as mi
 
     from transient.chunks import ReplicaLayout
-    from transient.common import block_copy
+    from transient.common import block_copy, thread_copies
 
     loaded = _loaded(_covering(CASES["confocal"]))          # selects the variant
     threads = dr.thread_count()
     for count in (1000, 2**17):
-        # drjit-core's LLVM launch: one block of count / threads lanes per thread up to 2 x 16384 x threads
-        # lanes, blocks of 16384 beyond; consecutive blocks must add to different copies
+        # our reading of drjit-core's LLVM launch (LLVMThreadState::launch): about count / threads lanes per
+        # block up to 2 x 16384 x threads lanes, 16384 beyond; consecutive blocks must add to different copies
         block = 16384 if count > 2 * 16384 * threads else -(-count // threads)
         lanes = np.arange(count)
         copies = np.array(block_copy(dr.arange(mi.UInt32, count), count, 2))
         assert np.array_equal(copies, (lanes // block) % 2)
 
-    layout = ReplicaLayout.for_samples(2**17)                # 32 replicas of 4096: a replica spans no block
     integrator = loaded.integrator()
+    layout = ReplicaLayout.for_samples(2**20)                # 32 replicas of 32768: longer than a block
+    cells = layout.histogram_rows * integrator.pairs * integrator.bins
 
-    def whole():
-        return integrator.render_chunk_per_unit_intensity(loaded, seed=4, layout=layout, first=0,
-                                                          count=layout.samples)
+    def chunk():
+        return integrator.render_chunk_per_unit_intensity(loaded, seed=4, layout=layout, first=0, count=2**17)
 
     dr.set_thread_count(2)
     try:
-        two = whole()
+        assert thread_copies(cells, layout.size) == 2
+        assert thread_copies(cells, ReplicaLayout.for_samples(2**19).size) == 1     # replicas of one block
+        two = chunk()
         dr.set_thread_count(1)
-        one = whole()                                        # one thread: one copy
+        assert thread_copies(cells, layout.size) == 1
+        one = chunk()
     finally:
         dr.set_thread_count(threads)
     assert np.abs(one).max() > 0

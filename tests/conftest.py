@@ -35,3 +35,44 @@ import pytest  # noqa: E402
 def rng():
     """A seeded generator: every random test is reproducible."""
     return np.random.default_rng(20261121)
+
+
+@pytest.fixture(scope="module")
+def figures_drawn_once():
+    """A module's commands, run in this process, draw each distinct figure once, here.
+
+    A figure's PNG is a function of its request (the plotting function and its arguments): a request
+    whose pickle equals an earlier one's gets the earlier bytes, without drawing again (about 0.6 s
+    each); a new one is drawn as the command draws it, and a drawing that raises is raised, never
+    remembered. No figure worker is started (a command's default; an explicit ``start`` is kept): the
+    tests using this are about a command's inputs and files, not the worker
+    (tests/validation/test_figure_worker.py is, and does not use this).
+    """
+    import pickle
+
+    from validation.plots import worker
+
+    drawn = {}
+    start_worker, png = worker.FigureWorker.__init__, worker.FigureWorker.png
+
+    def without_a_worker(self, start=None):
+        start_worker(self, start=False if start is None else start)
+
+    def once(self):
+        request, sent = self._pending[0]
+        if sent and self._process is not None:      # an explicit worker: its answers stay in order
+            return png(self)
+        try:
+            key = pickle.dumps(request, protocol=pickle.HIGHEST_PROTOCOL)
+        except (pickle.PickleError, AttributeError, TypeError):
+            return png(self)                           # drawn, as the worker would have left it
+        if key not in drawn:
+            drawn[key] = png(self)
+        else:
+            self._pending.pop(0)
+        return drawn[key]
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(worker.FigureWorker, "__init__", without_a_worker)
+        patch.setattr(worker.FigureWorker, "png", once)
+        yield

@@ -43,6 +43,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+#: Many cases draw the same figure (the same scene's transient): drawn once (tests/conftest.py)
+pytestmark = pytest.mark.usefixtures("figures_drawn_once")
+
 PROGRAM = [sys.executable, "-m", "validation.cli"]
 ERROR = "diffuse-imaging: error:"
 WARNING = "diffuse-imaging: warning:"

@@ -180,7 +180,7 @@ class ChunkPlan:
 
 
 def render_memory_bytes(layout: ReplicaLayout, shape: tuple[int, int], copies: int = 1) -> int:
-    """Bytes a render of this layout holds at once: replica means, partial sums, one chunk's histogram.
+    """Bytes a render of this layout holds at most at once: replica means, partial sums, one chunk's histogram.
 
     Parameters
     ----------
@@ -188,15 +188,17 @@ def render_memory_bytes(layout: ReplicaLayout, shape: tuple[int, int], copies: i
     shape : (int, int)
         (K sensors, N bins).
     copies : int
-        Copies of the kernel's histogram (the relay-wall kernel's one per
-        thread, :func:`transient.common.thread_copies`).
+        Per-thread copies of the kernel's histogram
+        (:func:`transient.common.per_thread_copies`).
 
     Returns
     -------
     int
         8 K N (R + 1 + 2 h) bytes, h = :attr:`ReplicaLayout.histogram_rows`
         (the kernel's histogram and its NumPy copy); with c > 1 copies
-        8 K N (R + 1 + (2 c + 1) h) (the copies in both, and their sum).
+        8 K N (R + 1 + (2 c + 1) h), the relay-wall kernel's (the copies in
+        Dr.Jit and in NumPy, and their sum), more than Dr.Jit's own
+        ``Expand`` holds (its copies, the histogram and one NumPy copy).
     """
     cells = int(shape[0]) * int(shape[1])
     histograms = 2 if copies == 1 else 2 * int(copies) + 1

@@ -33,7 +33,7 @@ from analytic.waveforms import ERRORFUNCTIONS, POLYNOMIAL, WaveformTerms, make_w
 from analytic.waveforms import special
 
 __all__ = ["cumulative", "kernel_between", "attenuation", "height_over_cube", "sample_stream", "jittered_point", "replica_of", "deposit",
-           "reduce_mode", "thread_copies", "block_copy", "opaque_u32", "opaque_f64", "is_diffuse", "time_axis_and_waveform"]
+           "reduce_mode", "per_thread_copies", "thread_copies", "block_copy", "opaque_u32", "opaque_f64", "is_diffuse", "time_axis_and_waveform"]
 
 
 #: The attenuation of analytic.attenuation, with Dr.Jit's square root: one expression for every backend.
@@ -354,21 +354,28 @@ def reduce_mode():
 LLVM_BLOCK_LANES = 16384
 
 
-def thread_copies(entries: int, replica_size: int) -> int:
-    """Copies of a histogram of ``entries`` float64 that keep the LLVM backend's threads apart (1 on CUDA).
+def per_thread_copies(entries: int) -> int:
+    """Copies of a histogram of ``entries`` float64 that a kernel keeps, one per LLVM thread.
 
-    One per thread (see :func:`block_copy`) when a replica of
-    ``replica_size`` samples is longer than a block, so that blocks running
-    at once can add to one replica's rows; 1 when it is shorter (blocks
-    running at once then hold different replicas, and each copy would cost
-    a chunk 2 to 2.5 ms of zeroing, copying and summing) or when the
-    histogram has more than ``dr.expand_threshold()`` entries (the limit of
-    Dr.Jit's own per-thread copies).
+    Dr.Jit's own ``Expand`` (the plane and path kernels' ``Auto``) keeps them
+    up to ``dr.expand_threshold()`` entries, and the relay-wall kernel under
+    the same limit (:func:`thread_copies`); 1 on CUDA or above the limit.
     """
-    if (dr.backend_v(mi.Float64) != dr.JitBackend.LLVM or entries > dr.expand_threshold()
-            or replica_size <= LLVM_BLOCK_LANES):
+    if dr.backend_v(mi.Float64) != dr.JitBackend.LLVM or entries > dr.expand_threshold():
         return 1
     return max(1, dr.thread_count())
+
+
+def thread_copies(entries: int, replica_size: int) -> int:
+    """The relay-wall kernel's copies of a histogram of ``entries`` float64 (see :func:`block_copy`).
+
+    :func:`per_thread_copies` when a replica of ``replica_size`` samples is
+    longer than a block, so that blocks running at once can add to one
+    replica's rows; 1 when it is shorter (blocks running at once then hold
+    different replicas, and each copy would cost a chunk 2 to 2.5 ms of
+    zeroing, copying and summing).
+    """
+    return 1 if replica_size <= LLVM_BLOCK_LANES else per_thread_copies(entries)
 
 
 def block_copy(lane, count: int, copies: int):

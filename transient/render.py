@@ -413,11 +413,9 @@ def render(scene: Scene, *, spp: int, seed: int = 0, out_dir: str | Path | None 
     from .backend import select_variant
 
     variant = select_variant(variant)
-    copies = 1
-    if not isinstance(scene, Scene):                  # the relay-wall kernel's histogram copies
-        from .common import thread_copies
+    from .common import per_thread_copies
 
-        copies = thread_copies(layout.histogram_rows * shape[0] * shape[1], layout.size)
+    copies = per_thread_copies(layout.histogram_rows * shape[0] * shape[1])
     require_memory(render_memory_bytes(layout, shape, copies),
                    f"{layout.replicas} replicas x {shape[0]} sensors x {shape[1]} bins",
                    "use fewer bins (sampling.count), sensors or replicas")

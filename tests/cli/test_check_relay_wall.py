@@ -161,3 +161,21 @@ def test_irradiancemeter_convention_is_refused_for_a_relay_wall(tmp_path, capsys
     assert run("check", scene_file, "--data", tmp_path / "y.npy", "--expect", "irradiancemeter",
                "--out", tmp_path / "out") == 2
     assert "nlos_capture_meter reads the model's own units" in capsys.readouterr().err
+
+
+def test_a_render_more_precise_than_the_scenes_tolerance_agrees(tmp_path):
+    """A 1 mm hidden square renders to ~1e-12 of its value, under the model's 1e-6: check evaluates the model
+    tighter instead of failing the render on the model's own error (χ²/dof 425 against the 1e-6 model)."""
+    scene = scene_of(pixels=1, reflectance=0.5, center=(0.0, 0.0, 1.0), u=(0.001, 0.0, 0.0), v=(0.0, -0.001, 0.0),
+                     scan=Scan(type="single", grid=(2, 2)), sampling=Sampling(bin_width_opl=0.01, start_opl=2.22,
+                                                                              count=1))
+    replicas = our_replicas(scene, spp=2**16)
+    scene_file = write_relay_wall_file(tmp_path, scene)
+    for r, replica in enumerate(replicas):
+        np.save(tmp_path / f"replica_{r}.npy", replica)
+    mean, error = replicas.mean(axis=0), replicas.std(axis=0, ddof=1) / np.sqrt(len(replicas))
+    lit = mean > 0
+    assert np.max(error[lit] / mean[lit]) < 1e-8               # the case: far under the scene's tolerance
+    status, metrics = check(tmp_path, scene_file, sorted(tmp_path.glob("replica_*.npy")), "out")
+    assert status == 0 and metrics["agrees"], metrics["diagnosis"]
+    assert metrics["model_tolerance"] is not None and metrics["model_tolerance"] < scene.tolerance

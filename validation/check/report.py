@@ -89,7 +89,8 @@ def _statistical_lines(result: CheckResult) -> list[str]:
     if result.after_fit is not None:
         rows.append(("after the fit", result.after_fit, result.relative_l2_after_fit))
     return ([f"Per-bin error from {source}, over {given.bins} judged bin(s) ({given.skipped} with too few "
-             f"samples not judged). False-alarm rate {given.false_alarm:g}: {given.null_note}.", "",
+             f"samples not judged). False-alarm rate {given.false_alarm:g}: {given.null_note}."
+             + (f" The {result.model_tolerance_note}." if result.model_tolerance_note else ""), "",
              "| | verdict | χ²/dof [accepted] | max \\|z\\| (limit) | relative L2 |", "|---|---|---|---|---|"]
             + [f"| {name} | {'agrees' if agreement.agrees else 'disagrees'} | {agreement.chi2_per_dof:.4g} "
                f"[{agreement.chi2_interval[0]:.3f}, {agreement.chi2_interval[1]:.3f}] | {agreement.max_abs_z:.3g} "

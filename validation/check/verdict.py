@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from analytic.errors import DataError
-from analytic.scene import Scene
+from analytic.scene import MIN_TOLERANCE, Scene
 from validation.compare import Agreement, compare_transients
 
 from .conventions import Convention, diagnose
@@ -52,6 +52,11 @@ MAX_RELATIVE_STDERR = 0.1
 
 #: Fewest judged bins that a scale and a time offset are fitted to (two parameters and a residual).
 FIT_BINS = 3
+
+#: The model's own error (up to its tolerance x |y|) may move z by at most this many standard errors: data
+#: more precise than the scene's tolerance / MODEL_SHARE of their values are judged against the model
+#: evaluated again at a tolerance that tight (down to analytic.scene.MIN_TOLERANCE).
+MODEL_SHARE = 0.1
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -110,6 +115,10 @@ class CheckResult:
         Its full verdict (None by shape only or without a stated convention).
     shape_tolerance : float or None
         The relative L2 tolerance when judged by shape only.
+    model_tolerance : float or None
+        The tolerance the model was evaluated at when the data's errors
+        needed a tighter one than the scene's (:data:`MODEL_SHARE`); None:
+        the scene's.
     replica_data : numpy.ndarray or None
         ``(R, K, N)`` the replicas judged (None for one transient): sums over
         bins take their error from them.
@@ -137,6 +146,7 @@ class CheckResult:
     relative_l2_as_expected: float | None = None
     as_expected: Agreement | None = field(default=None, repr=False)
     shape_tolerance: float | None = None
+    model_tolerance: float | None = None
     replica_data: np.ndarray | None = field(default=None, repr=False)
 
     @property
@@ -161,6 +171,14 @@ class CheckResult:
 
 
     @property
+    def model_tolerance_note(self) -> str | None:
+        """Why the model was evaluated at a tighter tolerance than the scene's (None when it was not)."""
+        if self.model_tolerance is None:
+            return None
+        return (f"model evaluated at tolerance {self.model_tolerance:g}, tighter than the scene's: some bins' "
+                f"errors are under {1 / MODEL_SHARE:g} x the scene's tolerance of their values")
+
+    @property
     def verdict(self) -> bool:
         """What the exit status reports: agreement with the stated convention, else as given."""
         return bool(self.agrees_as_expected) if self.expected is not None else self.agrees
@@ -173,7 +191,8 @@ class CheckResult:
                   "judged_by": self.judged_by, "replicas": self.replicas, "dof": self.dof,
                   "relative_l2": self.relative_l2, "relative_l2_after_fit": self.relative_l2_after_fit,
                   "chi2_per_dof_after_fit": self.chi2_per_dof_after_fit,
-                  "max_abs_z_after_fit": self.max_abs_z_after_fit, "diagnosis": self.diagnosis}
+                  "max_abs_z_after_fit": self.max_abs_z_after_fit, "diagnosis": self.diagnosis,
+                  "model_tolerance": self.model_tolerance}
         if self.expected is not None:
             result["expected"] = self.expected.as_dict() | {
                 "agrees": self.agrees_as_expected, "relative_l2": self.relative_l2_as_expected}
@@ -202,6 +221,8 @@ class CheckResult:
                     f"χ²/dof = {self.chi2_per_dof:.3f}, max |z| = {self.max_abs_z:.2f}, "
                     f"relative L2 = {self.relative_l2:.3e}")
         lines = [head]
+        if self.model_tolerance_note:
+            lines.append(f"({self.model_tolerance_note})")
         if self.expected is not None:
             lines.append(expected_sentence(self))
         return "\n".join(lines + [self.diagnosis])
@@ -391,6 +412,26 @@ def check_transient(scene: Scene, data, *, stderr=None, dof: int | None = None, 
                               false_alarm)
 
 
+def _precise_model(scene, data, error, model_at: ShiftedModel) -> tuple[ShiftedModel, float | None]:
+    """The model at a tolerance the data's errors need, and that tolerance (None: the scene's served).
+
+    The model's entries are within ``tolerance`` of their value, so where a
+    bin's standard error is under tolerance / :data:`MODEL_SHARE` of its value
+    the model's own error could fail data that are right (a 1 mm hidden
+    square renders to 1e-12). Then the model is evaluated again at
+    :data:`MODEL_SHARE` x the data's smallest relative error, not below
+    :data:`analytic.scene.MIN_TOLERANCE`.
+    """
+    judged = (error > 0) & (error < MAX_RELATIVE_STDERR * np.abs(data))
+    if not np.any(judged):
+        return model_at, None               # _judged_bins refuses these data
+    needed = MODEL_SHARE * float(np.min(error[judged] / np.abs(data[judged])))
+    if scene.tolerance <= needed:
+        return model_at, None
+    tolerance = max(needed, MIN_TOLERANCE)
+    return ShiftedModel(scene.replace(tolerance=tolerance), None, model_at.evaluate), tolerance
+
+
 def _expected_model(model_at, expect: Convention | None) -> np.ndarray | None:
     """scale · y_model(start_opl + offset_opl) (+ added) of the stated convention (None without one)."""
     if expect is None:
@@ -410,6 +451,7 @@ def _judge_with_errors(scene, data, error, dof, replica_data, model_at, expect, 
     ``replica_data``: the ``(R, K, N)`` replicas ``data`` and ``error`` come from, or None for a
     transient with its standard error.
     """
+    model_at, model_tolerance = _precise_model(scene, data, error, model_at)
     y_model = model_at(0.0)
     expected_model = _expected_model(model_at, expect)
     judged_by = "stderr" if replica_data is None else "replicas"
@@ -441,7 +483,7 @@ def _judge_with_errors(scene, data, error, dof, replica_data, model_at, expect, 
         relative_l2_after_fit=None if fit is None else _relative_l2(data, fitted), after_fit=after,
         expected=expect, agrees_as_expected=None if as_expected is None else bool(as_expected.agrees),
         relative_l2_as_expected=None if expected_model is None else _relative_l2(data, expected_model),
-        as_expected=as_expected, replica_data=replica_data)
+        as_expected=as_expected, model_tolerance=model_tolerance, replica_data=replica_data)
 
 
 def _judge_by_shape(scene, data, model_at, expect, shape_tolerance) -> CheckResult:

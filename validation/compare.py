@@ -50,11 +50,34 @@ from validation.null_distribution import (FLIPS, TAIL_PATTERNS, flip_count, inde
                                           normal_scores, replica_deviations, replica_limits)
 
 __all__ = ["Agreement", "compare_transients", "assert_transients_agree", "normal_scores", "combined_dof",
-           "replica_null_resolves", "CorrelationWarning", "MIN_CHECK_SAMPLES", "FLIPS"]
+           "replica_null_resolves", "CorrelationWarning", "MIN_CHECK_SAMPLES", "FLIPS", "MODEL_SHARE",
+           "model_tolerance_for"]
 
 #: Fewest samples for a render that is cross-checked (run, validate, a sweep with cross_check):
 #: 128 per replica, so that the bins with light have a standard error to judge them by.
 MIN_CHECK_SAMPLES = 2**12
+
+#: The model's own error (up to its tolerance x |y|) may move z by at most this many standard errors.
+MODEL_SHARE = 0.1
+
+
+def model_tolerance_for(tolerance: float, values, stderr, max_relative_stderr: float = 0.1) -> float | None:
+    """The tolerance a model must be evaluated at to judge these data, or None when ``tolerance`` serves.
+
+    The model's entries are within ``tolerance`` of their value, so where a
+    judged bin's standard error is under tolerance / :data:`MODEL_SHARE` of
+    its value the model's own error could fail data that are right (a 1 mm
+    hidden square renders to 1e-12). Then: :data:`MODEL_SHARE` x the data's
+    smallest relative error, not below :data:`analytic.scene.MIN_TOLERANCE`.
+    """
+    from analytic.scene import MIN_TOLERANCE
+
+    values, stderr = np.asarray(values, dtype=np.float64), np.asarray(stderr, dtype=np.float64)
+    judged = (stderr > 0) & (stderr < max_relative_stderr * np.abs(values))
+    if not np.any(judged):
+        return None
+    needed = MODEL_SHARE * float(np.min(stderr[judged] / np.abs(values[judged])))
+    return None if tolerance <= needed else max(needed, MIN_TOLERANCE)
 
 
 class CorrelationWarning(UserWarning):

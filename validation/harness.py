@@ -35,7 +35,7 @@ from analytic.errors import SceneError
 from analytic.response import impulse_response
 from analytic.scene import Scene
 from analytic.system import QuadratureWarning, forward, system_matrix
-from validation.compare import Agreement, compare_transients
+from validation.compare import MODEL_SHARE, Agreement, compare_transients, model_tolerance_for
 
 __all__ = ["SceneCheck", "check_scene", "refuse_dark", "imaging_problem", "simplification_costs", "model_convergence",
            "data_driven_rule", "reconstruct_from_noisy_data"]
@@ -61,6 +61,14 @@ class SceneCheck:
     render_convergence: list = field(default_factory=list)
     model_convergence: list = field(default_factory=list)
     reconstructions: dict = field(default_factory=dict)
+
+    def summary(self) -> str:
+        """The agreement's summary, and the model's tolerance when the render needed a tighter one."""
+        tighter = self.metrics.get("model_tolerance")
+        note = ("" if tighter is None else
+                f"\n(model judged at tolerance {tighter:g}, tighter than the scene's {self.scene.tolerance:g}: some "
+                f"bins' standard errors are under {1 / MODEL_SHARE:g} x that of their values)")
+        return self.agreement.summary() + note
 
 
 def _matrix(scene: Scene, tolerance: float | None = None):
@@ -312,13 +320,17 @@ def check_scene(scene: Scene, *, spp: int, seed: int = 0, convergence: bool = Tr
     timings["model_seconds"] = time.perf_counter() - started
     result = render(scene, spp=spp, seed=seed, progress=progress)
     timings["render_seconds"] = result.seconds
+    # a render more precise than the scene's tolerance is judged against the model evaluated tighter
+    tighter = model_tolerance_for(scene.tolerance, result.mean, result.stderr)
+    judged_model = model if tighter is None else forward(scene.replace(tolerance=tighter))
     # the replicas give the null of χ² and max |z| whatever the correlation between bins
-    agreement = compare_transients(result.mean, result.stderr, model, dof=result.dof,
+    agreement = compare_transients(result.mean, result.stderr, judged_model, dof=result.dof,
                                    replicas=result.replica_means)
     check = SceneCheck(scene.name, scene, spp, seed, model, result.mean, result.stderr, agreement,
                        replicas=result.replicas)
     check.metrics.update(timings)
     check.metrics["window_share"] = share
+    check.metrics["model_tolerance"] = tighter
     check.metrics["agreement"] = agreement.as_dict()
     judged = np.isfinite(agreement.z)
     if convergence:

@@ -196,7 +196,7 @@ def _draw_scene(check, folder: Path, link: str, heading: str, drawer: FigureWork
                 title=f"{check.name}: the model (steps) against the render (points)", row_kind=row_kind)
     drawer.draw(z_map_figure, agreement.z, agreement.z_threshold, sampling,
                 f"{check.name}: z over {row_kind}s x bins", row_kind=row_kind)
-    lines = ["", heading, "", agreement.summary(), "",
+    lines = ["", heading, "", check.summary(), "",
              f"Transients of up to 8 {row_kind}s (named in the figure) with z below each; the z map shows "
              f"every {row_kind}.", "",
              f"![transients]({link}transients.png)", "", f"![z map]({link}z_map.png)"]

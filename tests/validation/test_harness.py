@@ -92,3 +92,18 @@ def test_data_driven_rule_uses_sigma_when_the_scene_knows_it():
     assert data_driven_rule(default_scene(), "lcurve") == ("lcurve", None)
     with pytest.raises(SceneError, match="noise.sigma"):
         data_driven_rule(default_scene(noise=None), "discrepancy")
+
+
+def test_a_render_more_precise_than_the_scenes_tolerance_is_judged_against_a_tighter_model():
+    """A 1 mm hidden square renders to ~1e-12 of its value: judged against the 1e-6 model it failed (χ²/dof 240)."""
+    from analytic.relay_wall import RelayWallScene, Scan
+    from analytic.scene import Sampling
+
+    scene = RelayWallScene(name="tiny", pixels=1, reflectance=0.5, center=(0.0, 0.0, 1.0), u=(0.001, 0.0, 0.0),
+                           v=(0.0, -0.001, 0.0), scan=Scan(type="single", grid=(2, 2)),
+                           sampling=Sampling(bin_width_opl=0.01, start_opl=2.22, count=1))
+    check = check_scene(scene, spp=2**14, seed=3, convergence=False, reconstruction=False)
+    assert np.max(check.stderr / check.render) < 1e-8        # the case: far under the scene's tolerance
+    assert check.agreement.agrees, check.summary()
+    assert check.metrics["model_tolerance"] < scene.tolerance
+    assert "tighter than the scene's" in check.summary()

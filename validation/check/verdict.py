@@ -36,8 +36,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from analytic.errors import DataError
-from analytic.scene import MIN_TOLERANCE, Scene
-from validation.compare import Agreement, compare_transients
+from analytic.scene import Scene
+from validation.compare import MODEL_SHARE, Agreement, compare_transients, model_tolerance_for
 
 from .conventions import Convention, diagnose
 from .fit import Fit, ShiftedModel, fit_scale_offset
@@ -52,11 +52,6 @@ MAX_RELATIVE_STDERR = 0.1
 
 #: Fewest judged bins that a scale and a time offset are fitted to (two parameters and a residual).
 FIT_BINS = 3
-
-#: The model's own error (up to its tolerance x |y|) may move z by at most this many standard errors: data
-#: more precise than the scene's tolerance / MODEL_SHARE of their values are judged against the model
-#: evaluated again at a tolerance that tight (down to analytic.scene.MIN_TOLERANCE).
-MODEL_SHARE = 0.1
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -413,22 +408,11 @@ def check_transient(scene: Scene, data, *, stderr=None, dof: int | None = None, 
 
 
 def _precise_model(scene, data, error, model_at: ShiftedModel) -> tuple[ShiftedModel, float | None]:
-    """The model at a tolerance the data's errors need, and that tolerance (None: the scene's served).
-
-    The model's entries are within ``tolerance`` of their value, so where a
-    bin's standard error is under tolerance / :data:`MODEL_SHARE` of its value
-    the model's own error could fail data that are right (a 1 mm hidden
-    square renders to 1e-12). Then the model is evaluated again at
-    :data:`MODEL_SHARE` x the data's smallest relative error, not below
-    :data:`analytic.scene.MIN_TOLERANCE`.
-    """
-    judged = (error > 0) & (error < MAX_RELATIVE_STDERR * np.abs(data))
-    if not np.any(judged):
-        return model_at, None               # _judged_bins refuses these data
-    needed = MODEL_SHARE * float(np.min(error[judged] / np.abs(data[judged])))
-    if scene.tolerance <= needed:
+    """The model at the tolerance the data's errors need (:func:`validation.compare.model_tolerance_for`)
+    and that tolerance, or ``model_at`` and None when the scene's serves."""
+    tolerance = model_tolerance_for(scene.tolerance, data, error, MAX_RELATIVE_STDERR)
+    if tolerance is None:
         return model_at, None
-    tolerance = max(needed, MIN_TOLERANCE)
     return ShiftedModel(scene.replace(tolerance=tolerance), None, model_at.evaluate), tolerance
 
 

@@ -152,7 +152,7 @@ def command_run(args) -> int:
         refuse_dark(scene, share)                 # nothing to judge: one line, not a warning and then an error
         check = _run(args, scene, share, grid, drawer)
     if not args.quiet:
-        print(check.agreement.summary())
+        print(check.summary())
         recon = check.metrics.get("reconstruction", {})
         if "skipped" in recon:
             print(f"no reconstruction: {recon['skipped']}")

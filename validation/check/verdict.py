@@ -50,6 +50,9 @@ MAX_DATA = 1e150
 #: Bins are judged (and fitted) only where se < this x |y_data| (as compare_transients).
 MAX_RELATIVE_STDERR = 0.1
 
+#: Smallest standard error judged, relative to the largest |y| (data or model): below it z² overflows float64.
+MIN_RELATIVE_STDERR = 1e-100
+
 #: Fewest judged bins that a scale and a time offset are fitted to (two parameters and a residual).
 FIT_BINS = 3
 
@@ -414,6 +417,11 @@ def _judge_with_errors(scene, data, error, dof, replica_data, model_at, expect, 
     expected_model = _expected_model(model_at, expect)
     judged_by = "stderr" if replica_data is None else "replicas"
     mask = _judged_bins(data, error, judged_by)
+    floor = MIN_RELATIVE_STDERR * max(float(np.max(np.abs(data))), float(np.max(np.abs(y_model))))
+    if np.any(error[mask] < floor):
+        raise DataError(f"{'data' if judged_by == 'replicas' else 'stderr'}: {int(np.sum(error[mask] < floor))} "
+                        f"bin(s) have a standard error under {MIN_RELATIVE_STDERR:g} of the largest |y|, where "
+                        f"z squared overflows; give each bin's standard error in the units of y")
     if not np.any(y_model[mask] != 0):
         raise DataError("scene: the model puts no light in the bins the data fill; check the scene's "
                         "sampling (start, period, count) against the data's")

@@ -251,16 +251,20 @@ _H_RANK = {"T_Si": 2, "T_Sx_Sy": 3, "T_Lx_Ly_Sx_Sy": 5, "T_Li_Si": 3}
 
 
 def _refuse(name: str, key: str, problem: str) -> CaptureError:
-    return CaptureError(f"{name}: {key} {problem}; expected {_EXPECTED[key]}")
+    return CaptureError(f"{name}: {key} {problem}; expected {_EXPECTED.get(key, 'what tal writes')}")
 
 
 def _read(handle, name: str, key: str):
     """A dataset's value as a NumPy array, or None when absent or empty (tal's None)."""
     import h5py
 
-    if key not in handle:
-        return None
-    item = handle[key]
+    try:
+        if key not in handle:
+            return None
+        item = handle[key]
+    except Exception as error:   # a damaged file: h5py raises KeyError, OSError, RuntimeError for its objects
+        raise CaptureError(f"{name}: {key} cannot be opened ({type(error).__name__}: {error}); the file is "
+                           f"damaged: copy or write it again") from None
     if not isinstance(item, h5py.Dataset):
         raise _refuse(name, key, f"is a {type(item).__name__.lower()}, not a dataset")
     try:

@@ -50,7 +50,9 @@ def read_npy(path: str | Path) -> np.ndarray:
         that is not a real number (text, complex, boolean, objects).
     """
     try:
-        array = np.load(path, allow_pickle=False)
+        # mapped first: a header whose shape the file does not hold (truncated, or forged to 10^14
+        # values) is refused by its size, not by an attempt to allocate it
+        array = np.load(path, mmap_mode="r", allow_pickle=False)
     except (ValueError, OSError, EOFError) as error:
         raise DataError(f"{path}: not a readable .npy ({error})") from None
     if not isinstance(array, np.ndarray):
@@ -58,7 +60,7 @@ def read_npy(path: str | Path) -> np.ndarray:
         raise DataError(f"{path}: an .npz archive, not one .npy array; save the transient with numpy.save")
     if not (np.issubdtype(array.dtype, np.floating) or np.issubdtype(array.dtype, np.integer)):
         raise DataError(f"{path}: holds {array.dtype} values, not real numbers; save y as float64")
-    return np.asarray(array, dtype=np.float64)
+    return np.array(array, dtype=np.float64)
 
 
 def json_default(value):

@@ -55,8 +55,8 @@ def _file_kind(mode: int) -> str:
     return "something other than a folder"
 
 
-def _prepare_output_folder(folder: str | Path, option: str) -> tuple[Path, bool]:
-    """The output folder, created when absent; True when this call created it."""
+def _prepare_output_folder(folder: str | Path, option: str) -> tuple[Path, Path | None]:
+    """The output folder, created when absent; the topmost folder this call created (None when none)."""
     text = os.fsdecode(os.fspath(folder))
     if not text.strip():      # Path("") is the current folder: never write there unasked
         raise ResourceError(f"{option}: an empty path; name the output folder")
@@ -73,17 +73,20 @@ def _prepare_output_folder(folder: str | Path, option: str) -> tuple[Path, bool]
                 target = os.readlink(folder)
             raise ResourceError(f"{option} {folder}: a symbolic link to {target}, which does not exist; "
                                 f"create the folder it names or choose another {option}") from None
+        top = folder
+        while not os.path.lexists(top.parent) and top.parent != top:
+            top = top.parent
         try:
             folder.mkdir(parents=True, exist_ok=True)
         except OSError as error:
             raise resource_error(error, folder, "create the folder") from None
-        return folder, True
+        return folder, top
     except OSError as error:
         raise resource_error(error, folder, "use the folder") from None
     if not stat.S_ISDIR(mode):
         raise ResourceError(f"{option} {folder}: is {_file_kind(mode)}, not a folder; "
                             f"choose another {option}")
-    return folder, False
+    return folder, None
 
 
 def _names(path: Path, descriptor: int) -> bool:
@@ -222,8 +225,13 @@ def output_folder(folder: str | Path, *, option: str = "--out") -> Iterator[Path
         try:
             yield folder
         except BaseException:
-            if created:
+            if created is not None:
                 _remove_if_only_lock(folder)
+                with contextlib.suppress(OSError):   # and the empty parents it made (a refused export left them)
+                    for parent in folder.parents:
+                        if len(parent.parts) < len(created.parts):
+                            break
+                        parent.rmdir()
             raise
     finally:
         _release_against_readers(against_readers)

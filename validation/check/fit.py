@@ -158,14 +158,19 @@ def _gauss_newton(data, sigma, mask, model_at, bin_width_opl: float, max_iterati
         step[1] = float(np.clip(step[1], -bin_width_opl, bin_width_opl))   # trust region: a bin per step
         small = bool(np.all(np.abs(step) <= 1e-2 * np.maximum(errors, 1e-300)))
         # Halve the step until χ² does not grow (Gauss–Newton can overshoot a kink).
+        moved = np.zeros(2)
         for _ in range(30):
             trial = (scale + float(step[0]), float(np.clip(offset + step[1], -limit, limit)))
             value = chi2(*trial)
             if value <= current * (1 + 1e-12):
+                moved = np.array([trial[0] - scale, trial[1] - offset])
                 scale, offset, current = trial[0], trial[1], value
                 break
             step = step / 2
-        if small:
+        # Converged too when the line search moves less than 1 % of an error: the model's own roughness
+        # (its quadrature error varies with the offset) then misleads each new step by as much again, and
+        # iterating on cost 30 models per iteration without moving (a relay-wall check took 217 s).
+        if small or bool(np.all(np.abs(moved) <= 1e-2 * np.maximum(errors, 1e-300))):
             converged = True
             break
     jacobian, residual = linearised(scale, offset)

@@ -46,11 +46,18 @@ def _meta_time_axis(path: Path, sampling: Sampling) -> None:
         return
     try:
         meta = json.loads(meta_path.read_text())
-    except (OSError, json.JSONDecodeError):
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
         return   # not ours: nothing to compare
+    if not isinstance(meta, dict):
+        return   # not ours either
     width = meta.get("bin_width_opl")
     if "start_opl" in meta and width is not None:
-        _time_axis(f"{path} (meta.json)", float(meta["start_opl"]), float(width), sampling)
+        start = meta["start_opl"]
+        numbers = [value for value in (start, width) if isinstance(value, (int, float)) and not isinstance(value, bool)]
+        if len(numbers) != 2 or not np.all(np.isfinite(numbers)):
+            raise DataError(f"{meta_path}: start_opl {start!r} and bin_width_opl {width!r} are not two finite "
+                            f"numbers (metres); correct meta.json or remove it to judge {path.name} alone")
+        _time_axis(f"{path} (meta.json)", float(start), float(width), sampling)
 
 
 def _our_exr(path: Path, sampling: Sampling) -> np.ndarray:
@@ -135,6 +142,15 @@ def _capture(path: Path, scene: Scene) -> np.ndarray:
     if capture.source is not None and np.max(np.abs(capture.source - scene.source)) > tolerance:
         raise DataError(f"{path}: laser_xyz {capture.source.tolist()} is not the scene's source "
                         f"{scene.source.tolist()}; check it against the scene it was rendered from")
+    if capture.accounts_first_and_last_bounces:
+        # tal's path lengths then add |laser_xyz - laser point| + |sensor point - sensor_xyz|, which a plane's lack
+        legs = [np.linalg.norm(points - end, axis=-1) for points, end in
+                ((capture.lasers, capture.source), (capture.sensors, capture.sensor_position))
+                if points is not None and end is not None]
+        if len(legs) < 2 or max(float(np.max(leg)) for leg in legs) > tolerance:
+            raise DataError(f"{path}: t_accounts_first_and_last_bounces is true: its path lengths add the legs "
+                            f"laser_xyz -> laser grid and sensor grid -> sensor_xyz, which a plane scene's do "
+                            f"not; give a capture written with it false (as ours are)")
     transient = capture.transient
     if capture.sensors is None or transient.shape[0] != scene.sensor_count:
         return transient   # the shape check in read_data reports a count mismatch
@@ -301,6 +317,8 @@ def read_data(path: str | Path, scene: Scene) -> np.ndarray:
         raise DataError(f"{path}: no such file or folder")
     name = str(path)
     kind = transient_format(path)
+    if not (path.is_dir() or path.is_file()):   # a FIFO would block the reader, a device read without end
+        raise DataError(f"{path}: not a file or folder (a named pipe, device or socket); save the data to a file")
     if path.is_dir():
         ours = transient_in_folder(path)
         if ours is not None:

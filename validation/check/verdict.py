@@ -50,6 +50,9 @@ MAX_DATA = 1e150
 #: Bins are judged (and fitted) only where se < this x |y_data| (as compare_transients).
 MAX_RELATIVE_STDERR = 0.1
 
+#: Smallest standard error judged, relative to the largest |y| (data or model): below it z² overflows float64.
+MIN_RELATIVE_STDERR = 1e-100
+
 #: Fewest judged bins that a scale and a time offset are fitted to (two parameters and a residual).
 FIT_BINS = 3
 
@@ -440,6 +443,11 @@ def _judge_with_errors(scene, data, error, dof, replica_data, model_at, expect, 
     expected_model = _expected_model(model_at, expect)
     judged_by = "stderr" if replica_data is None else "replicas"
     mask = _judged_bins(data, error, judged_by)
+    floor = MIN_RELATIVE_STDERR * max(float(np.max(np.abs(data))), float(np.max(np.abs(y_model))))
+    if np.any(error[mask] < floor):
+        raise DataError(f"{'data' if judged_by == 'replicas' else 'stderr'}: {int(np.sum(error[mask] < floor))} "
+                        f"bin(s) have a standard error under {MIN_RELATIVE_STDERR:g} of the largest |y|, where "
+                        f"z squared overflows; give each bin's standard error in the units of y")
     if not np.any(y_model[mask] != 0):
         raise DataError("scene: the model puts no light in the bins the data fill; check the scene's "
                         "sampling (start, period, count) against the data's")
@@ -459,6 +467,12 @@ def _judge_with_errors(scene, data, error, dof, replica_data, model_at, expect, 
                              bin_width_opl=scene.sampling.bin_width_opl)
     else:
         diagnosis = f"{'agrees' if as_given.agrees else 'disagrees'} as given; {skipped}."
+    low, high = as_given.chi2_interval
+    if not as_given.agrees and as_given.chi2_per_dof < low and as_given.max_abs_z <= as_given.z_threshold:
+        # refused only for fitting too well: no scale or offset explains that, and "a bug?" would mislead
+        diagnosis = (f"disagrees only by χ²/dof = {as_given.chi2_per_dof:.3g} below its accept interval "
+                     f"[{low:.3g}, {high:.3g}]: the data lie closer to the model than their standard errors "
+                     f"allow (errors overstated, or data that are not noisy estimates: the model itself?).")
     return CheckResult(
         agrees=bool(as_given.agrees), judged_by=judged_by, relative_l2=_relative_l2(data, y_model),
         diagnosis=diagnosis, data=data, model=y_model, fitted_model=fitted, edges=scene.sampling.edges,

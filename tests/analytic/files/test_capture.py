@@ -312,3 +312,16 @@ def test_data_reader_refuses_captures_of_another_scene(tmp_path, rng):
     write_capture(tmp_path / "source.h5", y, start_opl=1.0, **(kwargs | {"source": [0.4, 0.5, 1.0]}))
     with pytest.raises(DataError, match="laser_xyz"):
         read_data(tmp_path / "source.h5", scene)
+
+
+@pytest.mark.parametrize("start, step", [(800, 97), (1000, 61), (3000, 211)])
+def test_a_damaged_capture_is_one_capture_error(tmp_path, rng, start, step):
+    """Bytes flipped inside the HDF5 objects: h5py's KeyError/RuntimeError on opening a dataset becomes
+    one CaptureError naming the file, not a traceback."""
+    path, _, _ = small_capture(tmp_path, rng)
+    damaged = bytearray(path.read_bytes())
+    for i in range(start, len(damaged), step):
+        damaged[i] ^= 0xFF
+    path.write_bytes(bytes(damaged))
+    with pytest.raises(CaptureError, match=f"{path}: .*(damaged|cannot be read)"):
+        read_capture(path)

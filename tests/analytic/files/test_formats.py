@@ -35,3 +35,14 @@ def test_read_npy_takes_real_numbers_and_refuses_the_rest(tmp_path):
     (tmp_path / "archive.npz").rename(tmp_path / "archive.npy")     # np.load reads it as an archive
     with pytest.raises(DataError, match="npz archive"):
         read_npy(tmp_path / "archive.npy")
+
+
+def test_read_npy_refuses_a_header_whose_shape_the_file_does_not_hold(tmp_path):
+    """A header claiming 1.6e13 values on 64 bytes: one DataError by the file's size, not a 116 TiB allocation."""
+    header = b"{'descr': '<f8', 'fortran_order': False, 'shape': (4000000, 4000000), }".ljust(117) + b"\n"
+    (tmp_path / "forged.npy").write_bytes(b"\x93NUMPY\x01\x00v\x00" + header + b"\0" * 64)
+    with pytest.raises(DataError, match="not a readable .npy"):
+        read_npy(tmp_path / "forged.npy")
+    np.save(tmp_path / "whole.npy", np.arange(6.0).reshape(2, 3))
+    back = read_npy(tmp_path / "whole.npy")
+    assert type(back) is np.ndarray and np.array_equal(back, np.arange(6.0).reshape(2, 3))   # a copy, not a map

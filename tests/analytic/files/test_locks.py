@@ -345,3 +345,20 @@ def test_a_read_only_folder_is_one_line(tmp_path):
                 pass
     finally:
         tmp_path.chmod(0o755)
+
+
+def test_a_failed_command_removes_the_empty_parents_it_made(tmp_path):
+    """`export --radius 5 --out new/a/b` was refused after output_folder had made new/a/b: b went, new/a
+    stayed. Now the parents it made go too, and a folder that was there before (or holds a file) stays."""
+    (tmp_path / "kept").mkdir()
+    for out in (tmp_path / "new" / "a" / "b", tmp_path / "kept" / "a" / "b"):
+        with pytest.raises(ValueError):
+            with output_folder(out):
+                raise ValueError("refused")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["kept"] and not any((tmp_path / "kept").iterdir())
+    with output_folder(tmp_path / "new" / "a"):
+        (tmp_path / "new" / "a" / "mine.txt").write_text("x")
+    with pytest.raises(ValueError):
+        with output_folder(tmp_path / "new" / "a" / "b" / "c"):
+            raise ValueError("refused")
+    assert sorted(p.name for p in (tmp_path / "new" / "a").iterdir()) == ["mine.txt"]

@@ -4,6 +4,7 @@ with a DataError naming the file; our render's own errors found beside its outpu
 from __future__ import annotations
 
 import json
+import os
 
 import numpy as np
 import pytest
@@ -173,3 +174,40 @@ def test_check_takes_the_replicas_beside_our_render(tmp_path, scene_file, scene,
     np.save(folder / "replicas.npy", noisy_replicas(model, rng, replicas=16))       # another render's
     assert run_check(scene_file, "--data", folder, "--out", tmp_path / "mixed") == 2
     assert not (tmp_path / "mixed").exists()
+
+
+@pytest.mark.parametrize("text, refused", [
+    ('{"start_opl": "abc", "bin_width_opl": 0.1}', True),      # ours in form, not in content: one line
+    ('{"start_opl": NaN, "bin_width_opl": 0.1}', True),        # NaN compares false: would pass unchecked
+    ('[1, 2]', False),                                         # not ours: nothing to compare
+    ('{"start_opl": 1.0}', False),
+])
+def test_a_meta_json_of_other_types_is_one_line_or_ignored(tmp_path, scene, model, text, refused):
+    out = tmp_path / "forward"
+    write_transient(out, model, build_meta(scene, kind="model"))
+    (out / "meta.json").write_text(text)
+    if refused:
+        with pytest.raises(DataError, match="meta.json: start_opl .* are not two finite numbers"):
+            read_data(out / "transient.npy", scene)
+    else:
+        assert np.array_equal(read_data(out / "transient.npy", scene), model)
+
+
+def test_a_named_pipe_is_refused_not_waited_on(tmp_path, scene):
+    os.mkfifo(tmp_path / "pipe.npy")
+    with pytest.raises(DataError, match="not a file or folder"):
+        read_data(tmp_path / "pipe.npy", scene)
+
+
+def test_a_plane_capture_whose_times_count_the_legs_is_refused(tmp_path, scene, model):
+    """t_accounts_first_and_last_bounces true adds |sensor point - sensor_xyz| to each sensor's path lengths
+    (sensor_xyz is the sensors' centroid in ours): read as it stands it would be silently late by that."""
+    import h5py
+
+    write_transient(tmp_path / "out", model, build_meta(scene, kind="model"))
+    path = tmp_path / "out" / "transient.h5"
+    with h5py.File(path, "r+") as handle:
+        del handle["t_accounts_first_and_last_bounces"]
+        handle["t_accounts_first_and_last_bounces"] = True
+    with pytest.raises(DataError, match="t_accounts_first_and_last_bounces is true"):
+        read_data(path, scene)

@@ -116,3 +116,18 @@ def test_zero_errors_are_named_for_what_they_are(scene, model):
         check_transient(scene, np.stack([model] * 4), model=model)
     with pytest.raises(DataError, match="too noisy to judge; render more samples"):
         check_transient(scene, model, stderr=np.abs(model) + 1.0, model=model)
+
+
+def test_a_standard_error_too_small_to_square_is_refused(scene, model):
+    """stderr 1e-300 next to y ~ 1e-3: z ~ 1e297 squares to infinity, and the fit's SVD failed with a
+    LinAlgError traceback; now one DataError."""
+    with pytest.raises(DataError, match="standard error under 1e-100 of the largest"):
+        check_transient(scene, model, stderr=np.full_like(model, 1e-300 * model.max()), model=model)
+
+
+def test_data_closer_to_the_model_than_their_errors_allow_are_named_so(scene, model):
+    """The model itself given with a standard error: χ²/dof = 0 is refused (below the accept interval), and
+    the diagnosis says why, not 'a different model, scene or a bug?'."""
+    result = check_transient(scene, model, stderr=0.01 * model + 1e-4 * model.max(), model=model)
+    assert not result.agrees and result.chi2_per_dof == 0.0
+    assert "below its accept interval" in result.diagnosis and "bug" not in result.diagnosis

@@ -42,3 +42,20 @@ def test_check_warns_when_the_window_is_mostly_empty(tmp_path, capsys, rng):
         "diffuse-imaging: warning: the window [0, 4) m is mostly empty: 33 of its 40 bins receive no light (paths "
         "span [2.032, 2.684] m plus the pulse); [sampling] start = 2, count = 7 covers the light at the same period "
         "(what --window auto takes)"]
+
+
+def test_export_into_the_scenes_folder_never_replaces_its_image(tmp_path, capsys):
+    """--out in the scene's own folder, whose image is reflectance.exr: refused, the user's image untouched."""
+    from analytic.files import save_exr
+
+    image = np.linspace(0.1, 0.9, 64).reshape(8, 8)
+    save_exr(tmp_path / "reflectance.exr", image)
+    before = (tmp_path / "reflectance.exr").read_bytes()
+    path = write_scene(tmp_path, FITTED.replace("reflectance = 0.5", 'reflectance = "reflectance.exr"'))
+    assert main(["export", str(path), "--format", "mitsuba", "--out", str(tmp_path), "--quiet"]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "would replace the scene's own reflectance.exr" in lines[0], lines
+    assert (tmp_path / "reflectance.exr").read_bytes() == before
+    assert not (tmp_path / "scene.xml").exists()
+    # another folder is fine
+    assert main(["export", str(path), "--format", "mitsuba", "--out", str(tmp_path / "x"), "--quiet"]) == 0

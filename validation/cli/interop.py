@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import os
 import math
 from pathlib import Path
 
@@ -135,6 +136,7 @@ def command_export(args) -> int:
         raise UsageError(f"--spp: must be in [1, 2^31], got {args.spp}")
     from analytic.errors import SceneError
 
+    _refuse_replacing_inputs(args.scene, args.out)
     with output_folder(args.out) as out:
         try:
             written = export_scene(scene, out, args.format, radius=args.radius, spp=args.spp)
@@ -145,6 +147,35 @@ def command_export(args) -> int:
     if not args.quiet:
         print(f"export: {scene.name} for {args.format} -> {written['scene.xml']}")
     return 0
+
+
+#: The files ``export`` writes in --out.
+EXPORT_NAMES = ("scene.xml", "reflectance.exr", "README.md")
+
+
+def _refuse_replacing_inputs(scene_path: str | None, out: str) -> None:
+    """UsageError when a file export would write in ``out`` is the scene file or the image it reads.
+
+    (--out in the scene's own folder, whose image is ``reflectance.exr``: the export would replace the
+    user's image by its float32 copy.)
+    """
+    import tomllib
+
+    if scene_path is None:
+        return
+    scene_path = Path(scene_path)
+    inputs = [scene_path]
+    with contextlib.suppress(OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):   # load_scene read it
+        tables = tomllib.loads(scene_path.read_text(encoding="utf-8-sig"))
+        inputs += [scene_path.parent / table["reflectance"] for table in tables.values()
+                   if isinstance(table, dict) and isinstance(table.get("reflectance"), str)]
+    for name in EXPORT_NAMES:
+        target = Path(out) / name
+        for source in inputs:
+            with contextlib.suppress(OSError):
+                if target.exists() and os.path.samefile(target, source):
+                    raise UsageError(f"--out {out}: export would replace the scene's own {source.name} with "
+                                     f"its {name}; choose another --out")
 
 
 def _finite_float(option: str):

@@ -51,7 +51,7 @@ from validation.null_distribution import (FLIPS, TAIL_PATTERNS, flip_count, inde
 
 __all__ = ["Agreement", "compare_transients", "assert_transients_agree", "normal_scores", "combined_dof",
            "replica_null_resolves", "CorrelationWarning", "MIN_CHECK_SAMPLES", "FLIPS", "MODEL_SHARE",
-           "model_tolerance_for"]
+           "model_tolerance_for", "tighter_model_note"]
 
 #: Fewest samples for a render that is cross-checked (run, validate, a sweep with cross_check):
 #: 128 per replica, so that the bins with light have a standard error to judge them by.
@@ -64,11 +64,15 @@ MODEL_SHARE = 0.1
 def model_tolerance_for(tolerance: float, values, stderr, max_relative_stderr: float = 0.1) -> float | None:
     """The tolerance a model must be evaluated at to judge these data, or None when ``tolerance`` serves.
 
-    The model's entries are within ``tolerance`` of their value, so where a
+    A scene's tolerance bounds each system-matrix entry relative to its
+    row's largest; the model's per-bin error measured on the examples stays
+    under 0.34 x tolerance of the bin's value (docs/check.md). So where a
     judged bin's standard error is under tolerance / :data:`MODEL_SHARE` of
-    its value the model's own error could fail data that are right (a 1 mm
+    its value, the model's own error could fail data that are right (a 1 mm
     hidden square renders to 1e-12). Then: :data:`MODEL_SHARE` x the data's
-    smallest relative error, not below :data:`analytic.scene.MIN_TOLERANCE`.
+    smallest relative error, not below :data:`analytic.scene.MIN_TOLERANCE`
+    (where the data are more precise still, :func:`tighter_model_note` says
+    so).
     """
     from analytic.scene import MIN_TOLERANCE
 
@@ -78,6 +82,18 @@ def model_tolerance_for(tolerance: float, values, stderr, max_relative_stderr: f
         return None
     needed = MODEL_SHARE * float(np.min(stderr[judged] / np.abs(values[judged])))
     return None if tolerance <= needed else max(needed, MIN_TOLERANCE)
+
+
+def tighter_model_note(tolerance: float, scene_tolerance: float) -> str:
+    """Why data were judged against the model at ``tolerance`` (:func:`model_tolerance_for`), in words."""
+    from analytic.scene import MIN_TOLERANCE
+
+    note = (f"model evaluated at tolerance {tolerance:g}, tighter than the scene's {scene_tolerance:g}: some bins' "
+            f"standard errors are under {1 / MODEL_SHARE:g} x the scene's tolerance of their values")
+    if tolerance <= MIN_TOLERANCE:
+        note += (f"; {MIN_TOLERANCE:g} is as tight as the model goes, so in bins more precise than "
+                 f"{MIN_TOLERANCE / MODEL_SHARE:g} of their values part of a difference may be the model's own")
+    return note
 
 
 class CorrelationWarning(UserWarning):
@@ -208,8 +224,9 @@ def compare_transients(rendered, stderr, model, *, dof=None, replicas=None, fals
     null, drawn, interval, threshold = _limits(replicas, rendered, stderr, model, judged, false_alarm, flips)
     note = null_note(null, count, drawn, false_alarm)
     if count is not None and null == INDEPENDENT:
-        warnings.warn(f"{note}: correlated bins are not accounted for, so the false-alarm rate may exceed "
-                      f"α; give at least {_fewest_replicas(false_alarm)} replicas", CorrelationWarning,
+        warnings.warn(f"{note}: correlated bins, and bins lit by a few samples per replica (whose spread can "
+                      f"come out near 0), are not accounted for, so the false-alarm rate may exceed α; give at "
+                      f"least {_fewest_replicas(false_alarm)} replicas", CorrelationWarning,
                       stacklevel=2)
     max_abs_z = float(np.nanmax(np.abs(z)))
     order = np.argsort(-np.nan_to_num(np.abs(z), nan=-1.0), axis=None)[:worst]

@@ -35,7 +35,7 @@ from analytic.errors import SceneError
 from analytic.response import impulse_response
 from analytic.scene import Scene
 from analytic.system import QuadratureWarning, forward, system_matrix
-from validation.compare import MODEL_SHARE, Agreement, compare_transients, model_tolerance_for
+from validation.compare import Agreement, compare_transients, model_tolerance_for, tighter_model_note
 
 __all__ = ["SceneCheck", "check_scene", "refuse_dark", "imaging_problem", "simplification_costs", "model_convergence",
            "data_driven_rule", "reconstruct_from_noisy_data"]
@@ -65,9 +65,7 @@ class SceneCheck:
     def summary(self) -> str:
         """The agreement's summary, and the model's tolerance when the render needed a tighter one."""
         tighter = self.metrics.get("model_tolerance")
-        note = ("" if tighter is None else
-                f"\n(model judged at tolerance {tighter:g}, tighter than the scene's {self.scene.tolerance:g}: some "
-                f"bins' standard errors are under {1 / MODEL_SHARE:g} x that of their values)")
+        note = "" if tighter is None else f"\n({tighter_model_note(tighter, self.scene.tolerance)})"
         return self.agreement.summary() + note
 
 

@@ -34,7 +34,8 @@ class Fit:
     iterations : int
         Gauss–Newton iterations used.
     converged : bool
-        Whether the steps fell below 1 % of the standard errors.
+        Whether the proposed or the accepted step fell below 1 % of the
+        standard errors (False when the line search found no lower χ²).
     stderr_from : {"replicas", "bins"}
         Standard errors from the replicas' spread, or from per-bin errors
         assuming independent bins (see :func:`fit_scale_offset`).
@@ -158,7 +159,7 @@ def _gauss_newton(data, sigma, mask, model_at, bin_width_opl: float, max_iterati
         step[1] = float(np.clip(step[1], -bin_width_opl, bin_width_opl))   # trust region: a bin per step
         small = bool(np.all(np.abs(step) <= 1e-2 * np.maximum(errors, 1e-300)))
         # Halve the step until χ² does not grow (Gauss–Newton can overshoot a kink).
-        moved = np.zeros(2)
+        moved = None
         for _ in range(30):
             trial = (scale + float(step[0]), float(np.clip(offset + step[1], -limit, limit)))
             value = chi2(*trial)
@@ -170,8 +171,10 @@ def _gauss_newton(data, sigma, mask, model_at, bin_width_opl: float, max_iterati
         # Converged too when the line search moves less than 1 % of an error: the model's own roughness
         # (its quadrature error varies with the offset) then misleads each new step by as much again, and
         # iterating on cost 30 models per iteration without moving (a relay-wall check took 217 s).
-        if small or bool(np.all(np.abs(moved) <= 1e-2 * np.maximum(errors, 1e-300))):
+        if small or (moved is not None and bool(np.all(np.abs(moved) <= 1e-2 * np.maximum(errors, 1e-300)))):
             converged = True
+            break
+        if moved is None:                # no step of a halving lowers χ²: stuck, not converged
             break
     jacobian, residual = linearised(scale, offset)
     return _Optimum(scale, offset, jacobian, residual, s_, iterations, converged)

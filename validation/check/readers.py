@@ -16,6 +16,7 @@ Our render's own errors are found beside its output:
 from __future__ import annotations
 
 import json
+import math
 import re
 from pathlib import Path
 
@@ -39,6 +40,16 @@ def _time_axis(name: str, start: float, width: float, sampling: Sampling) -> Non
                         f"check it against the scene it was rendered from")
 
 
+def _finite_number(value) -> bool:
+    """A JSON number (not a boolean) that is a finite float (a 400-digit integer is not)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return False
+    try:
+        return math.isfinite(float(value))
+    except OverflowError:
+        return False
+
+
 def _meta_time_axis(path: Path, sampling: Sampling) -> None:
     """Check the time axis recorded in a ``meta.json`` beside our output, when there is one."""
     meta_path = path.parent / "meta.json"
@@ -46,15 +57,14 @@ def _meta_time_axis(path: Path, sampling: Sampling) -> None:
         return
     try:
         meta = json.loads(meta_path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+    except (OSError, ValueError):   # unreadable, not UTF-8, not JSON, integers beyond Python's digit limit
         return   # not ours: nothing to compare
     if not isinstance(meta, dict):
         return   # not ours either
     width = meta.get("bin_width_opl")
     if "start_opl" in meta and width is not None:
         start = meta["start_opl"]
-        numbers = [value for value in (start, width) if isinstance(value, (int, float)) and not isinstance(value, bool)]
-        if len(numbers) != 2 or not np.all(np.isfinite(numbers)):
+        if not all(_finite_number(value) for value in (start, width)):
             raise DataError(f"{meta_path}: start_opl {start!r} and bin_width_opl {width!r} are not two finite "
                             f"numbers (metres); correct meta.json or remove it to judge {path.name} alone")
         _time_axis(f"{path} (meta.json)", float(start), float(width), sampling)

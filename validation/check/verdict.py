@@ -37,7 +37,7 @@ import numpy as np
 
 from analytic.errors import DataError
 from analytic.scene import Scene
-from validation.compare import MODEL_SHARE, Agreement, compare_transients, model_tolerance_for
+from validation.compare import Agreement, compare_transients, model_tolerance_for, tighter_model_note
 
 from .conventions import Convention, diagnose
 from .fit import Fit, ShiftedModel, fit_scale_offset
@@ -115,8 +115,10 @@ class CheckResult:
         The relative L2 tolerance when judged by shape only.
     model_tolerance : float or None
         The tolerance the model was evaluated at when the data's errors
-        needed a tighter one than the scene's (:data:`MODEL_SHARE`); None:
-        the scene's.
+        needed a tighter one than the scene's
+        (:func:`validation.compare.model_tolerance_for`); None: the scene's.
+    scene_tolerance : float or None
+        The scene's own tolerance.
     replica_data : numpy.ndarray or None
         ``(R, K, N)`` the replicas judged (None for one transient): sums over
         bins take their error from them.
@@ -145,6 +147,7 @@ class CheckResult:
     as_expected: Agreement | None = field(default=None, repr=False)
     shape_tolerance: float | None = None
     model_tolerance: float | None = None
+    scene_tolerance: float | None = None
     replica_data: np.ndarray | None = field(default=None, repr=False)
 
     @property
@@ -173,8 +176,7 @@ class CheckResult:
         """Why the model was evaluated at a tighter tolerance than the scene's (None when it was not)."""
         if self.model_tolerance is None:
             return None
-        return (f"model evaluated at tolerance {self.model_tolerance:g}, tighter than the scene's: some bins' "
-                f"errors are under {1 / MODEL_SHARE:g} x the scene's tolerance of their values")
+        return tighter_model_note(self.model_tolerance, self.scene_tolerance)
 
     @property
     def verdict(self) -> bool:
@@ -438,16 +440,16 @@ def _judge_with_errors(scene, data, error, dof, replica_data, model_at, expect, 
     ``replica_data``: the ``(R, K, N)`` replicas ``data`` and ``error`` come from, or None for a
     transient with its standard error.
     """
-    model_at, model_tolerance = _precise_model(scene, data, error, model_at)
-    y_model = model_at(0.0)
-    expected_model = _expected_model(model_at, expect)
     judged_by = "stderr" if replica_data is None else "replicas"
     mask = _judged_bins(data, error, judged_by)
-    floor = MIN_RELATIVE_STDERR * max(float(np.max(np.abs(data))), float(np.max(np.abs(y_model))))
+    floor = MIN_RELATIVE_STDERR * max(float(np.max(np.abs(data))), float(np.max(np.abs(model_at(0.0)))))
     if np.any(error[mask] < floor):
         raise DataError(f"{'data' if judged_by == 'replicas' else 'stderr'}: {int(np.sum(error[mask] < floor))} "
                         f"bin(s) have a standard error under {MIN_RELATIVE_STDERR:g} of the largest |y|, where "
                         f"z squared overflows; give each bin's standard error in the units of y")
+    model_at, model_tolerance = _precise_model(scene, data, error, model_at)   # after refusals: it can be slow
+    y_model = model_at(0.0)
+    expected_model = _expected_model(model_at, expect)
     if not np.any(y_model[mask] != 0):
         raise DataError("scene: the model puts no light in the bins the data fill; check the scene's "
                         "sampling (start, period, count) against the data's")
@@ -481,7 +483,8 @@ def _judge_with_errors(scene, data, error, dof, replica_data, model_at, expect, 
         relative_l2_after_fit=None if fit is None else _relative_l2(data, fitted), after_fit=after,
         expected=expect, agrees_as_expected=None if as_expected is None else bool(as_expected.agrees),
         relative_l2_as_expected=None if expected_model is None else _relative_l2(data, expected_model),
-        as_expected=as_expected, model_tolerance=model_tolerance, replica_data=replica_data)
+        as_expected=as_expected, model_tolerance=model_tolerance, scene_tolerance=scene.tolerance,
+        replica_data=replica_data)
 
 
 def _judge_by_shape(scene, data, model_at, expect, shape_tolerance) -> CheckResult:

@@ -179,6 +179,8 @@ def test_check_takes_the_replicas_beside_our_render(tmp_path, scene_file, scene,
 @pytest.mark.parametrize("text, refused", [
     ('{"start_opl": "abc", "bin_width_opl": 0.1}', True),      # ours in form, not in content: one line
     ('{"start_opl": NaN, "bin_width_opl": 0.1}', True),        # NaN compares false: would pass unchecked
+    ('{"start_opl": 1' + 400 * '0' + ', "bin_width_opl": 0.1}', True),   # an int beyond float64
+    ('{"start_opl": 1' + 5000 * '0' + ', "bin_width_opl": 0.1}', False),  # beyond Python's digit limit: not JSON
     ('[1, 2]', False),                                         # not ours: nothing to compare
     ('{"start_opl": 1.0}', False),
 ])

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import os
 import math
+import os
 from pathlib import Path
 
 from .common import UsageError, add_quiet, announce_window, load_scene_argument, positive_float_type

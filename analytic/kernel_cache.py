@@ -65,6 +65,13 @@ def _imports(path: Path, stamp: tuple[int, int]) -> tuple[Path, ...]:
     return tuple(found)
 
 
+@functools.lru_cache(maxsize=None)
+def _content(path: Path, stamp: tuple[int, int]) -> str:
+    """The file's SHA-256: a kernel stays cached across copies and checkouts of the same source."""
+    del stamp   # part of the memo's key, as for _imports
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
 def _stamp(path: Path) -> tuple[int, int]:
     status = path.stat()
     return status.st_mtime_ns, status.st_size
@@ -89,12 +96,14 @@ class PackageCacheLocator(InTreeCacheLocator):
     def __init__(self, py_func, py_file):
         super().__init__(py_func, py_file)
         if config.CACHE_DIR:
-            self._cache_path = os.path.join(config.CACHE_DIR, self.get_suitable_cache_subpath(py_file))
+            # by the path inside the package: copies of the package with the same sources share kernels
+            relative = Path(py_file).resolve().parent.relative_to(_PACKAGE.parent)
+            self._cache_path = os.path.join(config.CACHE_DIR, *relative.parts)
 
     def get_source_stamp(self):
         digest = hashlib.sha256()
         for module in module_closure(self._py_file):
-            digest.update(f"{module.relative_to(_PACKAGE.parent)}:{_stamp(module)}\n".encode())
+            digest.update(f"{module.relative_to(_PACKAGE.parent)}:{_content(module, _stamp(module))}\n".encode())
         return digest.hexdigest()
 
     @classmethod

@@ -22,19 +22,22 @@ def test_closure_follows_imports_through_other_modules():
 
 
 def test_stamp_changes_when_an_imported_module_changes(tmp_path, monkeypatch):
-    """On a copy of the package: touching the real ``pieces.py``, even for a moment, would make every cached
+    """On a copy of the package: editing the real ``pieces.py``, even for a moment, would make every cached
     kernel stale for another process loading one meanwhile (a second pytest-xdist worker, a user's command),
-    which would recompile it (minutes, gigabytes)."""
+    which would recompile it. The stamp follows the sources' content, not their times."""
     copy = tmp_path / PACKAGE.name
     shutil.copytree(PACKAGE, copy, ignore=shutil.ignore_patterns("__pycache__"))
     monkeypatch.setattr(kernel_cache, "_PACKAGE", copy)
     locator = PackageCacheLocator.from_function(system.forward, str(copy / "system.py"))
     before = locator.get_source_stamp()
     dependency = copy / "waveforms" / "pieces.py"
+    original = dependency.read_bytes()
     status = dependency.stat()
     os.utime(dependency, ns=(status.st_atime_ns, status.st_mtime_ns + 10**9))
+    assert locator.get_source_stamp() == before          # touched, not changed
+    dependency.write_bytes(original + b"# edited\n")
     assert locator.get_source_stamp() != before
-    os.utime(dependency, ns=(status.st_atime_ns, status.st_mtime_ns))
+    dependency.write_bytes(original)
     assert locator.get_source_stamp() == before
 
 

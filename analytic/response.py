@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from .attenuation import attenuation, attenuation_code
-from .isochrone import ellipse, make_frame
+from .kernels.isochrone import ellipse, make_frame
 from .scene import Scene
 
 __all__ = ["impulse_response", "binned_contour_model"]

@@ -6,7 +6,7 @@ The plane scene is one geometry of :mod:`analytic.geometry` (a rectangle and
 one point pair per sensor); :func:`rectangle_matrix` assembles A for any
 rectangle and any pairs, rows pair-major then bin. The compiled kernels that
 compute one pair's entries over one pixel are :mod:`analytic.kernels`; the
-compiled passes that count and fill A's entries are :mod:`analytic.assembly`;
+compiled passes that count and fill A's entries are :mod:`analytic.kernels.assembly`;
 this module checks the resources, allocates and drives them.
 
 How it is computed
@@ -18,36 +18,36 @@ four routes:
 
 - *Smooth pixels* (no breakpoint inside (d_lo, d_hi), and the pixel clear of
   the peaks of a under the source's and sensor's feet, see
-  :data:`analytic.kernels.FOOT_CLEARANCE`): every entry a_k κ_n(d) is analytic on the pixel,
+  :data:`analytic.kernels.routes.FOOT_CLEARANCE`): every entry a_k κ_n(d) is analytic on the pixel,
   and each κ_n a short Taylor polynomial over the pixel's range of d, so the
   entries are a few moments of the pixel's path lengths
-  (:func:`analytic.moments.smooth_by_moments`), integrated by the tensor
+  (:func:`analytic.kernels.moments.smooth_by_moments`), integrated by the tensor
   Gauss ladder with its error check (or, where the moments do not serve,
-  every kernel by :func:`analytic.quadrature.tensor_integrate`); most pairs
+  every kernel by :func:`analytic.kernels.quadrature.tensor_integrate`); most pairs
   take this route, more of them at larger M. Assembly settles most of them
-  from d and ∇d at the pixel's centre (:func:`analytic.isochrone.range_bound`),
+  from d and ∇d at the pixel's centre (:func:`analytic.kernels.isochrone.range_bound`),
   without the exact range.
 - *Cut pixels by strips* (clear of the feet and of x*): the slabs between
   the kinks' isochrones, each a region with conic sides whose limits are
-  closed-form (:mod:`analytic.strips`), by G_4 x G_4 judged by G_3 x G_3;
+  closed-form (:mod:`analytic.kernels.strips`), by G_4 x G_4 judged by G_3 x G_3;
   when that rule does not meet the tolerance, the next route. For the
   impulse (the one waveform whose S is a step, so each κ_n is constant on
   either side of a breakpoint; the square pulse's S is a ramp) and a pixel
   that one breakpoint cuts, the common case for small pixels, first the
   two parts' ∫ a alone by a
-  ladder from G_3 x G_3 judged by G_2 x G_2 (:func:`analytic.strips.single_cut`),
+  ladder from G_3 x G_3 judged by G_2 x G_2 (:func:`analytic.kernels.strips.single_cut`),
   each part's constant kernels taken once.
-- *Cut pixels*: in isochrone coordinates (τ, φ) (see :mod:`analytic.isochrone`)
+- *Cut pixels*: in isochrone coordinates (τ, φ) (see :mod:`analytic.kernels.isochrone`)
   the entry is ∫ κ_n(τ) G(τ) dτ with G(τ) = ∫_{isochrone ∩ pixel} a J dφ.
   G is smooth except where an isochrone passes a pixel corner, touches an
   edge (a square-root branch point), is born at x*, or passes a foot; the
   τ-range is cut there and at κ's breakpoints, and each piece is mapped
-  by :func:`analytic.quadrature.piece_map`, which turns a square-root end
+  by :func:`analytic.kernels.quadrature.piece_map`, which turns a square-root end
   into an entire function and leaves a regular end alone. Each piece is
   integrated by the tensor rule in (τ, φ)
-  (:func:`analytic.quadrature.isochrone_rule`) under the adaptive driver,
+  (:func:`analytic.kernels.quadrature.isochrone_rule`) under the adaptive driver,
 - or, near x* or a foot, or where that rule fails, by adaptive φ-integrals
-  inside adaptive τ-integrals (:func:`analytic.quadrature.integrate`, the
+  inside adaptive τ-integrals (:func:`analytic.kernels.quadrature.integrate`, the
   *adaptive* route, the slowest and most general).
 
 :func:`pair_entries` computes one (sensor, pixel) by any route, so that each fast route
@@ -55,7 +55,7 @@ can be checked against the adaptive one.
 
 Each rule's error is estimated by the next rung of its Gauss ladder (and the
 rungs' trend), and the value estimated is the one kept, relative to
-∫ |integrand|; the quadrature asks for :data:`analytic.kernels.SAFETY` x ``tolerance`` and
+∫ |integrand|; the quadrature asks for :data:`analytic.kernels.routes.SAFETY` x ``tolerance`` and
 the inner integrals for a tenth of that. Every entry, hence every row's
 largest, is accurate to ``tolerance``, and the achieved error follows the
 tolerance (each entry's relative error 2 to 4 times below it from 1e-2 to
@@ -65,7 +65,7 @@ tolerance is faster.
 Assembly (geometry -> entries) runs once, compiled and in parallel over
 blocks of pixels (all pairs of a pixel together, blocks dealt across the
 image so that the threads stay balanced), straight into CSR
-(:mod:`analytic.assembly`); the result is a SciPy sparse matrix to apply,
+(:mod:`analytic.kernels.assembly`); the result is a SciPy sparse matrix to apply,
 transpose and slice. Its memory is proportional to nnz(A), which is counted
 exactly, per block and row, before anything of that size is allocated.
 """
@@ -78,14 +78,17 @@ from typing import NamedTuple
 import numpy as np
 import scipy.sparse
 
-from . import assembly
-from .assembly import ImageGrid, auto_entries, block_bounds, pixel_box
 from .attenuation import attenuation_code
 from .errors import ResourceError
 from .geometry import PointPairs, Rectangle, pair_table
-from .isochrone import pair_frame, rectangle_range
-from .kernel_cache import njit
-from .kernels import SAFETY, RouteOutcome, TimeAxis, make_scratch, pair_by_method, pixel_bins
+from .kernels import assembly
+from .kernels.assembly import Assembly, ImageGrid, Jobs, Slots, StepAssembly, auto_entries, pair_frame_of, pixel_box
+from .kernels.cache import compiled
+from .kernels.isochrone import rectangle_range
+from .kernels.quadrature import nested_integral_arguments, pixel_isochrone_integral
+from .kernels.routes import SAFETY, CutRoute, DirectRoute, RouteOutcome, StripRoute, TimeAxis, make_scratch, \
+    pair_by_method, pixel_bins
+from .blocks import run_blocks, thread_count
 from .resources import available_memory
 from .scene import MAX_TOLERANCE, MIN_TOLERANCE, Sampling, Scene, check_heights, check_tolerance
 from .waveforms import Waveform, make_waveform
@@ -99,7 +102,7 @@ __all__ = ["system_matrix", "rectangle_matrix", "forward", "count_entries", "che
 # longer converges: on the default scene 1e-11 takes about 10 times the time
 # of 1e-6 with ~500 such pieces, 1e-12 about 60 times with ~5000, and 1e-300
 # would refine every piece to its limit.
-_BLOCKS_PER_THREAD = 16  # parallel jobs per thread (blocks of pixels, dealt across the image)
+_BLOCKS_PER_THREAD = 16  # blocks of pixels per thread (pulled by the threads as they finish the last)
 _COUNTS_BYTES = 2**28    # at most this much (and an eighth of the memory limit) for the blocks' counts per row
 
 #: Quadrature routes of :func:`pair_entries`, in the order of analytic.kernels' route codes.
@@ -128,6 +131,22 @@ def _problem(rectangle: Rectangle, pairs: PointPairs, sampling: Sampling, wavefo
                     np.asarray(pairs.scales, dtype=np.float64))
 
 
+def _record(problem: _Problem, rtol: float) -> Assembly | StepAssembly:
+    """The compiled kernels' record of the problem, their quadrature asked for ``rtol``.
+
+    Its type says whether S is a step function (the impulse), for which the first pass is compiled
+    without the moments route (:class:`analytic.kernels.assembly.StepAssembly`).
+    """
+    kind = StepAssembly if problem.waveform.terms.degree == 0 else Assembly
+    return kind(problem.pairs, problem.mode, problem.grid, problem.axis, problem.waveform.terms, float(rtol),
+                problem.scales)
+
+
+def _block_bounds(columns: int, blocks: int) -> np.ndarray:
+    """(B + 1,) int64 column bounds of B contiguous blocks of pixels, as even as integers allow."""
+    return (np.arange(blocks + 1, dtype=np.int64) * columns) // blocks
+
+
 def _index_bytes(limit: int) -> int:
     return 4 if limit < 2**31 else 8
 
@@ -145,11 +164,11 @@ class _Layout(NamedTuple):
 
 def _layout(problem: _Problem, limit: int) -> _Layout:
     """About _BLOCKS_PER_THREAD blocks per thread, fewer where their counts per row would take much memory."""
-    threads = _threads()
+    threads = thread_count()
     rows = max(len(problem.pairs) * problem.axis.count, 1)
     affordable = min(limit // 8, _COUNTS_BYTES) // (8 * rows)
     blocks = max(1, min(_BLOCKS_PER_THREAD * threads, affordable, problem.grid.pixels ** 2))
-    return _Layout(block_bounds(problem.grid.pixels ** 2, blocks), threads)
+    return _Layout(_block_bounds(problem.grid.pixels ** 2, blocks), threads)
 
 
 def _check_layout(problem: _Problem, layout: _Layout, limit: int) -> None:
@@ -185,11 +204,14 @@ def _count(problem: _Problem, layout: _Layout, limit: int) -> _Counts:
     _check_layout(problem, layout, limit)
     columns = problem.grid.pixels ** 2
     rows = len(problem.pairs) * problem.axis.count
-    counts = _Counts(np.empty(columns, dtype=np.int64), np.zeros((len(layout.bounds) - 1, rows), dtype=np.int64),
-                     np.zeros(len(layout.bounds) - 1, dtype=np.int64))
-    terms = problem.waveform.terms
-    assembly.count(problem.pairs, problem.mode, problem.grid, problem.axis, terms.lead, terms.duration,
-                   layout.bounds, layout.threads, counts.per_pixel, counts.per_block, counts.widest)
+    blocks = len(layout.bounds) - 1
+    per_pixel = np.empty(columns, dtype=np.int64)
+    per_block = np.zeros((blocks, rows), dtype=np.int64)
+    record = _record(problem, 0.0)
+    bounds = layout.bounds
+    widest = run_blocks(assembly.count_block, lambda b: (record, bounds[b], bounds[b + 1], per_pixel, per_block[b]),
+                        blocks, threads=layout.threads)
+    counts = _Counts(per_pixel, per_block, np.asarray(widest, dtype=np.int64))
     nnz = int(counts.per_pixel.sum())
     needed = _matrix_bytes(nnz, columns, rows, len(layout.bounds) - 1)
     if needed > limit:
@@ -336,24 +358,24 @@ def rectangle_matrix(rectangle: Rectangle, pairs: PointPairs, sampling: Sampling
     index_type = np.int32 if _index_bytes(max(nnz, rows, columns)) == 4 else np.int64
     indices = np.empty(nnz, dtype=index_type)
     data = np.empty(nnz, dtype=np.float64)
-    statistics_ = np.zeros((cursors.shape[0], 3), dtype=np.int64)
-    jobs = cursors.shape[0]
-    steps = min(100, jobs) if progress else 1
+    record = _record(problem, SAFETY * tolerance)
+    bounds, widest = layout.bounds, counts.widest
     bar = None
     if progress:
         from tqdm import tqdm
         bar = tqdm(total=columns, desc="system matrix", unit="pixel", leave=False)
-    for step in range(steps):
-        first, last = step * jobs // steps, (step + 1) * jobs // steps
-        assembly.fill(problem.pairs, problem.mode, problem.grid, problem.axis, waveform.terms, SAFETY * tolerance,
-                      layout.bounds, first, last, layout.threads, counts.widest, problem.scales, cursors, indices,
-                      data, statistics_)
+    try:
+        totals = run_blocks(assembly.fill_block,
+                            lambda b: (record, bounds[b], bounds[b + 1], widest[b], Slots(cursors[b], indices, data)),
+                            len(bounds) - 1, threads=layout.threads, bar=bar, weights=np.diff(bounds))
+        failures, served, reached, left = (int(total) for total in np.sum(totals, axis=0))
+        if left:
+            more_failures, more_served = _left_pairs(record, data, indices, indptr, sampling.count, layout.threads)
+            failures += more_failures
+            served += more_served
+    finally:
         if bar is not None:
-            bar.update(int(sum(layout.bounds[block + 1] - layout.bounds[block] for block in
-                               (assembly.dealt(job, jobs, layout.threads) for job in range(first, last)))))
-    if bar is not None:
-        bar.close()
-    failures, served, reached = (int(total) for total in statistics_.sum(axis=0))
+            bar.close()
     if statistics is not None:
         statistics.update(pairs=reached, smooth_pairs=served)
     if failures:
@@ -364,10 +386,70 @@ def rectangle_matrix(rectangle: Rectangle, pairs: PointPairs, sampling: Sampling
     return matrix
 
 
-def _threads() -> int:
-    import numba
+#: Jobs per block of the general routes (each a cut pixel's quadrature: about a millisecond or more).
+_JOBS_PER_BLOCK = 64
 
-    return int(numba.get_num_threads())
+
+def _left_jobs(data: np.ndarray, indices: np.ndarray, indptr: np.ndarray, bins: int) -> Jobs:
+    """The (pair, pixel)s the first pass left (NaN in their slots), each with its slots in bin order."""
+    slots = np.flatnonzero(np.isnan(data))
+    rows = np.searchsorted(indptr, slots, side="right") - 1
+    pairs, bin_index, pixels = rows // bins, rows % bins, indices[slots].astype(np.int64)
+    order = np.lexsort((bin_index, pixels, pairs))
+    slots, pairs, bin_index, pixels = slots[order], pairs[order], bin_index[order], pixels[order]
+    starts = np.flatnonzero(np.concatenate([[True], (pairs[1:] != pairs[:-1]) | (pixels[1:] != pixels[:-1])]))
+    offsets = np.append(starts, slots.size).astype(np.int64)
+    return Jobs(pairs[starts].astype(np.int64), pixels[starts], bin_index[starts].astype(np.int64), offsets,
+                slots.astype(np.int64), np.empty(starts.size), np.empty(starts.size))
+
+
+def _subset(jobs: Jobs, chosen: np.ndarray) -> Jobs:
+    """The jobs where ``chosen`` is True, with their slots."""
+    index = np.flatnonzero(chosen)
+    lengths = np.diff(jobs.offsets)[index]
+    offsets = np.concatenate([[0], np.cumsum(lengths)]).astype(np.int64)
+    slots = np.concatenate([jobs.slots[jobs.offsets[j]:jobs.offsets[j + 1]] for j in index]) if index.size \
+        else np.empty(0, dtype=np.int64)
+    return Jobs(jobs.pairs[index], jobs.pixels[index], jobs.firsts[index], offsets, slots.astype(np.int64),
+                jobs.lows[index], jobs.highs[index])
+
+
+def _compile_nested() -> None:
+    """The φ-integrals that the cut routes nest in their τ-integrals, compiled first (see
+    :func:`analytic.kernels.quadrature.nested_integral_arguments`)."""
+    compiled(pixel_isochrone_integral, *nested_integral_arguments())
+
+
+def _left_pairs(record: Assembly, data: np.ndarray, indices: np.ndarray, indptr: np.ndarray, bins: int,
+                threads: int) -> tuple[int, int]:
+    """The general routes on the pairs the first pass left, one route at a time; (pieces failed, served smooth).
+
+    Each route's kernel is compiled (or loaded) only when some pair needs it
+    (:mod:`analytic.kernels.assembly`); a route that does not serve a pair leaves it to the next.
+    """
+    jobs = _left_jobs(data, indices, indptr, bins)
+    flags = np.zeros(jobs.pairs.size, dtype=np.int64)
+    compiled(assembly.job_routes, record, jobs, flags)(record, jobs, flags)
+    waiting = np.ones(jobs.pairs.size, dtype=bool)
+    failures, smooth = 0, 0
+    for route, applies in ((DirectRoute(), flags & assembly.DIRECT_APPLIES > 0),
+                           (StripRoute(), flags & assembly.STRIPS_APPLY > 0), (CutRoute(), None)):
+        chosen = waiting if applies is None else waiting & applies
+        if not np.any(chosen):
+            continue
+        if isinstance(route, CutRoute):
+            _compile_nested()
+        batch = _subset(jobs, chosen)
+        served = np.zeros(batch.pairs.size, dtype=np.bool_)
+        count = batch.pairs.size
+        blocks = max(1, -(-count // _JOBS_PER_BLOCK))
+        failures += int(sum(run_blocks(assembly.run_jobs, lambda b: (route, record, batch, b * count // blocks,
+                                                                     (b + 1) * count // blocks, data, served),
+                                       blocks, threads=threads)))
+        if isinstance(route, DirectRoute):
+            smooth += int(served.sum())
+        waiting[np.flatnonzero(chosen)[served]] = False
+    return failures, smooth
 
 
 def pair_entries(scene: Scene, sensor: int, pixel: int, *, method: str = "auto",
@@ -391,12 +473,12 @@ def pair_entries(scene: Scene, sensor: int, pixel: int, *, method: str = "auto",
         tensor rule in (τ, φ) on each τ-piece. "adaptive": the cut
         quadrature with adaptive φ-integrals inside adaptive τ-integrals.
         "strip": the cut pixel as slabs between isochrones with closed-form
-        limits (:mod:`analytic.strips`; clear of the feet and of x* only).
+        limits (:mod:`analytic.kernels.strips`; clear of the feet and of x* only).
     tolerance : float, optional
         As for :func:`system_matrix`.
     taylor : bool
         For the three named routes: through the pixel's (or τ-piece's)
-        moments and the kernels' Taylor coefficients (:mod:`analytic.taylor`,
+        moments and the kernels' Taylor coefficients (:mod:`analytic.kernels.taylor`,
         what "auto" does), or with every kernel at every quadrature node
         (False), so that the two can be held to each other.
 
@@ -422,13 +504,14 @@ def pair_entries(scene: Scene, sensor: int, pixel: int, *, method: str = "auto",
     problem = _problem(rectangle, pairs, scene.sampling,
                        make_waveform(scene.illumination, scene.sampling.bin_width_opl))
     terms = problem.waveform.terms
-    frame = _frame_of(problem.pairs, sensor, problem.mode)
+    frame = pair_frame_of(problem.pairs, sensor, problem.mode)
     box = pixel_box(problem.grid, pixel)
     axis = problem.axis._replace(start_opl=problem.axis.start_opl - float(problem.pairs[sensor]["offset"]))
     low, high = rectangle_range(frame, box)
     run = pixel_bins(low, high, axis, terms.lead, terms.duration)
     out = np.zeros(max(run.bins, 1))
     scratch = make_scratch(max(run.bins, 1))
+    _compile_nested()
     if method == "auto":
         # assembly's own run of bins (the tests hold it to the exact range's, which the other routes use)
         run, _ = auto_entries(frame, box, terms, axis, SAFETY * tolerance, out, scratch)
@@ -447,11 +530,6 @@ def pair_entries(scene: Scene, sensor: int, pixel: int, *, method: str = "auto",
         warnings.warn(f"{outcome.failures} quadrature pieces stopped refining before reaching tolerance "
                       f"{tolerance:g}", QuadratureWarning, stacklevel=2)
     return run.first, out[:run.bins] * problem.scales[sensor]
-
-
-@njit(cache=True, error_model="numpy")
-def _frame_of(pairs, k, mode):
-    return pair_frame(pairs[k], mode)
 
 
 def forward(scene: Scene, matrix=None) -> np.ndarray:

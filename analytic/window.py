@@ -2,7 +2,7 @@
 
 Path length d(x) = |x − p_s| + |x − p_k| is convex on the plane, so its
 range over the plane is exact: the maximum at a corner, the minimum at the
-first-arrival point or on an edge (:func:`analytic.isochrone.rectangle_range`).
+first-arrival point or on an edge (:func:`analytic.kernels.isochrone.rectangle_range`).
 The same holds for any scene's geometry (:meth:`analytic.scene.Scene.geometry`): a relay-wall
 capture's hidden rectangle with the lit and read wall points as the foci, each
 pair's counted laser and sensor legs added (docs/design.md section 7).
@@ -27,7 +27,8 @@ import warnings
 import numpy as np
 
 from .geometry import PointPairs, Rectangle, pair_table
-from .isochrone import LAMBERTIAN, PixelBox, pair_frame, rectangle_range
+from .kernels.formulas import LAMBERTIAN
+from .kernels.isochrone import PixelBox, pair_frame, rectangle_range
 from .scene import Sampling, Scene, SceneError
 
 __all__ = ["response_range", "pairs_range", "covering_sampling", "auto_sampling", "window_share", "empty_bins",

@@ -18,6 +18,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 # Packages not (yet) converted: none.
 NOT_YET_LAZY: set[str] = set()
+# Packages whose public names are their modules (the compiled kernels: the Python side imports the modules it drives).
+MODULE_PACKAGES = {"analytic.kernels"}
 
 
 def _packages() -> list[str]:
@@ -42,7 +44,7 @@ def test_every_package_loads_its_names_lazily_and_lists_them(name):
         assert getattr(package, public) is not None, f"{name}.{public}"
 
 
-@pytest.mark.parametrize("name", _packages())
+@pytest.mark.parametrize("name", [p for p in _packages() if p not in MODULE_PACKAGES])
 def test_a_public_name_is_what_it_names_after_its_same_named_module_is_imported(name):
     # ``analytic.attenuation`` (a function in attenuation.py) and ``transient.render`` (in render.py): the
     # import system binds the submodule to the package's attribute when it first loads it; the public name

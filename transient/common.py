@@ -30,7 +30,7 @@ from analytic.attenuation import LAMBERTIAN, attenuation_formula
 from analytic.binning import bin_index
 from analytic.scene import Illumination
 from analytic.waveforms import ERRORFUNCTIONS, POLYNOMIAL, WaveformTerms, make_waveform
-from analytic.waveforms import special
+from analytic.kernels import formulas as special
 
 __all__ = ["cumulative", "kernel_between", "attenuation", "height_over_cube", "sample_stream", "jittered_point", "replica_of", "deposit",
            "reduce_mode", "per_thread_copies", "thread_copies", "block_copy", "opaque_u32", "opaque_f64", "is_diffuse", "time_axis_and_waveform"]
@@ -55,7 +55,7 @@ def opaque_f64(value: float):
 
 def erfcx(v):
     """erfcx(v) = e^{v²} erfc(v) for v >= 0 in Dr.Jit Float64 (v < 0 clamped): Cody's three ranges of
-    :mod:`analytic.waveforms.special`, the expressions NumPy and Numba evaluate, chosen by ``dr.select``."""
+    :mod:`analytic.kernels.special`, the expressions NumPy and Numba evaluate, chosen by ``dr.select``."""
     v = dr.maximum(v, 0.0)
     low = special.small(dr.minimum(v, special.SMALL), dr.exp)
     middle = special.middle(dr.clip(v, special.SMALL, special.LARGE), dr.exp)

@@ -23,9 +23,8 @@ import lazy_loader
 __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "builders": ["make_waveform", "BUILDERS"],
     "waveform": ["Waveform"],
-    "pieces": ["WaveformTerms", "make_terms", "cumulative_scalar", "kernel_scalar", "piece_of", "piece_value",
+    "pieces": ["WaveformTerms", "make_terms", "cumulative_array", "derivative_array", "kernel_array",
                "POLYNOMIAL", "EXPONENTIALS", "ERRORFUNCTIONS"],
-    "special": ["erfcx_scalar", "erfcx_array", "erfcx_taylor"],
     "measured": ["read_samples", "check_samples", "MAX_SAMPLES", "METRES_PER_PICOSECOND"],
     "emg": ["TAIL_RATIO_RANGE"],
     "butterworth": ["MAX_ORDER", "CUTOFF_RANGE", "CUTOFF_PERIOD_RANGE", "MIN_CUTOFF_DURATION"],

@@ -47,7 +47,7 @@ import numpy as np
 from ..errors import SceneError
 from .gaussian import FWHM_PER_SIGMA, TRUNCATION, require
 from .pieces import ERRORFUNCTIONS, POLYNOMIAL, make_terms
-from .special import erfcx_array
+from ..kernels.formulas import erfcx_array
 from .waveform import Waveform
 
 __all__ = ["build", "PARAMETERS", "TAIL_RATIO_RANGE"]

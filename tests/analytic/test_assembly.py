@@ -1,7 +1,7 @@
 """Assembly straight into CSR: the bound that settles most pairs, the slots each block fills, and the entries.
 
-analytic.assembly decides each (pixel, pair)'s bins from an interval of
-path length computed at the pixel's centre (analytic.isochrone.range_bound)
+analytic.kernels.assembly decides each (pixel, pair)'s bins from an interval of
+path length computed at the pixel's centre (analytic.kernels.isochrone.range_bound)
 and serves the smooth pixels through their moments over that interval; it
 writes every entry into its CSR slot by per-block counts. The interval must
 hold the exact range; the matrix must not depend on the number of threads,
@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 import scipy.sparse
 
-from analytic.isochrone import make_frame, range_bound, rectangle_range, PixelBox
+from analytic.kernels.isochrone import make_frame, range_bound, rectangle_range, PixelBox
 from analytic.scene import Illumination, Sampling, Scene
 from analytic.system import pair_entries, system_matrix
 

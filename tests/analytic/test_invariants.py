@@ -7,8 +7,9 @@ import pytest
 from reference import contour_response
 from scipy import integrate
 
-from analytic.attenuation import LAMBERTIAN, PAPER, attenuation, attenuation_at
-from analytic.isochrone import make_frame
+from analytic.attenuation import LAMBERTIAN, PAPER, attenuation
+from analytic.kernels.attenuation import attenuation_at
+from analytic.kernels.isochrone import make_frame
 from analytic.scene import MIN_HEIGHT_FRACTION, scene_extent
 from analytic.response import impulse_response
 from analytic.scene import Illumination, Sampling, Scene, SceneError, default_scene

@@ -18,7 +18,7 @@ import pytest
 from irf_reference import reference_for
 from reference import pixel_box, pixel_entry
 
-from analytic.isochrone import first_arrival_point, make_frame
+from analytic.kernels.isochrone import first_arrival_point, make_frame
 from analytic.scene import Illumination, Sampling, Scene
 from analytic.system import QuadratureWarning, pair_entries, system_matrix
 

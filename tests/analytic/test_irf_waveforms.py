@@ -17,14 +17,16 @@ import pytest
 from irf_reference import EmgReference, GaussianReference, SampledReference, sigma_of
 from scipy import integrate
 
-from analytic.bins import BinRun, TimeAxis
+from analytic.kernels.bins import BinRun, TimeAxis
 from analytic.errors import SceneError
 from analytic.scene import Illumination, Sampling
-from analytic.taylor import MAX_TERMS, kernel_taylor
+from analytic.kernels.taylor import MAX_TERMS, kernel_taylor
 from analytic.waveforms import make_waveform
 from analytic.waveforms.measured import METRES_PER_PICOSECOND, read_samples
-from analytic.waveforms.pieces import kernel_array, piece_derivative_bound, piece_derivatives, piece_of
-from analytic.waveforms.special import erfcx_array, erfcx_scalar, erfcx_taylor
+from analytic.kernels.formulas import erfcx_array
+from analytic.kernels.pieces import piece_derivative_bound, piece_derivatives, piece_of
+from analytic.kernels.special import erfcx_scalar, erfcx_taylor
+from analytic.waveforms.pieces import kernel_array
 
 FWHM = 20 * METRES_PER_PICOSECOND          # a SPAD's jitter: 20 ps
 TAIL = 50 * METRES_PER_PICOSECOND          # and its tail: 50 ps

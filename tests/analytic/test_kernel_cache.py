@@ -1,46 +1,110 @@
-"""The kernels' cache is keyed by every module they use, not only their own file."""
+"""The compiled kernels: a closed sub-package, cached by its own sources, in a folder a user can write."""
 
+import ast
 import os
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 from numba.core.caching import CacheImpl
 
-from analytic import kernel_cache, system
-from analytic.kernel_cache import PackageCacheLocator, module_closure
+from analytic.kernels import cache
+from analytic.kernels.cache import KernelCacheLocator, sources_stamp
 
-PACKAGE = Path(kernel_cache.__file__).resolve().parent
-
-
-def test_closure_follows_imports_through_other_modules():
-    names = {str(path.relative_to(PACKAGE)) for path in module_closure(PACKAGE / "system.py")}
-    # system imports kernels, which imports quadrature, which imports isochrone, which imports attenuation;
-    # kernels imports the waveforms' pieces (a subpackage)
-    assert {"system.py", "kernels.py", "quadrature.py", "isochrone.py", "attenuation.py",
-            "waveforms/pieces.py"} <= names
-    assert "io.py" not in names and "capture.py" not in names
+KERNELS = Path(cache.__file__).resolve().parent
+PACKAGE = KERNELS.parent
+ROOT = PACKAGE.parent
+#: What a kernel module may import besides its siblings: compiled code and constants only.
+ALLOWED = {"__future__", "math", "typing", "numpy", "numba", "numba.extending", "numba.core",
+           "numba.core.caching", "numba.core.config", "contextlib", "functools", "hashlib", "os", "sys", "tempfile",
+           "threading", "pathlib", "fcntl"}
 
 
-def test_stamp_changes_when_an_imported_module_changes(tmp_path, monkeypatch):
-    """On a copy of the package: editing the real ``pieces.py``, even for a moment, would make every cached
-    kernel stale for another process loading one meanwhile (a second pytest-xdist worker, a user's command),
-    which would recompile it. The stamp follows the sources' content, not their times."""
-    copy = tmp_path / PACKAGE.name
+def test_the_kernels_import_only_each_other_numpy_numba_and_the_standard_library():
+    for path in sorted(KERNELS.glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom):
+                name = node.module or ""
+                assert node.level == 1 or name in ALLOWED, f"{path.name} imports {name} (level {node.level})"
+                assert node.level <= 1, f"{path.name} imports from outside the kernels ({'.' * node.level}{name})"
+            elif isinstance(node, ast.Import):
+                for alias in node.names:
+                    assert alias.name in ALLOWED, f"{path.name} imports {alias.name}"
+
+
+def _copy(tmp_path) -> Path:
+    copy = tmp_path / "copy" / "analytic"
     shutil.copytree(PACKAGE, copy, ignore=shutil.ignore_patterns("__pycache__"))
-    monkeypatch.setattr(kernel_cache, "_PACKAGE", copy)
-    locator = PackageCacheLocator.from_function(system.forward, str(copy / "system.py"))
-    before = locator.get_source_stamp()
-    dependency = copy / "waveforms" / "pieces.py"
-    original = dependency.read_bytes()
-    status = dependency.stat()
-    os.utime(dependency, ns=(status.st_atime_ns, status.st_mtime_ns + 10**9))
-    assert locator.get_source_stamp() == before          # touched, not changed
-    dependency.write_bytes(original + b"# edited\n")
-    assert locator.get_source_stamp() != before
-    dependency.write_bytes(original)
-    assert locator.get_source_stamp() == before
+    return copy
 
 
-def test_only_this_package_is_served():
-    assert CacheImpl._locator_classes[0] is PackageCacheLocator
-    assert PackageCacheLocator.from_function(os.path.join, os.path.__file__) is None
+def test_the_stamp_follows_the_kernels_sources_and_nothing_else(tmp_path, monkeypatch):
+    """On a copy of the package: editing the real sources, even for a moment, would make every cached kernel stale
+    for another process loading one meanwhile (a second pytest-xdist worker, a user's command)."""
+    copy = _copy(tmp_path)
+    monkeypatch.setattr(cache, "_KERNELS", copy / "kernels")
+    before = sources_stamp()
+    assert before == sources_stamp()
+    outside = copy / "geometry.py"
+    outside.write_text(outside.read_text(encoding="utf-8") + "# an edit of plain Python\n", encoding="utf-8")
+    assert sources_stamp() == before
+    inside = copy / "kernels" / "pieces.py"
+    original = inside.read_bytes()
+    status = inside.stat()
+    os.utime(inside, ns=(status.st_atime_ns, status.st_mtime_ns + 10**9))
+    assert sources_stamp() == before                     # touched, not changed
+    inside.write_bytes(original + b"# edited\n")
+    assert sources_stamp() != before
+    inside.write_bytes(original)
+    assert sources_stamp() == before
+
+
+def test_only_the_kernels_are_served():
+    assert CacheImpl._locator_classes[0] is KernelCacheLocator
+    assert KernelCacheLocator.from_function(os.path.join, os.path.__file__) is None
+    geometry = PACKAGE / "geometry.py"
+    assert KernelCacheLocator.from_function(test_only_the_kernels_are_served, str(geometry)) is None
+
+
+def _run(code: str, env: dict, cwd: Path) -> subprocess.CompletedProcess:
+    environment = {key: value for key, value in os.environ.items() if key != "NUMBA_CACHE_DIR"}
+    environment.update(env)
+    return subprocess.run([sys.executable, "-c", code], cwd=cwd, env=environment, capture_output=True, text=True,
+                          timeout=300)
+
+
+def test_an_install_whose_folder_cannot_be_written_keeps_its_kernels_in_the_users_cache_folder(tmp_path):
+    """A read-only install (a system or shared one, a container), as any user, root included: its kernels'
+    ``__pycache__`` cannot be made (here a file stands in its place)."""
+    copy = _copy(tmp_path)
+    (copy / "kernels" / "__pycache__").write_text("not a folder", encoding="utf-8")
+    done = _run("from analytic.kernels.cache import cache_folder; print(cache_folder())",
+                {"PYTHONPATH": str(copy.parent), "XDG_CACHE_HOME": str(tmp_path / "cache")}, tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert Path(done.stdout.strip()) == tmp_path / "cache" / "diffuse-imaging" / "kernels"
+
+
+def test_the_cache_folder_is_beside_the_sources_where_they_can_be_written_or_under_numba_cache_dir(tmp_path):
+    done = _run("from analytic.kernels.cache import cache_folder; print(cache_folder())",
+                {"PYTHONPATH": str(ROOT)}, tmp_path)
+    assert Path(done.stdout.strip()) == KERNELS / "__pycache__", done.stderr
+    done = _run("from analytic.kernels.cache import cache_folder; print(cache_folder())",
+                {"PYTHONPATH": str(ROOT), "NUMBA_CACHE_DIR": str(tmp_path / "numba")}, tmp_path)
+    assert Path(done.stdout.strip()) == tmp_path / "numba" / "diffuse-imaging" / "kernels", done.stderr
+
+
+def test_a_long_compile_says_so_once_on_stderr(tmp_path):
+    """A compile into an empty cache, with the notice's delay set to 0: one line naming what and where."""
+    code = ("import analytic.kernels.cache as cache; cache.NOTICE_SECONDS = 0.0\n"
+            "from analytic.kernels.bins import TimeAxis, bin_of\n"
+            "from analytic.kernels.isochrone import PixelBox\n"
+            "print(bin_of(0.5, TimeAxis(0.0, 0.1, 10)))\n")
+    done = _run(code, {"PYTHONPATH": str(ROOT), "NUMBA_CACHE_DIR": str(tmp_path / "numba")}, tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "5"
+    lines = [line for line in done.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("diffuse-imaging: compiling the model's kernels (bins.bin_of)")
+    assert str(tmp_path / "numba" / "diffuse-imaging" / "kernels") in lines[0]
+    again = _run(code, {"PYTHONPATH": str(ROOT), "NUMBA_CACHE_DIR": str(tmp_path / "numba")}, tmp_path)
+    assert again.returncode == 0 and again.stderr.strip() == ""      # loaded from the cache: no compile, no line

@@ -5,7 +5,7 @@ on a whole pixel that no kernel breakpoint crosses ("smooth"), the tensor
 rule in (τ, φ) on each τ-piece of a cut pixel ("isochrone"), and adaptive
 φ-integrals inside adaptive τ-integrals ("adaptive", the slowest and most
 general). Each fast route can go through the pixel's moments and the kernels'
-Taylor coefficients (analytic.taylor, what assembly does) or evaluate every
+Taylor coefficients (analytic.kernels.taylor, what assembly does) or evaluate every
 kernel at every node; the reference is the adaptive route evaluating the
 kernels directly, which shares neither. On random scenes, pixels, sensors and
 waveforms every route must give its entries to 1e-9 of the pair's largest.
@@ -16,7 +16,7 @@ import warnings
 import numpy as np
 import pytest
 
-from analytic.isochrone import first_arrival_point, make_frame
+from analytic.kernels.isochrone import first_arrival_point, make_frame
 from analytic.scene import Illumination, Sampling, Scene
 from analytic.system import QuadratureWarning, pair_entries
 
@@ -115,7 +115,7 @@ def test_assembly_route_agrees_with_adaptive(rng, waveform):
 @pytest.mark.parametrize("waveform", ["impulse", "square", "butterworth"])
 def test_assembly_route_on_fine_pixels_agrees_with_adaptive(rng, waveform):
     """Fine pixels, where assembly settles most pairs from d and ∇d at the pixel's centre and takes
-    the smooth ones through their moments over that bound (analytic.assembly): the same run of bins
+    the smooth ones through their moments over that bound (analytic.kernels.assembly): the same run of bins
     as the exact range gives, and the adaptive route's entries."""
     for _ in range(3):
         scene = _random_scene(rng, waveform).replace(pixels=int(rng.integers(200, 1500)), reflectance=1.0)
@@ -142,7 +142,7 @@ def _fine_scene(rng, waveform):
 
 @pytest.mark.parametrize("waveform", ["impulse", "square", "butterworth"])
 def test_strip_route_agrees_with_adaptive(rng, waveform):
-    """Cut pixels by slabs with conic sides (analytic.strips) against the (τ, φ) adaptive route."""
+    """Cut pixels by slabs with conic sides (analytic.kernels.strips) against the (τ, φ) adaptive route."""
     served = 0
     for _ in range(6):
         scene = _fine_scene(rng, waveform)

@@ -1,4 +1,4 @@
-"""A pixel that one bin edge cuts, for a step-function waveform (analytic.strips.single_cut).
+"""A pixel that one bin edge cuts, for a step-function waveform (analytic.kernels.strips.single_cut).
 
 Assembly serves such a (pixel, pair) by the two parts' ∫ a alone (a G_n x G_n
 ladder between the conic side's closed-form limits), their kernels once per
@@ -18,10 +18,10 @@ import numpy as np
 import pytest
 from scipy import optimize
 
-from analytic.isochrone import PixelBox, make_frame
-from analytic.kernels import clear_of_birth, clear_of_feet
+from analytic.kernels.isochrone import PixelBox, make_frame
+from analytic.kernels.routes import clear_of_birth, clear_of_feet
 from analytic.scene import Illumination, Sampling, Scene
-from analytic.strips import single_cut
+from analytic.kernels.strips import single_cut
 from analytic.system import QuadratureWarning, pair_entries
 from reference import attenuation, bin_kernel, distance_sum, pixel_box, pixel_entry
 

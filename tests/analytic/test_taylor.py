@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from analytic.kernels import BinRun, TimeAxis
+from analytic.kernels.bins import BinRun, TimeAxis
 from analytic.scene import Illumination, Sampling
-from analytic.taylor import MAX_TERMS, kernel_taylor
+from analytic.kernels.taylor import MAX_TERMS, kernel_taylor
 from analytic.waveforms import make_waveform
 
 PERIOD = 0.1

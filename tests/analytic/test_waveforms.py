@@ -18,7 +18,8 @@ from scipy import integrate, signal
 
 from analytic.binning import bin_index
 from analytic.scene import Illumination, Sampling, SceneError
-from analytic.waveforms import MAX_ORDER, cumulative_scalar, make_waveform
+from analytic.kernels.pieces import cumulative_scalar
+from analytic.waveforms import MAX_ORDER, make_waveform
 from waveform_reference import ButterworthReference
 
 SAMPLING = Sampling(bin_width_opl=0.1, start_opl=0.0, count=40)

@@ -14,7 +14,9 @@ import numpy as np
 import pytest
 
 from analytic.scene import Illumination, Sampling
-from analytic.waveforms import cumulative_scalar, make_waveform
+from analytic.kernels.pieces import cumulative_scalar
+from analytic.waveforms import make_waveform
+from compiled_kernels import compiled_kernels
 from transient import backend
 
 WAVEFORMS = ["impulse", "square", "butterworth"]
@@ -64,7 +66,8 @@ def test_cumulative_agrees_in_numpy_numba_and_drjit(mitsuba, rng, name, period):
 
 def test_attenuation_agrees_in_numpy_numba_and_drjit(mitsuba, rng):
     from analytic.attenuation import attenuation as numpy_attenuation
-    from analytic.isochrone import LAMBERTIAN, attenuation_at, make_frame
+    from analytic.kernels.formulas import LAMBERTIAN
+    from analytic.kernels.isochrone import attenuation_at, make_frame
     from transient.common import attenuation
 
     for _ in range(20):
@@ -194,13 +197,12 @@ def test_is_diffuse(mitsuba):
 
 def test_kernels_far_in_the_tail_agree_in_numba_and_drjit(mitsuba):
     """κ 1e-15 of the area below the peak: Dr.Jit's piece-wise difference keeps the digits Numba's does."""
-    from analytic.waveforms import kernel_scalar
     from transient.common import kernel_between
 
     waveform = make_waveform(Illumination(waveform="butterworth", order=1, cutoff=0.5, duration=12.0), 0.075)
     lower = np.linspace(0.5, 11.9, 400)
     upper = lower + 0.075
-    expected = np.array([kernel_scalar(waveform.terms, a, b)[0] for a, b in zip(lower, upper)])
+    expected = compiled_kernels(waveform.terms, lower, upper)
     traced = np.array(kernel_between(waveform.terms, mitsuba.Float64(lower), mitsuba.Float64(upper)),
                       dtype=np.float64)
     closed_form = (np.exp(-np.pi * lower) * -np.expm1(-np.pi * 0.075)) / np.pi     # s = e^{-πt}, unit peak

@@ -13,8 +13,10 @@ import pytest
 from render_checks import agreement, model
 
 from analytic.scene import Illumination
-from analytic.waveforms import cumulative_scalar, kernel_scalar, make_waveform
+from analytic.kernels.pieces import cumulative_scalar
+from analytic.waveforms import make_waveform
 from analytic.waveforms.pieces import kernel_array
+from compiled_kernels import compiled_kernels
 from transient.render import render
 
 RNG_SAMPLES = np.random.default_rng(4).uniform(0.0, 1.0, 24) * np.hanning(24)      # > 8 pieces: the gather path
@@ -43,7 +45,7 @@ def test_cumulative_and_kernels_agree_in_numpy_numba_and_drjit(mitsuba, rng, nam
     assert np.max(np.abs(traced - expected)) <= 1e-14 * area
     upper = u + rng.uniform(0.0, 0.1 * span, u.size)
     kernels = kernel_array(terms, u, upper)
-    compiled = np.array([kernel_scalar(terms, float(a), float(b))[0] for a, b in zip(u, upper)])
+    compiled = compiled_kernels(terms, u, upper)
     traced = np.array(kernel_between(terms, mitsuba.Float64(u), mitsuba.Float64(upper)), dtype=np.float64)
     floor = 1e-15 * area        # kernels beyond the pulse are rounding on every side
     assert np.all(np.abs(compiled - kernels) <= 1e-12 * np.abs(kernels) + floor)

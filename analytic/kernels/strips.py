@@ -3,7 +3,7 @@
 A bin edge (or another kink of the kernels) that crosses a pixel splits it
 into slabs {τ_a <= d <= τ_b}; on each slab every kernel κ_n(d) is smooth,
 so the entries are smooth integrals over a region with curved sides. The
-sides are conics (:mod:`analytic.conics`): along a line of the pixel an
+sides are conics (:mod:`analytic.kernels.conics`): along a line of the pixel an
 isochrone is a quadratic with closed-form roots. With the outer variable u
 chosen along the isochrones (the axis across which d changes least), the
 inner limits w(u) are smooth between the u where a side meets the pixel's
@@ -35,9 +35,9 @@ import numpy as np
 from .attenuation import attenuation_of_distances
 from .bins import BinRun, KernelProblem, bin_edge, bin_of, kernel_values
 from .conics import across, crossings, inner_roots, isochrone_conic, ordered, turns_inside
-from .kernel_cache import njit
+from .cache import njit
 from .quadrature import GAUSS_NODES, GAUSS_WEIGHTS
-from .waveforms.pieces import ROUNDING
+from .pieces import ROUNDING
 
 __all__ = ["strip_entries", "single_cut", "HIGH_ORDER", "LOW_ORDER", "FIRST_RUNG", "LAST_RUNG"]
 
@@ -49,7 +49,7 @@ FIRST_RUNG = 3
 LAST_RUNG = 6
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def _add_crossings(frame, conic, tau, w, lo, hi, swap, points, used):
     """Append the u in (lo, hi) where the isochrone crosses the line at w; returns the new count."""
     for u in crossings(frame, conic, tau, w, lo, hi, swap):
@@ -59,7 +59,7 @@ def _add_crossings(frame, conic, tau, w, lo, hi, swap, points, used):
     return used
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def _slab_pieces(frame, box, lower, upper, tau_a, tau_b, has_lower, has_upper, swap, points):
     """Sorted u-breakpoints of the slab's region (the pixel's u-edges and the sides' crossings of its w-edges).
 
@@ -80,7 +80,7 @@ def _slab_pieces(frame, box, lower, upper, tau_a, tau_b, has_lower, has_upper, s
     return used
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def _region_rows(frame, lower, upper, tau_a, tau_b, has_lower, has_upper, swap, u, w0, w1):
     """The inner intervals of the slab's region on the line at u: up to two (w_a, w_b), as four numbers.
 
@@ -100,7 +100,7 @@ def _region_rows(frame, lower, upper, tau_a, tau_b, has_lower, has_upper, swap, 
     return start, min(stop, hole_low), max(start, hole_high), stop
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def _row_node(frame, swap, u, wa, wb, order, jw):
     """(d, weight x a_k) at node jw of G_order over [wa, wb] of the line at u."""
     hw = 0.5 * (wb - wa)
@@ -112,7 +112,7 @@ def _row_node(frame, swap, u, wa, wb, order, jw):
             hw * GAUSS_WEIGHTS[order, jw] * attenuation_of_distances(frame, x, y, ds2, dk2))
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def _row_rule(frame, kernel, swap, u, wu, wa, wb, order, values, noise, total, magnitude, rounding, judged, steps):
     """G_order in w over [wa, wb] of the row at u (weight ``wu``), added as :func:`_slab_rule` says."""
     scalar = 0.0
@@ -134,7 +134,7 @@ def _row_rule(frame, kernel, swap, u, wu, wa, wb, order, values, noise, total, m
     return scalar, scalar_magnitude
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def _slab_rule(frame, kernel, lower, upper, tau_a, tau_b, has_lower, has_upper, swap, ua, ub, w0, w1, order,
                values, noise, total, magnitude, rounding, judged, steps):
     """G_order x G_order of a_k κ_n(d) over the slab's region for u in [ua, ub], added to total (per bin).
@@ -161,7 +161,7 @@ def _slab_rule(frame, kernel, lower, upper, tau_a, tau_b, has_lower, has_upper, 
     return scalar, scalar_magnitude
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def _cut_node(frame, conic, tau, swap, ua, ub, w0, w1, order, ju):
     """(u, weight, rows) at node ju of G_order over [ua, ub]: the rows below d = τ, then the two above.
 
@@ -176,7 +176,7 @@ def _cut_node(frame, conic, tau, swap, ua, ub, w0, w1, order, ju):
             ((max(w0, low), min(w1, high)), (w0, min(w1, low)), (max(w0, high), w1)))
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def _cut_rule(frame, kernels, conic, tau, swap, ua, ub, w0, w1, order, values, noise, totals, magnitudes, roundings,
               judged, steps):
     """:func:`_slab_rule` of both slabs of a pixel that one isochrone d = τ cuts, at once.
@@ -203,7 +203,7 @@ def _cut_rule(frame, kernels, conic, tau, swap, ua, ub, w0, w1, order, values, n
     return below, below_size, above, above_size
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def _row_integral(frame, swap, u, wa, wb, order):
     """(∫ a_k, ∫ |a_k|) over [wa, wb] of the line at u by G_order (zeros when the row is empty)."""
     total = 0.0
@@ -233,9 +233,9 @@ def single_cut(frame, box, tau, rtol):
 
     Parameters
     ----------
-    frame : analytic.isochrone.Frame
+    frame : analytic.kernels.isochrone.Frame
         The pair, in the rectangle's frame.
-    box : analytic.isochrone.PixelBox
+    box : analytic.kernels.isochrone.PixelBox
         The pixel, metres; clear of the feet and of x* (the caller's test).
     tau : float
         The path length of the only kernel breakpoint inside the pixel's range of d, metres.
@@ -280,7 +280,7 @@ def single_cut(frame, box, tau, rtol):
     return 0.0, 0.0, False
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def _slab_kinks(low, high, terms, axis, run, points):
     """Sorted τ in (low, high) where some κ_n has a kink, between low and high; returns the count."""
     points[0] = low
@@ -306,23 +306,23 @@ def strip_entries(frame, box, low, high, terms, axis, run, rtol, out, work):
 
     Parameters
     ----------
-    frame : analytic.isochrone.Frame
+    frame : analytic.kernels.isochrone.Frame
         The pair, in the rectangle's frame.
-    box : analytic.isochrone.PixelBox
+    box : analytic.kernels.isochrone.PixelBox
         The pixel, metres; clear of the feet and of x* (the caller's test).
     low, high : float
         The pixel's range of d, metres.
     terms : analytic.waveforms.WaveformTerms
         The waveform's pieces.
-    axis : analytic.bins.TimeAxis
+    axis : analytic.kernels.bins.TimeAxis
         The pair's bins.
-    run : analytic.bins.BinRun
+    run : analytic.kernels.bins.BinRun
         The bins the pixel's light reaches.
     rtol : float
         Relative accuracy of each entry.
     out : float64[:]
         Zero on entry, at least ``run.bins`` long.
-    work : analytic.quadrature.Workspace
+    work : analytic.kernels.quadrature.Workspace
         Of at least ``run.bins`` components.
     """
     swap, _, _, w0, w1 = across(frame, box)
@@ -414,7 +414,7 @@ def strip_entries(frame, box, low, high, terms, axis, run, rtol, out, work):
     return _judged(out, low_order, magnitude, rounding, rtol, run.bins)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def _slab_kernel(terms, axis, run, tau_a, tau_b):
     """(kernels, offset): the bins light leaving the slab [τ_a, τ_b] reaches (one spare each side), and where they
     start in the run."""
@@ -423,7 +423,7 @@ def _slab_kernel(terms, axis, run, tau_a, tau_b):
     return KernelProblem(terms, axis, BinRun(lo_bin, max(hi_bin - lo_bin + 1, 0))), lo_bin - run.first
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def _add_slab(kernel, tau, value, offset, out, work):
     """A step-function S's slab: its kernels (constant there, their value at τ) times value, added to out."""
     kernel_values(kernel, tau, value, work.values, work.noise)
@@ -431,7 +431,7 @@ def _add_slab(kernel, tau, value, offset, out, work):
         out[offset + i] += work.values[i]
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def _add_steps(kernel, tau, high_sum, low_sum, size, offset, out, low_order, magnitude, rounding, work):
     """A step-function S's slab: κ_n is constant there, its value at τ (the middle) times ∫ a_k by each rule."""
     kernel_values(kernel, tau, 1.0, work.values, work.noise)
@@ -442,7 +442,7 @@ def _add_steps(kernel, tau, high_sum, low_sum, size, offset, out, low_order, mag
         rounding[offset + i] += work.noise[i] * size
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def _judged(out, low_order, magnitude, rounding, rtol, bins):
     """Whether every entry's G_4 x G_4 agrees with G_3 x G_3 within the tolerance (else out zeroed, False)."""
     for i in range(bins):
@@ -451,7 +451,7 @@ def _judged(out, low_order, magnitude, rounding, rtol, bins):
     return True
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def _discard(out, bins):
     """Zero what a route that did not serve added; returns False."""
     for i in range(bins):

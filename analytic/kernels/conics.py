@@ -5,7 +5,7 @@ spheroid with foci at the pair's ends: a conic. In a pixel's axes (u, w),
 u chosen along the isochrones (:func:`across`), it meets a line of the
 pixel at the roots of a quadratic (:func:`inner_roots`, :func:`crossings`),
 refined by Newton's method on d itself (:func:`polish`). The slab rules of
-:mod:`analytic.strips` take their limits from here.
+:mod:`analytic.kernels.strips` take their limits from here.
 """
 
 from __future__ import annotations
@@ -14,12 +14,12 @@ import math
 
 import numpy as np
 
-from .kernel_cache import njit
+from .cache import njit
 
 __all__ = ["isochrone_conic", "roots", "polish", "inner_roots", "crossings", "turns_inside", "ordered", "across"]
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def isochrone_conic(frame, tau, swap):
     """The isochrone d = τ as a conic in the pixel's (u, w) about the foci's midpoint.
 
@@ -44,7 +44,7 @@ def isochrone_conic(frame, tau, swap):
             -ratio * ew * pz, mz * mz - ratio * pz * pz - minor)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def roots(a, b, c):
     """Real roots of a q² + 2 b q + c = 0 (a > 0), sorted: (low, high, True), or (0, 0, False) if none."""
     disc = b * b - a * c
@@ -57,7 +57,7 @@ def roots(a, b, c):
     return min(first, second), max(first, second), True
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def polish(frame, tau, u, w, swap, along_w):
     """A root of d = τ on the line through (u, w) along w (or u), refined by Newton's method on d itself.
 
@@ -89,7 +89,7 @@ def polish(frame, tau, u, w, swap, along_w):
     return w if along_w else u
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def inner_roots(frame, conic, tau, u, swap):
     """The w where the isochrone crosses the line at u: (low, high, True), or (0, 0, False) if it does not."""
     mu, mw, auu, auw, aww, bu, bw, c = conic
@@ -100,7 +100,7 @@ def inner_roots(frame, conic, tau, u, swap):
     return (polish(frame, tau, u, low + mw, swap, True), polish(frame, tau, u, high + mw, swap, True), True)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def crossings(frame, conic, tau, w, lo, hi, swap):
     """The u in (lo, hi) where the isochrone crosses the line at w: two numbers, each inf where there is none."""
     mu, mw, auu, auw, aww, bu, bw, c = conic
@@ -117,7 +117,7 @@ def crossings(frame, conic, tau, w, lo, hi, swap):
     return first, second
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def turns_inside(conic, u0, u1, w0, w1):
     """Whether the isochrone's tangent is along w at a point of the pixel (its inner roots merge there).
 
@@ -138,13 +138,13 @@ def turns_inside(conic, u0, u1, w0, w1):
     return False
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def ordered(a, b):
     """(a, b) in increasing order (a sorting network's step, on scalars)."""
     return (a, b) if a <= b else (b, a)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def across(frame, box):
     """(swap, u0, u1, w0, w1): the pixel in (u, w), u along the isochrones (d changes faster across w)."""
     cx, cy = 0.5 * (box.x0 + box.x1), 0.5 * (box.y0 + box.y1)

@@ -1,7 +1,7 @@
 """Entries through moments: a pixel's moments of path length, and the entries they give (compiled).
 
 Over a range of path lengths that no kink of the waveform crosses, every
-bin kernel is a short Taylor polynomial in τ - c (:mod:`analytic.taylor`),
+bin kernel is a short Taylor polynomial in τ - c (:mod:`analytic.kernels.taylor`),
 so a pixel's entries for every bin it reaches are Σ_j c_{n,j} m_j with the
 *moments* m_j = ∫_pixel a(x) (d(x) - c)^j dx: a few scalars, one quadrature
 for all the bins. This module computes a whole pixel's moments (the smooth
@@ -16,22 +16,23 @@ import math
 from typing import NamedTuple
 
 from .attenuation import attenuation_of_distances
-from .kernel_cache import njit
-from .quadrature import GAUSS_NODES, GAUSS_WEIGHTS, TENSOR_LEVELS
+from .cache import njit
+from .quadrature import GAUSS_NODES, GAUSS_WEIGHTS, TENSOR_LEVELS, implements, time_weight
 from .taylor import cancels, entries_from_moments, kernel_taylor
-from .waveforms.pieces import ROUNDING
+from .pieces import ROUNDING
 
 __all__ = ["MomentProblem", "moment_weight", "pixel_moments", "pixel_integral", "smooth_by_moments", "bin_moments"]
 
 
 class MomentProblem(NamedTuple):
-    """Powers (τ - centre)^j, j < count, of the path length: the moments' weights (:mod:`analytic.taylor`)."""
+    """Powers (τ - centre)^j, j < count, of the path length: the moments' weights (:mod:`analytic.kernels.taylor`)."""
 
     centre: float
     count: int
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@implements(time_weight, MomentProblem)
+@njit(cache=True, error_model="numpy", forceinline=True)
 def moment_weight(problem, tau, scale, values, noise):
     """values[j] = scale (τ - centre)^j, j < count: the moments' weights (their rounding is negligible)."""
     offset = tau - problem.centre
@@ -42,7 +43,7 @@ def moment_weight(problem, tau, scale, values, noise):
         power *= offset
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def _node(frame, cx, hx, cy, hy, order, jx, jy):
     """(weight x a_k, d_s², d_k²) at node (jx, jy) of G_order x G_order on the box centre ± half (metres)."""
     x = cx + hx * GAUSS_NODES[order, jx]
@@ -53,11 +54,11 @@ def _node(frame, cx, hx, cy, hy, order, jx, jy):
     return weight * attenuation_of_distances(frame, x, y, ds2, dk2), ds2, dk2
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def pixel_moments(frame, box, centre, count, rtol, moments):
     """m_j = ∫_pixel a(x) (d(x) - centre)^j dx, j < count, by the tensor Gauss ladder; True when converged.
 
-    The rule and its judgement are :func:`analytic.quadrature.tensor_integrate`'s (rung n is
+    The rule and its judgement are :func:`analytic.kernels.quadrature.tensor_integrate`'s (rung n is
     G_n x G_n, its error the next rung's difference or the previous rungs' trend, G_1 trusted
     for an integrand analytic around the pixel), written for the few scalar moments of one
     pixel: a generic vector of components would cost more than the arithmetic itself.
@@ -146,7 +147,7 @@ def pixel_integral(frame, box, rtol):
     return 0.0, False
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def smooth_by_moments(frame, box, low, high, terms, axis, run, rtol, out, scratch):
     """Add a smooth pixel's entries to out[:run.bins] through its moments; False (nothing added) when it cannot.
 
@@ -167,7 +168,7 @@ def smooth_by_moments(frame, box, low, high, terms, axis, run, rtol, out, scratc
     return bin_moments(scratch, count, run.bins, half, out)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def bin_moments(scratch, count, bins, half, out):
     """Add Σ_j c_{n,j} m_j to out[:bins], unless an entry's terms cancel (then False and nothing added).
 

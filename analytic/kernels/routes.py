@@ -2,8 +2,8 @@
 
     A[(k, n), p] = ∫_{pixel p} a_k(x) κ_n(d_k(x)) dx
 
-for one pair k (a :class:`~analytic.isochrone.Frame` in the rectangle's
-frame) and one pixel p (a :class:`~analytic.isochrone.PixelBox`), over the
+for one pair k (a :class:`~analytic.kernels.isochrone.Frame` in the rectangle's
+frame) and one pixel p (a :class:`~analytic.kernels.isochrone.PixelBox`), over the
 run of bins its light reaches (:class:`BinRun` of a :class:`TimeAxis`).
 :func:`pair_entries` chooses the route, :func:`pair_by_method` forces one
 (so that each fast route can be held to the adaptive one); the module
@@ -21,18 +21,21 @@ import math
 from typing import NamedTuple
 
 import numpy as np
+from numba.extending import overload
 
 from .bins import BinRun, KernelProblem, TimeAxis, bin_edge, bin_of, kernel_cut, kernel_values, pixel_bins
 from .isochrone import Frame, PixelBox, ellipse, first_arrival_point, path_length_at, segment_minimum
-from .kernel_cache import njit
+from .cache import njit
 from .attenuation import attenuation_of_distances
-from .quadrature import (LINEAR, ROOT_BOTH, ROOT_END, ROOT_START, IsochronePiece, Workspace, adapt, integrate, isochrone_rule, make_workspace, piece_map,
+from .quadrature import (LINEAR, ROOT_BOTH, ROOT_END, ROOT_START, IsochronePiece, Workspace, adapt, implements,
+                         integrand, integrate, make_workspace, piece_map, surface_integrand,
                          pixel_isochrone_integral, tensor_integrate)
 from .moments import MomentProblem, bin_moments, moment_weight, smooth_by_moments
 from .strips import strip_entries
 from .taylor import MAX_TERMS, kernel_taylor
 
-__all__ = ["TimeAxis", "BinRun", "Scratch", "RouteOutcome", "make_scratch", "pixel_bins", "pair_entries",
+__all__ = ["TimeAxis", "BinRun", "Scratch", "Column", "RouteOutcome", "DirectRoute", "StripRoute", "CutRoute",
+           "route_entries", "general_entries", "make_scratch", "pixel_bins", "pair_entries",
            "pair_by_method", "clear_of_feet", "clear_of_birth", "scratch_failures", "bin_of", "FOOT_CLEARANCE", "SAFETY", "AUTO", "SMOOTH", "ISOCHRONE", "ADAPTIVE", "STRIP"]
 
 #: A pixel is integrated as a smooth 2-D function only if every foot is at
@@ -71,6 +74,33 @@ class Scratch(NamedTuple):
     moments: Workspace         # the moments' quadrature (MAX_TERMS components)
 
 
+class Column(NamedTuple):
+    """One (pixel, pair)'s run of bins and a range of d holding its path lengths."""
+
+    run: BinRun
+    low: float              # metres
+    high: float
+    exact: bool             # [low, high] is the pixel's exact range (else a bound around it)
+
+
+class DirectRoute(NamedTuple):
+    """The smooth route with every kernel at every node (:func:`_smooth_direct`), as a type to compile by."""
+
+    code: int = 1
+
+
+class StripRoute(NamedTuple):
+    """Cut pixels by strips (:func:`analytic.kernels.strips.strip_entries`), as a type to compile by."""
+
+    code: int = 2
+
+
+class CutRoute(NamedTuple):
+    """The cut (τ, φ) quadrature (:func:`_cut_entries`), as a type to compile by."""
+
+    code: int = 3
+
+
 class RouteOutcome(NamedTuple):
     """What :func:`pair_by_method` did: whether its route applied and converged, and the failed pieces."""
 
@@ -101,6 +131,11 @@ class CutProblem(NamedTuple):
     inner: Workspace
 
 
+class CutMomentsProblem(CutProblem):
+    """:func:`_cut_moments_integrand`'s problem: a :class:`CutProblem` whose ``kernel`` is a
+    :class:`~analytic.kernels.moments.MomentProblem` (the piece's powers of τ); its own type chooses its integrand."""
+
+
 @njit(cache=True, error_model="numpy")
 def make_scratch(width):
     """A :class:`Scratch` for runs of up to ``width`` bins."""
@@ -110,7 +145,7 @@ def make_scratch(width):
                    make_workspace(MAX_TERMS))
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy")
 def clear_of_feet(frame, box):
     """Whether the attenuation's peaks under both feet are far enough for the tensor rule."""
     side = FOOT_CLEARANCE * max(box.x1 - box.x0, box.y1 - box.y0)
@@ -123,7 +158,8 @@ def clear_of_feet(frame, box):
     return True
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@implements(surface_integrand, SmoothProblem)
+@njit(cache=True, error_model="numpy")
 def _smooth_integrand(problem, x, y, values, noise):
     """a_k(x) κ_n(d(x)) for the pair's bins: the integrand of a smooth pixel."""
     frame = problem.frame
@@ -133,13 +169,7 @@ def _smooth_integrand(problem, x, y, values, noise):
              values, noise)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def _kernel_weight(problem, tau, scale, values, noise):
-    """scale κ_n(τ) for the piece's bins (the time weight of a cut piece), and its rounding."""
-    kernel_values(problem, tau, scale, values, noise)
-
-
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy")
 def _cut_response(problem, v):
     """(τ, G(τ) dτ/dv) at τ = piece_map(v): the pixel's response on its isochrone, φ-integrals adaptive."""
     tau, slope = piece_map(problem.kind, problem.tau_a, problem.span, v)
@@ -149,6 +179,7 @@ def _cut_response(problem, v):
     return tau, response * slope
 
 
+@implements(integrand, CutProblem)
 @njit(cache=True, error_model="numpy")
 def _cut_integrand(problem, v, values, noise):
     """κ_n(τ) G(τ) dτ/dv at τ = piece_map(v), for the piece's bins."""
@@ -161,6 +192,7 @@ def _cut_integrand(problem, v, values, noise):
     kernel_values(problem.kernel, tau, weight, values, noise)
 
 
+@implements(integrand, CutMomentsProblem)
 @njit(cache=True, error_model="numpy")
 def _cut_moments_integrand(problem, v, values, noise):
     """(τ - centre)^j G(τ) dτ/dv at τ = piece_map(v), j < count: the piece's moments."""
@@ -168,14 +200,14 @@ def _cut_moments_integrand(problem, v, values, noise):
     moment_weight(problem.kernel, tau, weight, values, noise)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy")
 def _pixel_breakpoints(frame, box, low, high, terms, axis, run):
     """Sorted τ in [low, high] where the cut integrand stops being smooth, and which are roots.
 
     Returns (points, root): ``root[i]`` when G(τ) has a square-root
     behaviour at points[i] (an isochrone touching an edge inside it, born
     at x*, or passing a foot, where G is peaked), so that the τ-pieces
-    next to it take a :func:`analytic.quadrature.piece_map` that smooths
+    next to it take a :func:`analytic.kernels.quadrature.piece_map` that smooths
     it; corners and kernel breakpoints are regular ends.
     """
     kinks = 0
@@ -281,8 +313,7 @@ def _cut_entries(frame, box, low, high, terms, axis, run, rtol, smooth_arcs, tay
             for i in range(piece_run.bins):
                 trial[i] = 0.0
             problem = IsochronePiece(kernel, frame, box, kind, tau_a, span, scratch.angles, scratch.arcs)
-            failed = adapt(isochrone_rule, _kernel_weight, problem, 0.0, 1.0, rtol, piece_run.bins, trial, work,
-                           resolution, _TENSOR_PIECES)
+            failed = adapt(problem, 0.0, 1.0, rtol, piece_run.bins, trial, work, resolution, _TENSOR_PIECES)
             if failed == 0:
                 for i in range(piece_run.bins):
                     target[i] += trial[i]
@@ -290,13 +321,13 @@ def _cut_entries(frame, box, low, high, terms, axis, run, rtol, smooth_arcs, tay
             work.failures[0] -= failed     # not failures: the adaptive route takes the piece over
         problem = CutProblem(frame, box, kernel, kind, tau_a, span, rtol * _INNER_FACTOR, scratch.angles,
                              scratch.arcs, scratch.inner)
-        integrate(_cut_integrand, problem, 0.0, 1.0, rtol, piece_run.bins, target, work, resolution)
+        integrate(problem, 0.0, 1.0, rtol, piece_run.bins, target, work, resolution)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy")
 def _piece_by_moments(frame, box, terms, axis, run, kind, tau_a, span, rtol, smooth_arcs, resolution, target,
                       scratch):
-    """A τ-piece's entries through its moments (:mod:`analytic.taylor`), added to target; False if not.
+    """A τ-piece's entries through its moments (:mod:`analytic.kernels.taylor`), added to target; False if not.
 
     The moments m_j = ∫ (τ - c)^j G(τ) dτ over the piece, by the (τ, φ) tensor rule where the arcs
     are smooth, else by adaptive φ-integrals inside adaptive τ-integrals; False (nothing added) when
@@ -315,8 +346,7 @@ def _piece_by_moments(frame, box, terms, axis, run, kind, tau_a, span, rtol, smo
     if smooth_arcs:
         for j in range(count):
             result[j] = 0.0
-        failed = adapt(isochrone_rule, moment_weight, IsochronePiece(powers, frame, box, kind, tau_a, span,
-                                                                      scratch.angles, scratch.arcs),
+        failed = adapt(IsochronePiece(powers, frame, box, kind, tau_a, span, scratch.angles, scratch.arcs),
                        0.0, 1.0, rtol, count, result, moments, resolution, _TENSOR_PIECES)
         if failed:
             moments.failures[0] -= failed   # not failures: the adaptive route takes the piece over
@@ -324,13 +354,13 @@ def _piece_by_moments(frame, box, terms, axis, run, kind, tau_a, span, rtol, smo
     if not smooth_arcs:
         for j in range(count):
             result[j] = 0.0
-        integrate(_cut_moments_integrand, CutProblem(frame, box, powers, kind, tau_a, span, rtol * _INNER_FACTOR,
-                                                     scratch.angles, scratch.arcs, scratch.inner),
+        integrate(CutMomentsProblem(frame, box, powers, kind, tau_a, span, rtol * _INNER_FACTOR, scratch.angles,
+                                    scratch.arcs, scratch.inner),
                   0.0, 1.0, rtol, count, result, moments, resolution)
     return bin_moments(scratch, count, run.bins, half, target)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy")
 def clear_of_birth(frame, box, clear):
     """Whether the pixel is ``clear`` (of the feet) and clear of x*: its arcs are smooth enough for the (τ, φ) tensor rule.
 
@@ -348,8 +378,7 @@ def clear_of_birth(frame, box, clear):
 @njit(cache=True, error_model="numpy")
 def _smooth_direct(frame, box, terms, axis, run, rtol, out, work):
     """The smooth route with every kernel at every node (the tensor Gauss ladder); True when converged."""
-    return tensor_integrate(_smooth_integrand, SmoothProblem(frame, KernelProblem(terms, axis, run)), box, rtol,
-                            run.bins, out, work)
+    return tensor_integrate(SmoothProblem(frame, KernelProblem(terms, axis, run)), box, rtol, run.bins, out, work)
 
 
 @njit(cache=True, error_model="numpy")
@@ -357,7 +386,7 @@ def pair_entries(frame, box, low, high, terms, axis, run, rtol, out, scratch):
     """out[i] = A[(k, first + i), p] for one (pair, pixel); True if the smooth route served.
 
     A real call (not inlined): assembly takes it only for the pairs its own smooth path
-    (:mod:`analytic.assembly`) does not serve.
+    (:mod:`analytic.kernels.assembly`) does not serve.
 
     Parameters
     ----------
@@ -366,7 +395,7 @@ def pair_entries(frame, box, low, high, terms, axis, run, rtol, out, scratch):
     box : PixelBox
         The pixel, metres.
     low, high : float
-        The pixel's range of d (:func:`analytic.isochrone.rectangle_range`), metres.
+        The pixel's range of d (:func:`analytic.kernels.isochrone.rectangle_range`), metres.
     terms : WaveformTerms
         The waveform's pieces.
     axis : TimeAxis
@@ -396,13 +425,75 @@ def pair_entries(frame, box, low, high, terms, axis, run, rtol, out, scratch):
 
 
 @njit(cache=True, error_model="numpy")
+def _direct(frame, box, column, terms, axis, rtol, out, scratch):
+    """:class:`DirectRoute`: where it applies (clear of the feet, no breakpoint inside), True when it converged."""
+    for i in range(column.run.bins):
+        out[i] = 0.0
+    if not clear_of_feet(frame, box) or kernel_cut(column.low, column.high, terms, axis, column.run):
+        return False
+    return _smooth_direct(frame, box, terms, axis, column.run, rtol, out, scratch.work)
+
+
+@njit(cache=True, error_model="numpy")
+def _strips(frame, box, column, terms, axis, rtol, out, scratch):
+    """:class:`StripRoute`: where it applies (clear of the feet and of x*), True when it served."""
+    for i in range(column.run.bins):
+        out[i] = 0.0
+    if not clear_of_birth(frame, box, clear_of_feet(frame, box)):
+        return False
+    return strip_entries(frame, box, column.low, column.high, terms, axis, column.run, rtol, out, scratch.work)
+
+
+@njit(cache=True, error_model="numpy")
+def _cut(frame, box, column, terms, axis, rtol, out, scratch):
+    """:class:`CutRoute`: always serves (its pieces that stop refining are counted as failures)."""
+    for i in range(column.run.bins):
+        out[i] = 0.0
+    smooth_arcs = clear_of_birth(frame, box, clear_of_feet(frame, box))
+    _cut_entries(frame, box, column.low, column.high, terms, axis, column.run, rtol, smooth_arcs, True, out, scratch)
+    return True
+
+
+def route_entries(route, frame, box, column, terms, axis, rtol, out, scratch):
+    """One route's entries of one (pixel, pair) into out[:run.bins]; True when it served (compiled code only).
+
+    ``route`` is a :class:`DirectRoute`, :class:`StripRoute` or :class:`CutRoute`: its type chooses the
+    route when the caller is compiled, so that a route is compiled only when a scene needs it.
+    """
+    raise TypeError("route_entries is called from compiled code")
+
+
+@overload(route_entries, jit_options={"error_model": "numpy"})
+def _route_of(route, frame, box, column, terms, axis, rtol, out, scratch):
+    chosen = {DirectRoute: _direct, StripRoute: _strips, CutRoute: _cut}.get(getattr(route, "instance_class", None))
+    if chosen is None:
+        return None
+    return lambda route, frame, box, column, terms, axis, rtol, out, scratch: chosen(frame, box, column, terms, axis,
+                                                                                     rtol, out, scratch)
+
+
+@njit(cache=True, error_model="numpy")
+def general_entries(frame, box, column, terms, axis, rtol, out, scratch):
+    """The routes after the moments, in order, on the exact ``column``; True if the smooth one served.
+
+    What :func:`pair_entries` does once its moments did not serve; assembly runs the same routes
+    one at a time over the pairs it left (:func:`analytic.kernels.assembly.run_jobs`).
+    """
+    if _direct(frame, box, column, terms, axis, rtol, out, scratch):
+        return True
+    if not _strips(frame, box, column, terms, axis, rtol, out, scratch):
+        _cut(frame, box, column, terms, axis, rtol, out, scratch)
+    return False
+
+
+@njit(cache=True, error_model="numpy")
 def pair_by_method(frame, box, low, high, terms, axis, run, rtol, method, taylor, out, scratch):
     """One (pair, pixel)'s entries by one route (``SMOOTH``, ``STRIP``, ``ISOCHRONE`` or ``ADAPTIVE``).
 
     ``taylor`` (except for ``STRIP``): through the moments and the kernels' Taylor coefficients
-    (:mod:`analytic.taylor`), or False: with the kernels at every quadrature node. ``AUTO``
+    (:mod:`analytic.kernels.taylor`), or False: with the kernels at every quadrature node. ``AUTO``
     is :func:`pair_entries` (what assembly does for the pairs its smooth path does not serve;
-    :func:`analytic.assembly.auto_entries` is assembly's whole route).
+    :func:`analytic.kernels.assembly.auto_entries` is assembly's whole route).
 
     Returns
     -------
@@ -434,7 +525,7 @@ def pair_by_method(frame, box, low, high, terms, axis, run, rtol, method, taylor
     return RouteOutcome(True, True, scratch_failures(scratch))
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy")
 def scratch_failures(scratch):
     """Quadrature pieces kept without meeting the tolerance, over the scratch's three workspaces."""
     return scratch.work.failures[0] + scratch.inner.failures[0] + scratch.moments.failures[0]

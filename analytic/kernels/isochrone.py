@@ -44,9 +44,10 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-from .kernel_cache import njit
+from .cache import njit
 
-from .attenuation import LAMBERTIAN, PAPER, attenuation_at
+from .attenuation import attenuation_at
+from .formulas import LAMBERTIAN, PAPER
 
 __all__ = ["Frame", "Isochrone", "PixelBox", "make_frame", "pair_frame", "ellipse", "point_on_ellipse", "jacobian", "path_length_at",
            "first_arrival_point", "segment_minimum", "rectangle_range", "range_bound", "rectangle_crossings",
@@ -282,7 +283,7 @@ def rectangle_range(frame, box):
 _BOUND_SLACK = 1e-14
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy")
 def range_bound(frame, centre_x, centre_y, half_x, half_y):
     """An interval of path length holding d over the box centre ± half, metres, from d and ∇d at its centre.
 

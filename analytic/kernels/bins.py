@@ -3,7 +3,7 @@
 A bin n of a :class:`TimeAxis` covers path lengths [t_n, t_n + T); light
 leaving the rectangle at path length τ adds κ_n(τ) = S(t_{n+1} - τ) -
 S(t_n - τ) to it, S the waveform's integral (:mod:`analytic.waveforms`).
-Every route of :mod:`analytic.kernels` and :mod:`analytic.strips` reads
+Every route of :mod:`analytic.kernels` and :mod:`analytic.kernels.strips` reads
 the bins and kernels through this module.
 """
 
@@ -13,8 +13,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .kernel_cache import njit
-from .waveforms.pieces import ROUNDING, WaveformTerms, piece_of, piece_value
+from .cache import njit
+from .pieces import ROUNDING, WaveformTerms, piece_of, piece_value
+from .quadrature import implements, time_weight
 
 __all__ = ["TimeAxis", "BinRun", "KernelProblem", "StepTable", "bin_edge", "bin_of", "pixel_bins", "kernel_cut",
            "kernel_values", "step_table", "step_cut", "step_kernels"]
@@ -48,7 +49,7 @@ class KernelProblem(NamedTuple):
     run: BinRun
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def bin_of(tau, axis):
     """floor((τ - start) / period) clamped to [-1, count] in floating point (no integer overflow)."""
     index = np.floor((tau - axis.start_opl) / axis.bin_width_opl)
@@ -59,7 +60,7 @@ def bin_of(tau, axis):
     return int(index)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def pixel_bins(low, high, axis, lead, duration):
     """The :class:`BinRun` that light leaving a pixel at d in [low, high] reaches (``bins`` 0 if none).
 
@@ -78,7 +79,7 @@ def bin_edge(axis, n):
     return axis.start_opl + axis.bin_width_opl * n
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def kernel_cut(low, high, terms, axis, run):
     """Whether a breakpoint of some κ_n (t_n shifted back by a kink of the waveform) lies strictly inside (low, high)."""
     for n in range(run.first, run.first + run.bins + 1):
@@ -89,7 +90,8 @@ def kernel_cut(low, high, terms, axis, run):
     return False
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@implements(time_weight, KernelProblem)
+@njit(cache=True, error_model="numpy", forceinline=True)
 def kernel_values(problem, tau, scale, values, noise):
     """values[i] = scale κ_{first + i}(τ), i < bins, and noise[i] a bound on its rounding.
 
@@ -118,7 +120,7 @@ def kernel_values(problem, tau, scale, values, noise):
 
 
 class StepTable(NamedTuple):
-    """A waveform's pieces as plain arrays for the kernels' hot path (:mod:`analytic.assembly`).
+    """A waveform's pieces as plain arrays for the kernels' hot path (:mod:`analytic.kernels.assembly`).
 
     ``kinked``: the starts b_i where s or a derivative jumps (the kernels' breakpoints are the
     bin edges shifted back by them). ``steps``: whether S is a step function (every piece a
@@ -160,7 +162,7 @@ def step_cut(kinked, low, high, axis, run):
 
 @njit(cache=True, error_model="numpy")
 def _step_of(starts, u):
-    """:func:`analytic.waveforms.pieces.piece_of` on plain arrays: the last piece starting below u, or -1.
+    """:func:`analytic.kernels.pieces.piece_of` on plain arrays: the last piece starting below u, or -1.
 
     A step function has a few pieces (the impulse one): a scan from the end.
     """
@@ -175,7 +177,7 @@ def step_kernels(starts, constants, forms, axis, run, tau, scale, out):
     """out[i] = scale κ_{first + i}(τ), i < bins, for a step-function S (a :class:`StepTable` with ``steps``).
 
     κ_n = (K_j - K_i) + (F_j - F_i) at the bin's two edges, as :func:`kernel_values` and
-    :func:`analytic.taylor.kernel_taylor` compute it, so the same numbers.
+    :func:`analytic.kernels.taylor.kernel_taylor` compute it, so the same numbers.
     """
     lower = _step_of(starts, bin_edge(axis, run.first) - tau)
     lower_constant = 0.0 if lower < 0 else constants[lower]

@@ -16,7 +16,7 @@ asks (:func:`kernel_taylor`).
 
 Accuracy: the terms kept are those whose remainder, bounded by the
 waveform's own derivative bounds over the range
-(:func:`analytic.waveforms.pieces.piece_derivative_bound`), is below a
+(:func:`analytic.kernels.pieces.piece_derivative_bound`), is below a
 share of the tolerance of the bin's scale; the moments are integrated to
 the tolerance relative to M_j = ∫ |τ - c|^j |G|, so an entry's error is
 within the tolerance of U_n = Σ_j |c_{n,j}| M_j, which is within a few
@@ -29,8 +29,8 @@ from __future__ import annotations
 
 import math
 
-from .kernel_cache import njit
-from .waveforms.pieces import piece_derivative_bound, piece_derivatives, piece_of, piece_value
+from .cache import njit
+from .pieces import piece_derivative_bound, piece_derivatives, piece_of, piece_value
 
 __all__ = ["MAX_TERMS", "kernel_taylor", "entries_from_moments", "cancels"]
 
@@ -42,7 +42,7 @@ _TRUNCATION = 0.05
 _CANCELLATION = 8.0
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def _edge_value(terms, u):
     """(piece, K, F(u)) at one bin edge u = t_n - c (piece -1, 0, 0 where S = 0)."""
     piece = piece_of(terms, u)
@@ -70,7 +70,7 @@ def _derivative_bound(terms, u, half, order):
     return bound
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def _constant_forms(terms, piece):
     """Whether a piece's form is a constant (no coefficient, or one polynomial coefficient): S' = 0 there.
 
@@ -83,15 +83,15 @@ def _constant_forms(terms, piece):
     return terms.offsets[piece + 1] - terms.offsets[piece] <= 1
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def kernel_taylor(terms, axis, run, centre, half, rtol, coefficients, lower_edge, upper_edge):
     """Taylor coefficients of the run's kernels at ``centre`` over centre ± half; returns how many terms.
 
     Parameters
     ----------
     terms : WaveformTerms
-    axis : analytic.bins.TimeAxis
-    run : analytic.bins.BinRun
+    axis : analytic.kernels.bins.TimeAxis
+    run : analytic.kernels.bins.BinRun
     centre, half : float
         The range of path length, metres; no kink of any κ_n inside it.
     rtol : float
@@ -134,7 +134,7 @@ def kernel_taylor(terms, axis, run, centre, half, rtol, coefficients, lower_edge
     return needed
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def _polynomial_taylor(terms, axis, run, centre, coefficients, lower_edge, upper_edge):
     """:func:`kernel_taylor` for polynomial pieces of degree D: D + 1 terms, exactly (no remainder)."""
     count = terms.degree + 1
@@ -195,7 +195,7 @@ def _more_terms(terms, lower_u, upper_u, lower_piece, upper_piece, half, rtol, c
     return 0
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def entries_from_moments(coefficients, count, bins, moments, out):
     """out[i] += Σ_{j < count} coefficients[i, j] moments[j] for i < bins."""
     for i in range(bins):
@@ -205,7 +205,7 @@ def entries_from_moments(coefficients, count, bins, moments, out):
         out[i] += total
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def cancels(coefficients, count, bins, moments, magnitudes):
     """Whether some entry Σ c_j m_j is far below U = Σ |c_j| M_j: its Taylor terms cancel (see the module docstring)."""
     for i in range(bins):

@@ -1,5 +1,15 @@
-"""The scaled complementary error function erfcx(v) = e^{v²} erfc(v) for v >= 0, one formula for three backends.
+"""Formulas written once for the three backends: NumPy, compiled code (Numba) and the renderer (Dr.Jit).
 
+Each is a plain function of its inputs and of the array module's functions
+(``sqrt``, ``exp``), with no import of its own, so that one expression
+serves every backend: :func:`attenuation_formula` (a_k of docs/design.md
+section 2) and the scaled complementary error function's three ranges
+(:func:`small`, :func:`middle`, :func:`large`), which the Gaussian and EMG
+pulses' cumulatives are made of. NumPy's forms are here too
+(:func:`erfcx_array`); the compiled ones are in :mod:`.special` and
+:mod:`.attenuation`, the renderer's in :mod:`transient.common`.
+
+The scaled complementary error function erfcx(v) = e^{v²} erfc(v), v >= 0:
 The Gaussian and exponentially modified Gaussian pulses' cumulatives are
 sums of e^{E(u)} erfcx(v(u)) with v >= 0 (:mod:`analytic.waveforms.pieces`,
 family ``ERRORFUNCTIONS``): erfcx is bounded by 1 there and never
@@ -18,15 +28,8 @@ v > 4                   (1/√π - R_3(1/v²) / v²) / v (asymptotic form)
 
 Each range is one function of the array module's ``exp`` (:func:`small`,
 :func:`middle`, :func:`large`); the backends only choose between them
-(:func:`erfcx_scalar` by branches in compiled code, :func:`erfcx_array`
+(:func:`analytic.kernels.special.erfcx_scalar` by branches in compiled code, :func:`erfcx_array`
 with ``numpy.where``, the renderer with ``drjit.select``).
-
-:func:`erfcx_taylor` gives erfcx's Taylor coefficients at v, which the
-model's moments route needs: erfcx^(k)(v) / k! = (-2)^k e^{v²} i^k erfc(v),
-with the repeated integrals i^k erfc the minimal solution of
-2k c_k = c_{k-2} - 2v c_{k-1} (c_k = e^{v²} i^k erfc(v), c_{-1} = 2/√π),
-so they are computed by Miller's backward recurrence (forward it loses
-(2v²)^k / k! of its digits: all of them at v = 6, k = 11).
 """
 
 from __future__ import annotations
@@ -35,10 +38,40 @@ import math
 
 import numpy as np
 
-from ..kernel_cache import njit
+__all__ = ["attenuation_formula", "LAMBERTIAN", "PAPER", "small", "middle", "large", "erfcx_array", "SMALL",
+           "LARGE", "RECIPROCAL_SQRT_PI"]
 
-__all__ = ["erfcx_scalar", "erfcx_array", "erfcx_taylor", "small", "middle", "large", "SMALL", "LARGE",
-           "RECIPROCAL_SQRT_PI"]
+#: Integer codes of the attenuation kinds for compiled code (``Frame.mode``).
+LAMBERTIAN, PAPER = 0, 1
+
+
+def attenuation_formula(sqrt):
+    """a_k from heights and squared distances, for an array module's ``sqrt``.
+
+    Parameters
+    ----------
+    sqrt : callable
+        ``math.sqrt`` (compiled code), ``numpy.sqrt`` or ``drjit.sqrt``.
+
+    Returns
+    -------
+    callable
+        ``a(mode, source_height, source_squared, sensor_height,
+        sensor_squared)``: heights h_s, h_k in metres, squared distances
+        d_s², d_k² in m², ``mode`` :data:`LAMBERTIAN` or :data:`PAPER`
+        (a Python int: a branch at trace time for Dr.Jit); 1/m⁴.
+
+    Notes
+    -----
+    lambertian h_s h_k / (π d_s³ d_k³), paper h_s / (d_s³ d_k²).
+    """
+    def formula(mode, source_height, source_squared, sensor_height, sensor_squared):
+        source_cube = source_squared * sqrt(source_squared)
+        if mode == LAMBERTIAN:
+            return source_height * sensor_height / (math.pi * source_cube * sensor_squared * sqrt(sensor_squared))
+        return source_height / (source_cube * sensor_squared)
+    return formula
+
 
 #: Where Cody's first range ends and his asymptotic range begins.
 SMALL, LARGE = 0.46875, 4.0
@@ -90,21 +123,6 @@ def large(v, exp):
     return (RECIPROCAL_SQRT_PI - z * (numerator + _P[4]) / (denominator + _Q[4])) / v
 
 
-_small = njit(cache=True, error_model="numpy", inline="always")(small)
-_middle = njit(cache=True, error_model="numpy", inline="always")(middle)
-_large = njit(cache=True, error_model="numpy", inline="always")(large)
-
-
-@njit(cache=True, error_model="numpy")
-def erfcx_scalar(v):
-    """erfcx(v) = e^{v²} erfc(v) for one v >= 0 (compiled); 1 for v <= 0 is not defined here (v < 0 is clamped)."""
-    if v <= SMALL:
-        return _small(max(v, 0.0), math.exp)
-    if v <= LARGE:
-        return _middle(v, math.exp)
-    return _large(v, math.exp)
-
-
 def erfcx_array(v) -> np.ndarray:
     """erfcx(v) elementwise for v >= 0 (NumPy; v < 0 is clamped to 0)."""
     v = np.maximum(np.asarray(v, dtype=np.float64), 0.0)
@@ -113,57 +131,3 @@ def erfcx_array(v) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore"):
         high = large(np.maximum(v, LARGE), np.exp)
     return np.where(v <= SMALL, low, np.where(v <= LARGE, mid, high))
-
-
-# Miller's recurrence starts 40 + 320 / v² orders above the highest one asked for (at most 13): the
-# dominant solution's share has decayed below 1e-15 by then (measured against mpmath, v in (1, 1e6]).
-# For v <= 1 the forward recurrence loses at most (2v²)^k / k! <= 2 of its digits and is used instead.
-_MILLER_START = 40.0
-_MILLER_SLOW = 320.0
-# Rescale the backward recurrence when its values pass this size (they grow like (2v)^k).
-_RESCALE = 1e150
-
-
-@njit(cache=True, error_model="numpy")
-def erfcx_taylor(v, count, out):
-    """out[k] = erfcx^(k)(v) / k! for k < count, v >= 0 (compiled).
-
-    Notes
-    -----
-    erfcx^(k)(v) / k! = (-2)^k c_k with c_k = e^{v²} i^k erfc(v), the
-    minimal solution of c_{k-2} = 2k c_k + 2v c_{k-1} for v > 1; Miller's
-    algorithm runs it downward from c_{N+1} = 0, c_N = 1 and scales the
-    result so that c_{-1} = 2/√π (see the module docstring). For v <= 1,
-    where the two solutions barely separate, it runs forward from
-    c_{-1} = 2/√π and c_0 = erfcx(v).
-    """
-    v = max(v, 0.0)
-    if v <= 1.0:
-        before = 2.0 * RECIPROCAL_SQRT_PI      # c_{k-2}
-        current = erfcx_scalar(v)              # c_{k-1}
-        factor = 1.0
-        for k in range(count):
-            if k > 0:
-                before, current = current, (before - 2.0 * v * current) / (2.0 * k)
-            out[k] = current * factor
-            factor *= -2.0
-        return
-    top = count + int(_MILLER_START + _MILLER_SLOW / (v * v))
-    upper = 0.0            # c_{k+1}
-    current = 1e-300       # c_k, from k = top down
-    for k in range(top, -1, -1):
-        if k < count:
-            out[k] = current
-        lower = 2.0 * (k + 1) * upper + 2.0 * v * current     # c_{k-1}
-        upper, current = current, lower
-        if abs(current) > _RESCALE:
-            for j in range(min(k, count), count):
-                out[j] /= _RESCALE
-            upper /= _RESCALE
-            current /= _RESCALE
-    # current is now c_{-1}
-    scale = 2.0 * RECIPROCAL_SQRT_PI / current
-    factor = 1.0
-    for k in range(count):
-        out[k] *= scale * factor
-        factor *= -2.0

@@ -26,10 +26,15 @@ tolerance stops earlier and is faster.
 - :func:`pixel_isochrone_integral` — G(τ) with :func:`integrate` on each arc
   between the isochrone's crossings of the pixel's edges.
 
-Integrands are compiled functions ``integrand(problem, t, values, noise)``
-(or ``(problem, x, y, values, noise)``) that write a vector f (one component
+Integrands are compiled functions ``f(problem, t, values, noise)`` (or
+``(problem, x, y, values, noise)``) that write a vector f (one component
 per time bin) into ``values[:size]`` and a bound on its rounding into
-``noise[:size]``; ``problem`` is any tuple they need. Acceptance is per
+``noise[:size]``; ``problem`` is a record (a NamedTuple) of what they need,
+and its type chooses the integrand: each module registers its own with
+:func:`implements` for :func:`integrand`, :func:`surface_integrand` or
+:func:`time_weight`, and the drivers call those names. The choice is made
+when a driver is compiled for a problem type, so no compiled function is
+passed as a value (which Numba could neither cache nor compile once). Acceptance is per
 component, relative to ∫ |f| (QUADPACK's ``resabs``), so the relative error
 of each entry is bounded even where a waveform's undershoot makes f change
 sign; a component whose ∫ |f| is below its own integrated rounding (a time
@@ -37,10 +42,7 @@ kernel that is the difference of two nearly equal values of S) is held to
 that rounding instead, which no rung could beat.
 
 Compiled with ``error_model="numpy"`` (a division by zero gives inf or NaN
-instead of raising) and the function-taking routines with
-``inline="always"``: Numba can cache a function that receives another
-compiled function only if that function value never crosses a real call
-(otherwise its address is baked into the code).
+instead of raising).
 """
 
 from __future__ import annotations
@@ -49,13 +51,14 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from .kernel_cache import njit
+from numba.extending import overload
 
 from .attenuation import attenuation_at
-from .isochrone import Frame, Isochrone, PixelBox, ellipse, point_on_ellipse, rectangle_crossings
+from .cache import njit
+from .isochrone import Frame, Isochrone, PixelBox, ellipse, make_frame, point_on_ellipse, rectangle_crossings
 
 __all__ = ["Workspace", "ArcProblem", "IsochronePiece", "make_workspace", "adapt", "ladder_rule", "integrate",
-           "isochrone_rule",
+           "isochrone_rule", "integrand", "surface_integrand", "time_weight", "implements", "nested_integral_arguments",
            "tensor_integrate", "arc_value", "arc_integrand", "pixel_arcs", "pixel_isochrone_integral",
            "piece_map", "LINEAR", "ROOT_START", "ROOT_END", "ROOT_BOTH", "GAUSS_NODES", "GAUSS_WEIGHTS",
            "LADDER_LEVELS", "TENSOR_LEVELS", "MAX_PIECES"]
@@ -114,8 +117,50 @@ def make_workspace(size):
                      np.zeros(size), np.zeros(size), np.zeros(1, dtype=np.int64))
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def _gauss(integrand, problem, lo, hi, order, size, work, out):
+# -- integrands, chosen by their problem's type ---------------------------------------------------------------
+
+
+def integrand(problem, t, values, noise):
+    """f(t) of a 1-D integral into ``values[:size]``, its rounding into ``noise[:size]`` (compiled code only).
+
+    The implementation is the one registered for ``problem``'s record type (:func:`implements`).
+    """
+    raise TypeError("integrand is called from compiled code, with a registered problem record")
+
+
+def surface_integrand(problem, x, y, values, noise):
+    """f(x, y) of a 2-D integral over a rectangle, as :func:`integrand` (compiled code only)."""
+    raise TypeError("surface_integrand is called from compiled code, with a registered problem record")
+
+
+def time_weight(problem, tau, scale, values, noise):
+    """scale w(τ): a cut piece's time weight (the bins' kernels, or the powers of τ), as :func:`integrand`."""
+    raise TypeError("time_weight is called from compiled code, with a registered problem record")
+
+
+def implements(stub, record):
+    """Decorator: the compiled function is ``stub``'s implementation for problems of type ``record``.
+
+    Parameters
+    ----------
+    stub : {integrand, surface_integrand, time_weight}
+    record : type
+        A NamedTuple class; its instances are the first argument.
+    """
+    def register(kernel):
+        @overload(stub, jit_options={"error_model": "numpy"})
+        def typed(problem, *arguments):
+            if getattr(problem, "instance_class", None) is record:
+                def call(problem, *arguments):
+                    return kernel(problem, *arguments)
+                return call
+            return None
+        return kernel
+    return register
+
+
+@njit(cache=True, error_model="numpy")
+def _gauss(problem, lo, hi, order, size, work, out):
     """G_order of f on [lo, hi] into out[:size]; of |f| and of f's rounding into work.magnitude, work.rounding."""
     centre = 0.5 * (lo + hi)
     half = 0.5 * (hi - lo)
@@ -132,7 +177,7 @@ def _gauss(integrand, problem, lo, hi, order, size, work, out):
             work.rounding[i] += weight * work.noise[i]
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy")
 def _judge(work, size, rtol, rung, first):
     """With G_rung in work.lower and G_{rung+1} in work.upper: is G_rung within the tolerance?
 
@@ -166,35 +211,32 @@ def _judge(work, size, rtol, rung, first):
     return False
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def ladder_rule(integrand, problem, lo, hi, rtol, size, work):
+@njit(cache=True, error_model="numpy")
+def ladder_rule(problem, lo, hi, rtol, size, work):
     """The 1-D ladder G_1, G_2, ... of an integrand on [lo, hi] (a rule for :func:`adapt`).
 
     Returns True when a rung converged, with it in ``work.lower``; else
     ``work.lower`` holds the highest rung.
     """
-    _gauss(integrand, problem, lo, hi, 1, size, work, work.lower)
+    _gauss(problem, lo, hi, 1, size, work, work.lower)
     for order in range(2, LADDER_LEVELS + 1):
-        _gauss(integrand, problem, lo, hi, order, size, work, work.upper)
+        _gauss(problem, lo, hi, order, size, work, work.upper)
         if _judge(work, size, rtol, order - 1, 2):
             return True
     return False
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def adapt(rule, integrand, problem, lo, hi, rtol, size, total, work, resolution, max_pieces):
+@njit(cache=True, error_model="numpy")
+def adapt(problem, lo, hi, rtol, size, total, work, resolution, max_pieces):
     """Add ∫_lo^hi of a vector integrand to total[:size] by adaptive bisection.
 
     Parameters
     ----------
-    rule : compiled function
-        ``rule(integrand, problem, left, right, rtol, size, work)`` climbs a
-        ladder on [left, right]; True if it converged. Either way the value
-        to keep is in ``work.lower``.
-    integrand : compiled function
-        What the rule evaluates (see the module docstring).
     problem : tuple
-        Passed to the rule.
+        The integrand's record; its type chooses the rule that climbs a ladder
+        on each piece (:func:`rule`: :func:`isochrone_rule` for an
+        :class:`IsochronePiece`, :func:`ladder_rule` of its :func:`integrand`
+        otherwise).
     lo, hi : float
         Interval, in the integration variable's units.
     rtol : float
@@ -243,7 +285,7 @@ def adapt(rule, integrand, problem, lo, hi, rtol, size, total, work, resolution,
         # a piece may hold its share (by length) of the whole interval's error budget
         for i in range(size):
             work.floor[i] = 0.0 if applied == 1 else rtol * work.density[i] * (right - left)
-        converged = rule(integrand, problem, left, right, rtol, size, work)
+        converged = rule(problem, left, right, rtol, size, work)
         if applied == 1:
             for i in range(size):
                 work.density[i] = work.magnitude[i] / (hi - lo)
@@ -266,19 +308,17 @@ def adapt(rule, integrand, problem, lo, hi, rtol, size, total, work, resolution,
     return failures
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def integrate(integrand, problem, lo, hi, rtol, size, total, work, resolution):
-    """Add ∫_lo^hi f(t) dt to total[:size]: :func:`adapt` with :func:`ladder_rule`.
+@njit(cache=True, error_model="numpy")
+def integrate(problem, lo, hi, rtol, size, total, work, resolution):
+    """Add ∫_lo^hi f(t) dt to total[:size]: :func:`adapt` with :func:`ladder_rule` of ``problem``'s :func:`integrand`.
 
-    ``integrand(problem, t, values, noise)`` writes f(t) into
-    ``values[:size]`` and its rounding into ``noise[:size]``; the other
-    arguments and the return value are :func:`adapt`'s.
+    The arguments and the return value are :func:`adapt`'s.
     """
-    return adapt(ladder_rule, integrand, problem, lo, hi, rtol, size, total, work, resolution, MAX_PIECES)
+    return adapt(problem, lo, hi, rtol, size, total, work, resolution, MAX_PIECES)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def tensor_integrate(integrand, problem, box, rtol, size, total, work):
+@njit(cache=True, error_model="numpy")
+def tensor_integrate(problem, box, rtol, size, total, work):
     """Add ∫∫ f(x, y) over [x0, x1] x [y0, y1] to total[:size] by the tensor Gauss ladder.
 
     Rungs G_n x G_n, n = 1 ... :data:`TENSOR_LEVELS`, each checked against the
@@ -286,11 +326,9 @@ def tensor_integrate(integrand, problem, box, rtol, size, total, work):
 
     Parameters
     ----------
-    integrand : compiled function
-        ``integrand(problem, x, y, values, noise)`` writes f(x, y) into
-        ``values[:size]`` and its rounding into ``noise[:size]``.
     problem : tuple
-    box : analytic.isochrone.PixelBox
+        The record of a registered :func:`surface_integrand`.
+    box : analytic.kernels.isochrone.PixelBox
         The rectangle, metres.
     rtol : float
         Relative accuracy of each component (relative to ∫∫ |f|).
@@ -322,7 +360,7 @@ def tensor_integrate(integrand, problem, box, rtol, size, total, work):
             x = cx + hx * GAUSS_NODES[order, jx]
             wx = hx * GAUSS_WEIGHTS[order, jx]
             for jy in range(order):
-                integrand(problem, x, cy + hy * GAUSS_NODES[order, jy], values, noise)
+                surface_integrand(problem, x, cy + hy * GAUSS_NODES[order, jy], values, noise)
                 weight = wx * hy * GAUSS_WEIGHTS[order, jy]
                 for i in range(size):
                     target[i] += weight * values[i]
@@ -353,6 +391,7 @@ def arc_value(frame, curve, phi):
     return attenuation_at(frame, x, y) * abs(curve.j0 * c + curve.j1 * c * c + curve.j2 * s * s)
 
 
+@implements(integrand, ArcProblem)
 @njit(cache=True, error_model="numpy")
 def arc_integrand(problem, phi, values, noise):
     """:func:`arc_value` as an integrand of :func:`integrate` (``problem``: an :class:`ArcProblem`).
@@ -375,7 +414,7 @@ def pixel_arcs(frame, curve, box, angles, arcs):
     ----------
     frame : Frame
     curve : Isochrone
-        From :func:`analytic.isochrone.ellipse`, metres.
+        From :func:`analytic.kernels.isochrone.ellipse`, metres.
     box : PixelBox
         The pixel, metres.
     angles : float64[8]
@@ -417,7 +456,7 @@ def pixel_isochrone_integral(frame, curve, box, rtol, angles, arcs, work):
     ----------
     frame : Frame
     curve : Isochrone
-        From :func:`analytic.isochrone.ellipse`.
+        From :func:`analytic.kernels.isochrone.ellipse`.
     box : PixelBox
         The pixel, metres.
     rtol : float
@@ -438,8 +477,22 @@ def pixel_isochrone_integral(frame, curve, box, rtol, angles, arcs, work):
     total = work.result
     total[0] = 0.0
     for i in range(count):
-        integrate(arc_integrand, problem, arcs[i, 0], arcs[i, 1], rtol, 1, total, work, 0.0)
+        integrate(problem, arcs[i, 0], arcs[i, 1], rtol, 1, total, work, 0.0)
     return total[0]
+
+
+def nested_integral_arguments():
+    """Arguments of :func:`pixel_isochrone_integral` (any values of the right types).
+
+    The cut routes integrate over τ with integrands that integrate over φ by the same drivers
+    (:func:`integrate` inside :func:`integrate`). Numba links such a nested specialisation only if it
+    was compiled before the outer one (otherwise the call aborts at run time on an unresolved symbol),
+    so the Python side compiles :func:`pixel_isochrone_integral` for these types first
+    (:func:`analytic.kernels.cache.compiled`).
+    """
+    frame = make_frame((0.5, 0.5, 1.0), (0.5, 0.5, 1.0), 0)
+    return (frame, ellipse(frame, 2.5), PixelBox(0.0, 1.0, 0.0, 1.0), 1e-6, np.empty(8), np.empty((4, 2)),
+            make_workspace(1))
 
 
 #: How :func:`piece_map` maps v in [0, 1] onto a τ-piece, by which ends have a
@@ -487,8 +540,8 @@ class IsochronePiece(NamedTuple):
     arcs: np.ndarray
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def isochrone_rule(weight, problem, lo, hi, rtol, size, work):
+@njit(cache=True, error_model="numpy")
+def isochrone_rule(problem, lo, hi, rtol, size, work):
     """Tensor ladder in (v, φ) of w(τ) G(τ) dτ/dv over [lo, hi] ⊂ [0, 1] (a rule for :func:`adapt`).
 
     G(τ) = ∫_{isochrone ∩ pixel} a J dφ as in :func:`pixel_isochrone_integral`,
@@ -499,11 +552,10 @@ def isochrone_rule(weight, problem, lo, hi, rtol, size, work):
 
     Parameters
     ----------
-    weight : compiled function
-        ``weight(weight_problem, tau, scale, values, noise)`` writes
-        scale w(τ) into ``values[:size]`` (the time kernels) and its
-        rounding into ``noise[:size]``.
     problem : IsochronePiece
+        Its ``weight_problem``'s :func:`time_weight` writes scale w(τ) into
+        ``values[:size]`` (the time kernels, or powers of τ) and its rounding
+        into ``noise[:size]``.
     lo, hi, rtol, size, work
         As for any rule of :func:`adapt`.
     """
@@ -533,7 +585,7 @@ def isochrone_rule(weight, problem, lo, hi, rtol, size, work):
             scale = half_v * GAUSS_WEIGHTS[order, jv] * slope * response
             if scale == 0.0:
                 continue
-            weight(problem.weight_problem, tau, scale, work.values, work.noise)
+            time_weight(problem.weight_problem, tau, scale, work.values, work.noise)
             for i in range(size):
                 target[i] += work.values[i]
                 work.magnitude[i] += abs(work.values[i])
@@ -541,3 +593,15 @@ def isochrone_rule(weight, problem, lo, hi, rtol, size, work):
         if order > 1 and _judge(work, size, rtol, order - 1, 2):
             return True
     return False
+
+
+def rule(problem, lo, hi, rtol, size, work):
+    """The rule :func:`adapt` climbs on [lo, hi] for ``problem`` (compiled code only)."""
+    raise TypeError("rule is called from compiled code")
+
+
+@overload(rule, jit_options={"error_model": "numpy"})
+def _rule_of(problem, lo, hi, rtol, size, work):
+    if getattr(problem, "instance_class", None) is IsochronePiece:
+        return lambda problem, lo, hi, rtol, size, work: isochrone_rule(problem, lo, hi, rtol, size, work)
+    return lambda problem, lo, hi, rtol, size, work: ladder_rule(problem, lo, hi, rtol, size, work)

@@ -162,6 +162,30 @@ def test_check_transients_title_legend_and_time_axes(check_result):
     assert any(axis.get_xlabel() == "ns" for axis in figure.findobj(lambda a: hasattr(a, "get_xlabel")))
 
 
+def test_check_transients_shows_the_model_as_given_beside_the_fitted_one(check_result):
+    """The data agree, so the fitted model nearly coincides with the model as given: the one as given is a band
+    at least twice as wide as the fitted line, drawn beneath it, so that both show; each draws its own
+    numbers, in the legend's order."""
+    from matplotlib.patches import StepPatch
+
+    scene, result = check_result
+    figure = drawn(plots.check_transients_figure(result))
+    (legend,) = figure.legends
+    assert [text.get_text() for text in legend.get_texts()][0] == "model as given"
+    panels = [axis for axis in figure.axes if axis.get_title(loc="left").startswith("sensor ")]
+    assert len(panels) == scene.sensor_count
+    for axis in panels:
+        k = int(axis.get_title(loc="left").split()[1])
+        given, fitted = [artist for artist in axis.patches if isinstance(artist, StepPatch)]
+        assert given.get_linewidth() >= 2 * fitted.get_linewidth() and given.get_zorder() < fitted.get_zorder()
+        assert given.get_visible() and fitted.get_visible() and fitted.get_linestyle() == "--"
+        for patch, row in ((given, result.model[k]), (fitted, result.fitted_model[k])):
+            values = patch.get_data().values
+            scale = values.max() / row.max()
+            assert any(np.allclose(values, scale * row[first:first + values.size], rtol=1e-12, atol=0)
+                       for first in range(row.size - values.size + 1)), k
+
+
 def test_check_z_is_drawn_against_path_length(check_result):
     scene, result = check_result
     figure = drawn(plots.check_z_figure(result))

@@ -34,6 +34,7 @@ __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "window": ["response_range", "covering_sampling", "window_share", "WindowWarning"],
     "files": ["build_meta", "write_transient", "read_transient"],
     "inversion": ["reconstruct", "reconstruct_rules", "reconstruct_tv", "Reconstruction", "image_metrics",
-                  "flat_image_psnr", "lambda_grid", "RULES", "RankDeficiencyWarning", "RegularizationWarning"],
+                  "flat_image_psnr", "lambda_grid", "RULES", "RankDeficiencyWarning", "NoiseLimitWarning",
+                  "RegularizationWarning"],
     "conditioning": ["singular_values", "conditioning_summary"],
 })

@@ -38,7 +38,7 @@ from analytic.system import QuadratureWarning, forward, system_matrix
 from validation.compare import Agreement, compare_transients, model_tolerance_for, tighter_model_note
 
 __all__ = ["SceneCheck", "check_scene", "refuse_dark", "imaging_problem", "simplification_costs", "model_convergence",
-           "data_driven_rule", "reconstruct_from_noisy_data"]
+           "noise_sigma", "data_driven_rule", "reconstruct_from_noisy_data"]
 
 TOLERANCES = (1e-2, 1e-4, 1e-6)
 REFERENCE_TOLERANCE = 1e-7
@@ -137,6 +137,13 @@ def simplification_costs(scene: Scene, y_lambertian: np.ndarray, *, sensors: int
     return result
 
 
+def noise_sigma(scene) -> float | None:
+    """The scene's Gaussian noise level σ (units of y), or None when its noise is not one Gaussian σ > 0."""
+    noise = scene.noise
+    known = noise is not None and noise.kind == "gaussian" and noise.sigma > 0
+    return float(noise.sigma) if known else None
+
+
 def data_driven_rule(scene: Scene, requested="auto") -> tuple:
     """The λ rule for a scene's data, and the σ it needs.
 
@@ -150,15 +157,14 @@ def data_driven_rule(scene: Scene, requested="auto") -> tuple:
     (rule, sigma)
         ``sigma`` is the scene's σ for ``discrepancy``, else None.
     """
-    noise = scene.noise
-    known = noise is not None and noise.kind == "gaussian" and noise.sigma > 0
+    sigma = noise_sigma(scene)
     if requested == "auto":
-        requested = "discrepancy" if known else "gcv"
+        requested = "gcv" if sigma is None else "discrepancy"
     if requested == "discrepancy":
-        if not known:
+        if sigma is None:
             raise SceneError("noise.sigma", "the discrepancy rule needs the scene's Gaussian noise level "
                                             "([noise] kind = \"gaussian\", sigma > 0)")
-        return "discrepancy", float(noise.sigma)
+        return "discrepancy", sigma
     return requested, None
 
 
@@ -174,11 +180,17 @@ def reconstruct_from_noisy_data(matrix, scene: Scene, model: np.ndarray, rendere
     Returns
     -------
     dict
-        ``noise`` (the scene's, None when noiseless), ``rule``, ``data`` (one
-        sentence saying which data and rule gave each number), ``model``
-        and ``render``: {``psnr``, ``ssim``, ``lambda``, ``image``,
-        ``warnings``: the inversion's warnings, ``{"category", "message"}``},
-        ``oracle``: {``psnr``, ``lambda``, ``image``}, ``flat_psnr``.
+        ``noise`` (the scene's, None when noiseless), ``rule``, ``data`` (the
+        sentences saying which data and rule gave each number, how many
+        numbers of the image the data fix, and the warnings about A and σ),
+        ``information``: {``rank``, ``effective_rank``, ``sigma``,
+        ``unknowns``, ``measurements``} (:mod:`analytic.inversion.information`;
+        the same for both data), ``warnings``: the inversion's warnings
+        about A and σ, once, ``{"category", "message"}``, ``model`` and
+        ``render``: {``psnr``, ``ssim``, ``lambda``, ``image``,
+        ``degrees_of_freedom``, ``warnings``: the inversion's warnings about
+        these data}, ``oracle``: {``psnr``, ``lambda``, ``image``},
+        ``flat_psnr``.
     """
     from analytic.inversion import (RankDeficiencyWarning, RegularizationWarning, flat_image_psnr, image_metrics,
                                     reconstruct)
@@ -186,7 +198,7 @@ def reconstruct_from_noisy_data(matrix, scene: Scene, model: np.ndarray, rendere
 
     truth = scene.reflectance
     pixels = scene.pixels
-    rule, sigma = data_driven_rule(scene, rule)
+    rule, _ = data_driven_rule(scene, rule)
     noise = scene.noise
     if noise is not None:
         model_data = add_noise(model, noise, rng=np.random.default_rng(noise.seed))
@@ -196,6 +208,7 @@ def reconstruct_from_noisy_data(matrix, scene: Scene, model: np.ndarray, rendere
     else:
         model_data, render_data, what = model, rendered, "no added noise"
     results = {}
+    known_sigma = noise_sigma(scene)     # what the data fix at their noise is counted against it
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("ignore", RuntimeWarning)     # numerical notices of the solvers
         # the inversion's own warnings change what a number means: kept for the report (and run's stderr)
@@ -203,18 +216,28 @@ def reconstruct_from_noisy_data(matrix, scene: Scene, model: np.ndarray, rendere
         warnings.simplefilter("always", RegularizationWarning)
         for key, data in (("model", model_data), ("render", render_data)):
             first = len(caught)
-            result = reconstruct(matrix, data.ravel(), pixels, rule=rule, truth=truth, sigma=sigma,
+            result = reconstruct(matrix, data.ravel(), pixels, rule=rule, truth=truth, sigma=known_sigma,
                                  lambdas=lambdas)
             results[key] = {"image": result.image, "lambda": float(result.lam),
                             **{k: v for k, v in image_metrics(result.image, truth).items()
                                if k in ("psnr", "ssim")},
+                            "degrees_of_freedom": result.degrees_of_freedom,
+                            # what concerns A and σ (the same for both data) is kept once, below
                             "warnings": [{"category": w.category.__name__, "message": str(w.message)}
-                                         for w in caught[first:]]}
+                                         for w in caught[first:]
+                                         if not issubclass(w.category, RankDeficiencyWarning)]}
         oracle = reconstruct(matrix, model_data.ravel(), pixels, rule="oracle", truth=truth, lambdas=lambdas)
     for unexpected in caught:       # anything else goes on to the caller, as it did
         if not issubclass(unexpected.category, (RankDeficiencyWarning, RegularizationWarning)):
             warnings.warn_explicit(unexpected.message, unexpected.category, unexpected.filename,
                                    unexpected.lineno)
+    shared = []                     # A's and σ's warnings, once (both reconstructions issued them)
+    for caught_warning in caught:
+        entry = {"category": caught_warning.category.__name__, "message": str(caught_warning.message)}
+        if issubclass(caught_warning.category, RankDeficiencyWarning) and entry not in shared:
+            shared.append(entry)
+    information = {"rank": result.rank, "effective_rank": result.effective_rank, "sigma": known_sigma,
+                   "unknowns": result.unknowns, "measurements": result.measurements}
     rule_name = rule if isinstance(rule, str) else f"λ = {rule:g}"
     return {
         "noise": None if noise is None else {"kind": noise.kind, "sigma": noise.sigma,
@@ -224,12 +247,25 @@ def reconstruct_from_noisy_data(matrix, scene: Scene, model: np.ndarray, rendere
                  + (f"each with the scene's {what} added (the same draw), " if noise is not None
                     else "as they are (the scene has no [noise]), ")
                  + f"reconstructed with λ by the {rule_name} rule; the oracle λ "
-                 f"(the truth's) on the model's noisy data is a bound, the best flat image the floor."),
+                 f"(the truth's) on the model's noisy data is a bound, the best flat image the floor. "
+                 + _information_sentence(information)
+                 + "".join(f" Warning: {entry['message']}." for entry in shared)),
+        "information": information,
+        "warnings": shared,
         **results,
         "oracle": {"image": oracle.image, "lambda": float(oracle.lam),
                    "psnr": image_metrics(oracle.image, truth)["psnr"]},
         "flat_psnr": flat_image_psnr(truth),
     }
+
+
+def _information_sentence(information: dict) -> str:
+    """:func:`analytic.inversion.information.information_summary` as a sentence (or "")."""
+    from analytic.inversion.information import information_summary
+
+    text = information_summary(**{name: information[name] for name in ("rank", "effective_rank", "sigma",
+                                                                        "unknowns")})
+    return f"{text[0].upper()}{text[1:]}; the Laplacian prior fills the rest." if text else ""
 
 
 def imaging_problem(scene) -> str | None:

@@ -13,7 +13,7 @@ import lazy_loader
 __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "tikhonov": ["reconstruct", "reconstruct_rules", "METHODS"],
     "tv": ["reconstruct_tv", "TV_RULES", "total_variation"],
-    "result": ["Reconstruction", "RankDeficiencyWarning", "RegularizationWarning"],
+    "result": ["Reconstruction", "RankDeficiencyWarning", "NoiseLimitWarning", "RegularizationWarning"],
     "rules": ["RULES", "DEFAULT_LAMBDA_COUNT", "lambda_grid"],
     "metrics": ["image_metrics", "structural_similarity", "flat_image_psnr"],
     "laplacian": ["neumann_laplacian", "laplacian_eigenvalues", "dct2", "idct2"],

@@ -17,12 +17,23 @@ import scipy.sparse
 
 from ..errors import DataError
 
-__all__ = ["RankDeficiencyWarning", "RegularizationWarning", "Reconstruction", "Problem",
+__all__ = ["RankDeficiencyWarning", "NoiseLimitWarning", "RegularizationWarning", "Reconstruction", "Problem",
            "record_warning", "parse_rule"]
 
 
 class RankDeficiencyWarning(RuntimeWarning):
-    """A has fewer independent rows than unknowns: the regulariser fills the null space."""
+    """The data fix well under what their measurements could: the regulariser fills the rest.
+
+    Issued (see :mod:`.information`) when A's rank is at most half of
+    min(measurements, unknowns) (the measurements repeat one another), when
+    pixels are seen by no measurement, and, as :class:`NoiseLimitWarning`,
+    when the noise hides most of what A fixes.
+    """
+
+
+class NoiseLimitWarning(RankDeficiencyWarning):
+    """At their noise the data fix at most half of what A fixes without noise (singular values of A/σ
+    above 1 against A's rank)."""
 
 
 class RegularizationWarning(RuntimeWarning):
@@ -56,7 +67,18 @@ class Reconstruction:
     method : str
         ``"svd"`` or ``"lsqr"``.
     rank : int or None
-        Numerical rank of A (svd method; None for lsqr).
+        Numerical rank of A: how many numbers of the image noiseless data
+        fix (svd method; the others when ``sigma`` was given and A fits a
+        dense SVD; else None).
+    effective_rank : int or None
+        How many numbers of the image the data fix at their noise: singular
+        values of A / σ above 1 (None without ``sigma``, or when A is too
+        large for a dense SVD).
+    sigma : float or None
+        σ, units of y: the noise ``effective_rank`` counts against.
+    degrees_of_freedom : float or None
+        trace(H_λ) of the chosen fit, the unpenalised mean counted as one:
+        how many numbers λ lets the data set (svd method; None otherwise).
     unknowns : int
         M².
     measurements : int
@@ -78,6 +100,9 @@ class Reconstruction:
     seminorm: float
     method: str
     rank: int | None
+    effective_rank: int | None = None
+    sigma: float | None = None
+    degrees_of_freedom: float | None = None
     unknowns: int
     measurements: int
     seconds: float

@@ -45,6 +45,8 @@ import scipy.sparse
 import scipy.sparse.linalg
 
 from ..errors import ResourceError
+from .information import (count_above_noise, degrees_of_freedom, information_warning, numerical_rank,
+                          singular_values_of, unseen_pixels_warning)
 from .laplacian import dct2, idct2, laplacian_eigenvalues
 from .result import (Problem, RankDeficiencyWarning, Reconstruction, RegularizationWarning, parse_rule,
                      record_warning)
@@ -298,7 +300,10 @@ def reconstruct(matrix, data, pixels: int, *, rule: str | float = "gcv", truth=N
     truth : array_like, optional
         ``(M, M)`` true image, for ``"oracle"``.
     sigma : float, optional
-        Noise standard deviation per sample, units of y, for ``"discrepancy"``.
+        Noise standard deviation per sample, units of y: needed by
+        ``"discrepancy"``; with any rule it gives the result's
+        ``effective_rank``, how many numbers of the image the data fix at
+        that noise (:mod:`.information`).
     lambdas : array_like, optional
         λ grid to sweep (positive). Default: 40 values log-spaced over the
         squared singular values s² of the standard-form operator
@@ -325,12 +330,18 @@ def reconstruct(matrix, data, pixels: int, *, rule: str | float = "gcv", truth=N
 
     Warns
     -----
+    NoiseLimitWarning
+        (a RankDeficiencyWarning) When, at ``sigma``, the data fix at most
+        half of what A fixes without noise and at most half of what their
+        measurements could (:func:`.information.information_warning`).
     RankDeficiencyWarning
-        When A has rank below M² (fewer independent measurements than
-        unknowns): the answer is still unique, its null-space part set by the
-        Laplacian prior. The svd method counts the numerical rank (singular
-        values above s_max max(m, M²) ε); lsqr sees only structural
-        deficiency (fewer non-zero rows than M², or pixels no row sees).
+        When A's numerical rank (singular values above s_max max(m, M²) ε;
+        svd method, or any with ``sigma``) is at most half of
+        min(measurements, M²): the measurements repeat one another; or when
+        pixels are seen by no row. Fewer measurements than unknowns alone is
+        the method (the Laplacian prior fills the rest) and is not warned
+        about: the result's ``rank``, ``effective_rank`` and
+        ``degrees_of_freedom`` say how many numbers the data fix.
     RegularizationWarning
         When the rule's optimum lies at an end of the λ grid, or the
         discrepancy equation has no root inside it.
@@ -388,9 +399,10 @@ def reconstruct_rules(matrix, data, pixels: int, *, rules=RULES, truth=None,
         if truth_image.shape != (pixels, pixels):
             raise ValueError(f"truth: shape {truth_image.shape}, expected ({pixels}, {pixels})")
         truth_image = truth_image / problem.image_scale
-    if "discrepancy" in rules:
-        if sigma is None or not (math.isfinite(float(sigma)) and float(sigma) > 0):
-            raise ValueError(f"sigma: the discrepancy rule needs a noise level > 0, got {sigma!r}")
+    if "discrepancy" in rules and sigma is None:
+        raise ValueError(f"sigma: the discrepancy rule needs a noise level > 0, got {sigma!r}")
+    if sigma is not None and not (math.isfinite(float(sigma)) and float(sigma) > 0):
+        raise ValueError(f"sigma: the noise level must be finite and > 0, got {sigma!r}")
     scaled_sigma = None if sigma is None else float(sigma) / c
     if lambdas is not None:
         lambdas = np.sort(np.asarray(lambdas, dtype=np.float64).ravel())
@@ -406,19 +418,15 @@ def reconstruct_rules(matrix, data, pixels: int, *, rules=RULES, truth=None,
         raise ResourceError(f"method svd: its dense matrices need {svd_bytes / 2**30:.2f} GiB, more than "
                             f"memory_limit ({memory_limit / 2**30:.2f} GiB); use method lsqr or raise the limit")
     solver = SpectralSolver(problem) if method == "svd" else IterativeSolver(problem)
-    shared = time.perf_counter() - started
-    rank = solver.rank
-    rank_message = None
     live_rows = int(problem.live.sum())
-    if (rank is not None and rank < unknowns) or (rank is None and live_rows < unknowns):
-        known = f"rank {rank}" if rank is not None else f"only {live_rows} non-zero rows"
-        rank_message = (f"A has {known} for {unknowns} unknowns (M = {pixels}): the data fix only "
-                        f"part of the image, the Laplacian prior fills the rest")
-    elif rank is None:
-        dead = np.asarray(abs(problem.matrix).sum(axis=0)).ravel() == 0
-        if np.any(dead):
-            rank_message = (f"{int(dead.sum())} pixels are seen by no measurement: the Laplacian "
-                            f"prior fills them")
+    # what the data fix at their noise needs A's own singular values (the solver's are of A C diag(1/μ))
+    values = None if sigma is None else singular_values_of(problem, memory_limit)
+    rank = solver.rank if method == "svd" else None if values is None else numerical_rank(values, rows, unknowns)
+    effective = None if values is None else count_above_noise(values * a, float(sigma))
+    notices = [warning for warning in (
+        information_warning(rank=rank, effective_rank=effective, live_rows=live_rows, unknowns=unknowns,
+                            sigma=sigma), unseen_pixels_warning(problem)) if warning is not None]
+    shared = time.perf_counter() - started
     default = default_grid(solver.largest, solver.smallest) if lambdas is None else lambdas
     if method != "svd" and "gcv" in [rule for rule, fixed in parsed if fixed is None]:
         # sweep once with GCV's probes first, so the other rules reuse that sweep
@@ -444,12 +452,12 @@ def reconstruct_rules(matrix, data, pixels: int, *, rules=RULES, truth=None,
         else:
             result = choose_iterative(solver, rule, scaled_fixed, truth_image, scaled_sigma, grid,
                                       messages, gcv_probes)
-        if rank_message is not None:
-            if warned:            # once per call, recorded with every rule's result
-                messages.append(rank_message)
+        for text, category in notices:     # once per call, recorded with every rule's result
+            if warned:
+                messages.append(text)
             else:
-                record_warning(messages, rank_message, RankDeficiencyWarning)
-                warned = True
+                record_warning(messages, text, category)
+        warned = True
         image, lam, grid, criterion, residuals, seminorms = result
         # back to the caller's units: f = (c/a) g, λ = a² λ', r = c r', D f = (c/a) D g
         results.append(Reconstruction(
@@ -461,7 +469,9 @@ def reconstruct_rules(matrix, data, pixels: int, *, rules=RULES, truth=None,
             residual_norm=c * float(np.linalg.norm(problem.matrix @ image.ravel() - problem.y)),
             seminorm=problem.image_scale * float(np.linalg.norm(
                 idct2(-laplacian_eigenvalues(pixels) * dct2(image)))),
-            method=method, rank=rank, unknowns=unknowns, measurements=rows,
+            method=method, rank=rank, effective_rank=effective, sigma=None if sigma is None else float(sigma),
+            degrees_of_freedom=degrees_of_freedom(solver.filters(lam)) if method == "svd" else None,
+            unknowns=unknowns, measurements=rows,
             seconds=shared + time.perf_counter() - begun, warnings=tuple(messages)))
     return results
 

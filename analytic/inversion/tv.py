@@ -14,6 +14,8 @@ import time
 
 import numpy as np
 
+from .information import (count_above_noise, information_warning, numerical_rank, singular_values_of,
+                          unseen_pixels_warning)
 from .result import Problem, Reconstruction, RegularizationWarning, parse_rule, record_warning
 from .rules import edge_warning
 
@@ -138,7 +140,9 @@ def reconstruct_tv(matrix, data, pixels: int, *, rule: str | float = "oracle", t
     Returns
     -------
     Reconstruction
-        ``method = "pdhg"``, ``seminorms`` hold TV(f_λ), ``rank`` None;
+        ``method = "pdhg"``, ``seminorms`` hold TV(f_λ), ``rank`` and
+        ``effective_rank`` from A's singular values when ``sigma`` is given
+        (else None), ``degrees_of_freedom`` None (the fit is nonlinear);
         ``criterion`` as in :func:`reconstruct`. For ``discrepancy`` the
         largest grid λ with ||A f - y||² ≤ m σ² is taken (no root refinement).
     """
@@ -155,8 +159,10 @@ def reconstruct_tv(matrix, data, pixels: int, *, rule: str | float = "oracle", t
         if truth.shape != (pixels, pixels):
             raise ValueError(f"truth: shape {truth.shape}, expected ({pixels}, {pixels})")
         truth = truth / problem.image_scale
-    if rule == "discrepancy" and (sigma is None or not float(sigma) > 0):
+    if rule == "discrepancy" and sigma is None:
         raise ValueError(f"sigma: the discrepancy rule needs a noise level > 0, got {sigma!r}")
+    if sigma is not None and not (np.isfinite(float(sigma)) and float(sigma) > 0):
+        raise ValueError(f"sigma: the noise level must be finite and > 0, got {sigma!r}")
     if isinstance(iterations, bool) or int(iterations) != iterations or iterations < 1:
         raise ValueError(f"iterations: must be a whole number >= 1, got {iterations!r}")
     steps = _tv_steps(matrix, pixels)
@@ -171,6 +177,16 @@ def reconstruct_tv(matrix, data, pixels: int, *, rule: str | float = "oracle", t
             raise ValueError("lambdas: expected finite values > 0")
         grid = grid / to_caller
     messages: list[str] = []
+    # what the data fix (module .information): A's singular values, when σ is given and A fits in memory
+    from .tikhonov import DEFAULT_MEMORY_LIMIT
+
+    values = None if sigma is None else singular_values_of(problem, DEFAULT_MEMORY_LIMIT)
+    rank = None if values is None else numerical_rank(values, y.size, pixels * pixels)
+    effective = None if values is None else count_above_noise(values * problem.matrix_scale, float(sigma))
+    for notice in (information_warning(rank=rank, effective_rank=effective, live_rows=int(problem.live.sum()),
+                                       unknowns=pixels * pixels, sigma=sigma), unseen_pixels_warning(problem)):
+        if notice is not None:
+            record_warning(messages, *notice)
     images = np.empty((grid.size, pixels * pixels))
     residuals = np.empty(grid.size)
     variations = np.empty(grid.size)
@@ -217,6 +233,7 @@ def reconstruct_tv(matrix, data, pixels: int, *, rule: str | float = "oracle", t
         rule=rule if fixed is None else "value", lambdas=grid * to_caller,
         criterion=criterion * criterion_scale, residual_norms=c * np.sqrt(residuals),
         seminorms=scale * variations, residual_norm=c * float(np.sqrt(residuals[best])),
-        seminorm=scale * float(variations[best]), method="pdhg", rank=None,
+        seminorm=scale * float(variations[best]), method="pdhg", rank=rank, effective_rank=effective,
+        sigma=None if sigma is None else float(sigma),
         unknowns=pixels * pixels, measurements=y.size, seconds=time.perf_counter() - started,
         warnings=tuple(messages))

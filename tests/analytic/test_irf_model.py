@@ -114,18 +114,26 @@ def test_every_route_agrees_with_the_direct_adaptive_route(rng, name):
     # The strip route converges on small pixels, for kernels polynomial between their kinks (impulse, square,
     # sampled). For the erfcx family, as for the Butterworth pulse, it reports no convergence at this
     # tolerance (measured: 0 of 10 pixels at M = 40 and 200) and "auto" serves those pixels by the routes above.
+    # Every pixel clear of the feet and of x* is held to one of the two: refused as not converged, or agreeing.
     fine = Scene(pixels=200, source=(0.3, 0.6, 0.8), sensors=[(0.8, 0.15, 0.5)], illumination=ILLUMINATIONS[name],
                  sampling=Sampling(bin_width_opl=0.01, start_opl=0.0, count=600))
-    for pixel in rng.integers(0, fine.pixels**2, 12):
-        if not _clear_of_feet_and_birth(fine, 0, int(pixel)):
-            continue
+    clear = [int(pixel) for pixel in rng.integers(0, fine.pixels**2, 12)
+             if _clear_of_feet_and_birth(fine, 0, int(pixel))]
+    assert len(clear) >= 6, clear                       # the loop below checks something
+    refused = 0
+    for pixel in clear:
         try:
-            strip = pair_entries(fine, 0, int(pixel), method="strip", tolerance=TOLERANCE, taylor=False)
-            with warnings.catch_warnings():     # only where the reference reaches its tolerance
-                warnings.simplefilter("error", QuadratureWarning)
-                reference = pair_entries(fine, 0, int(pixel), method="adaptive", tolerance=TOLERANCE, taylor=False)
-        except (ValueError, QuadratureWarning):
+            strip = pair_entries(fine, 0, pixel, method="strip", tolerance=TOLERANCE, taylor=False)
+        except ValueError as error:
+            assert "did not converge" in str(error), (name, pixel, str(error))     # clear: the route applies
+            refused += 1
             continue
-        _agree(strip, reference, (name, "strip", int(pixel)))
+        with warnings.catch_warnings():     # only where the reference reaches its tolerance
+            warnings.simplefilter("error", QuadratureWarning)
+            try:
+                reference = pair_entries(fine, 0, pixel, method="adaptive", tolerance=TOLERANCE, taylor=False)
+            except QuadratureWarning:
+                continue
+        _agree(strip, reference, (name, "strip", pixel))
         served["strip"] += 1
-    assert served["strip"] >= 4 or name != "sampled", served
+    assert served["strip"] >= 4 if name == "sampled" else refused + served["strip"] >= 4, (name, refused, served)

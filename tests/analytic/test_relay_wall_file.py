@@ -92,6 +92,23 @@ def test_a_bare_relay_wall_table_is_the_default_capture(tmp_path):
     assert scene.scan == default.scan and scene.sensor_count == default.sensor_count
 
 
+def test_tables_left_out_take_the_defaults_docs_nlos_states(tmp_path):
+    """docs/nlos.md lists what a missing [hidden], [laser], [sensor], [scan] or [sampling] (or key) takes."""
+    scene = load_scene(_write(tmp_path, "[relay_wall]\n"))
+    assert scene.wall_size == (2.0, 2.0) and scene.wall_reflectance == 1.0
+    for name, value in (("center", [0, 0, 1]), ("u", [1, 0, 0]), ("v", [0, -1, 0]),
+                        ("laser_position", [-0.5, 0, 0.25]), ("sensor_position", [-0.5, 0, 0.25])):
+        np.testing.assert_array_equal(getattr(scene, name), value, err_msg=name)
+    assert scene.pixels == 32 and np.all(scene.reflectance == 0.5) and scene.intensity == 1.0
+    assert (scene.scan.type, scene.scan.grid, scene.scan.account_first_and_last_bounces) == ("single", (4, 4), False)
+    np.testing.assert_array_equal(scene.laser_points, [[0, 0, 0]])           # the wall's centre
+    sampling = scene.sampling
+    assert (sampling.bin_width_opl, sampling.start_opl, sampling.count) == (0.1, 0.0, 40)
+    assert scene.illumination.waveform == "impulse" and scene.noise is None and scene.tolerance == 1e-6
+    exhaustive = load_scene(_write(tmp_path, "[relay_wall]\n[scan]\ntype = \"exhaustive\"\ngrid = [3, 2]\n"))
+    assert exhaustive.scan.laser_grid in (None, (3, 2)) and exhaustive.sensor_count == 36     # the grid's points
+
+
 
 def test_an_oversized_scan_is_refused_before_its_points_are_built(tmp_path):
     """A 10^5 x 10^5 confocal grid needed 75 GiB for its points before the pair count was checked."""

@@ -234,6 +234,18 @@ def test_refusals_name_tal_keys(change, key):
     refusal(config(**change), key)
 
 
+def test_a_laser_aperture_is_ignored_by_a_single_scan_and_refused_partial_by_the_others():
+    """tal 0.20's render.py reads laser_aperture_* only for confocal and exhaustive scans (the lit points'
+    grid); a single scan lights laser_lookat_x/y whatever the aperture: the same scene, as docs/tal.md says."""
+    aperture = {"laser_aperture_start_x": 0.25, "laser_aperture_end_x": 0.5, "laser_aperture_end_y": 0.75}
+    plain, partial = scene_of(config()), scene_of(config(**aperture))
+    assert (partial.scan.type, partial.scan.grid) == (plain.scan.type, plain.scan.grid) == ("single", (4, 4))
+    np.testing.assert_array_equal(partial.laser_points, plain.laser_points)
+    for kind in ("confocal", "exhaustive"):
+        assert "partial laser aperture" in refusal(config(scan_type=kind, laser_width=4, laser_height=4, **aperture),
+                                                   "laser_aperture_start_x")
+
+
 def test_refused_geometry_and_materials():
     hidden = config()["geometry"][0]
     refusal(config({**hidden, "material": {"id": "copper", "alpha": "0.1"}}), "geometry[plane].material.id")

@@ -172,3 +172,54 @@ class _returns:
     def __exit__(self, *exc):
         assert exc[0] is None and self.value == self.expected, self.value
         return False
+
+
+ONE_SENSOR = """
+[plane]
+pixels = 4
+[source]
+position = [0.3, 0.4, 1.0]
+[sensors]
+positions = [[0.8, 0.65, 0.7]]
+[sampling]
+period = 0.01
+start = 1.75
+count = 70
+[noise]
+sigma = {sigma!r}
+seed = 3
+"""
+
+
+def test_reconstruct_reports_what_the_data_fix_at_their_noise(tmp_path, capsys):
+    """One sensor, 70 bins, 16 pixels: A has full rank, yet at a σ above most of its singular values the data
+    fix few of the image's numbers. The report, metrics and summary line say how many (the singular values
+    above σ, counted here by NumPy on the assembled A), and a warning says so when they are at most half."""
+    from analytic.system import system_matrix
+
+    scene_path = tmp_path / "one.toml"
+    scene_path.write_text(ONE_SENSOR.format(sigma=1e-9))
+    values = np.linalg.svd(system_matrix(load_scene(scene_path)).toarray(), compute_uv=False)
+    assert np.sum(values > values[0] * 1e-12) == 16                  # full rank: noiseless data fix all
+    for kept, warned in ((5, True), (12, False)):
+        sigma = float(np.sqrt(values[kept - 1] * values[kept]))      # between the kept-th and the next
+        scene_path.write_text(ONE_SENSOR.format(sigma=sigma))
+        scene = load_scene(scene_path)
+        save_npy(tmp_path / "y.npy", add_noise(forward(scene), scene.noise))
+        out = tmp_path / f"r{kept}"
+        assert main(["reconstruct", str(scene_path), "--data", str(tmp_path / "y.npy"), "--out", str(out),
+                     "--lambda", "gcv", "--lambda-range", "1e-12", "1e-2"]) == 0
+        captured = capsys.readouterr()
+        metrics = json.loads((out / "metrics.json").read_text())
+        assert (metrics["rank"], metrics["effective_rank"], metrics["sigma"]) == (16, kept, sigma)
+        assert 1.0 <= metrics["degrees_of_freedom"] <= 16.0
+        fixed = f"the data fix about {kept} of the image's 16 numbers at σ = {sigma:g}"
+        assert fixed in captured.out
+        report = (out / "report.md").read_text()
+        assert "| rank of A | 16 of 16 |" in report
+        assert f"| fixed at the noise | {kept} of 16 (σ = {sigma:g}) |" in report
+        shown = [line for line in captured.err.splitlines() if "the data fix about" in line]
+        assert len(shown) == warned, captured.err
+        if warned:
+            assert shown[0].startswith(f"diffuse-imaging: warning: at σ = {sigma:g} the data fix about {kept} ")
+            assert f"- warning: {shown[0].removeprefix('diffuse-imaging: warning: ')}" in report

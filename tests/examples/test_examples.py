@@ -25,6 +25,8 @@ from analytic.window import FULL_SHARE, window_share
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLES = ROOT / "examples"
 SCENES = sorted(EXAMPLES.glob("*.toml"))
+#: Every scene a user may give a command: our TOML files and tal's YAML configurations.
+EVERY_SCENE = SCENES + sorted((EXAMPLES / "tal").glob("*.yaml"))
 
 
 def test_the_examples_cover_each_feature():
@@ -49,13 +51,24 @@ def test_each_example_loads_and_models_a_finite_nonzero_transient(path):
     assert np.all(y.sum(axis=1) > 0)                   # every sensor sees light in the window
 
 
-@pytest.mark.parametrize("path", SCENES, ids=lambda path: path.name)
-def test_each_examples_window_holds_all_its_light(path):
+@pytest.mark.parametrize("path", EVERY_SCENE, ids=lambda path: path.name)
+def test_each_examples_window_holds_all_its_light(path, monkeypatch):
+    monkeypatch.chdir(ROOT)                 # tal's OBJ file names are relative to the working folder, as tal's
     scene = analytic.load_scene(path)
     assert window_share(scene) >= FULL_SHARE
     first, last = analytic.response_range(scene)
     edges = scene.sampling.edges
     assert edges[0] < first and edges[-1] > last       # the first and the longest paths inside
+
+
+@pytest.mark.slow          # tal's confocal example: about a minute of assembly
+@pytest.mark.parametrize("path", EVERY_SCENE, ids=lambda path: path.name)
+def test_forward_on_each_example_prints_nothing_but_its_summary(path, tmp_path):
+    """What a new user runs first: no warning (a window that cuts the light, tal's notes) on any shipped example."""
+    done = subprocess.run([sys.executable, "-m", "validation.cli", "forward", str(path), "--out", str(tmp_path / "f")],
+                          capture_output=True, text=True, cwd=ROOT, timeout=900)
+    assert done.returncode == 0 and done.stderr == "", done.stderr
+    assert done.stdout.startswith("forward: ") and len(done.stdout.splitlines()) == 1, done.stdout
 
 
 def test_paper_is_the_built_in_scene_as_a_file():

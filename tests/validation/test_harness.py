@@ -78,7 +78,8 @@ def test_check_scene_reports_every_figure():
     recon = metrics["reconstruction"]
     assert recon["rule"] == "gcv" and recon["noise"] is None      # the scene is noiseless: GCV
     for key in ("model", "render"):
-        assert set(recon[key]) == {"psnr", "ssim", "lambda", "warnings"} and np.isfinite(recon[key]["psnr"])
+        assert set(recon[key]) == {"psnr", "ssim", "lambda", "degrees_of_freedom", "warnings"}
+        assert np.isfinite(recon[key]["psnr"])
     assert np.isfinite(recon["oracle"]["psnr"]) and np.isfinite(recon["flat_psnr"])
 
 

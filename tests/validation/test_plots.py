@@ -162,6 +162,30 @@ def test_check_transients_title_legend_and_time_axes(check_result):
     assert any(axis.get_xlabel() == "ns" for axis in figure.findobj(lambda a: hasattr(a, "get_xlabel")))
 
 
+def test_check_transients_shows_the_model_as_given_beside_the_fitted_one(check_result):
+    """The data agree, so the fitted model nearly coincides with the model as given: the one as given is a band
+    at least twice as wide as the fitted line, drawn beneath it, so that both show; each draws its own
+    numbers, in the legend's order."""
+    from matplotlib.patches import StepPatch
+
+    scene, result = check_result
+    figure = drawn(plots.check_transients_figure(result))
+    (legend,) = figure.legends
+    assert [text.get_text() for text in legend.get_texts()][0] == "model as given"
+    panels = [axis for axis in figure.axes if axis.get_title(loc="left").startswith("sensor ")]
+    assert len(panels) == scene.sensor_count
+    for axis in panels:
+        k = int(axis.get_title(loc="left").split()[1])
+        given, fitted = [artist for artist in axis.patches if isinstance(artist, StepPatch)]
+        assert given.get_linewidth() >= 2 * fitted.get_linewidth() and given.get_zorder() < fitted.get_zorder()
+        assert given.get_visible() and fitted.get_visible() and fitted.get_linestyle() == "--"
+        for patch, row in ((given, result.model[k]), (fitted, result.fitted_model[k])):
+            values = patch.get_data().values
+            scale = values.max() / row.max()
+            assert any(np.allclose(values, scale * row[first:first + values.size], rtol=1e-12, atol=0)
+                       for first in range(row.size - values.size + 1)), k
+
+
 def test_check_z_is_drawn_against_path_length(check_result):
     scene, result = check_result
     figure = drawn(plots.check_z_figure(result))
@@ -170,3 +194,40 @@ def test_check_z_is_drawn_against_path_length(check_result):
         low, high = axis.get_xlim()
         assert edges[0] - 0.1 <= low < high <= edges[-1] + 0.1       # metres of path, not a bin index
     assert "limit ±" in _texts(figure)
+
+
+def test_relay_wall_traces_say_their_rank_and_each_shows_its_shape():
+    """Pairs a thousandth as bright as the brightest lay flat at zero beside it on one linear scale, under a
+    title that read 'by brightness, 1 the brightest' while 2-4 were quartiles. Each trace now says its rank
+    of brightness (counted here from the totals), is drawn times the factor its label states, and peaks at
+    0.4 to 1 times the brightest's height."""
+    import re
+
+    from matplotlib.patches import StepPatch
+
+    scan = plots.WallScan(type="confocal", grid=(4, 4), wall_size=(2.0, 2.0))
+    rng = np.random.default_rng(3)
+    bins = np.arange(60)
+    y = 10.0 ** rng.uniform(-4, 0, 16)[:, None] * np.exp(-0.5 * ((bins - rng.uniform(15, 45, 16)[:, None]) / 3) ** 2)
+    figure = drawn(plots.relay_wall_figure(Sampling(bin_width_opl=0.01, start_opl=2.0, count=60), y, scan))
+    (axis,) = [axis for axis in figure.axes if axis.get_legend() is not None]
+    labels = [text.get_text() for text in axis.get_legend().get_texts()]
+    ranks = np.empty(16, dtype=int)
+    ranks[np.argsort(-y.sum(axis=1))] = np.arange(1, 17)
+    steps = [artist for artist in axis.patches if isinstance(artist, StepPatch)]
+    assert len(labels) == len(steps) == 4
+    top = steps[0].get_data().values.max()
+    unit = None                         # the axis' unit per unit of H (the brightest is drawn as it is)
+    for number, (label, step) in enumerate(zip(labels, steps), start=1):
+        found = re.fullmatch(r"(\d): pair (\d+), the (brightest|(\d+)(st|nd|rd|th) brightest of 16)(, × (\S+))?",
+                             label)
+        assert found and int(found[1]) == number, label
+        pair = int(found[2])
+        assert ranks[pair] == (1 if found[3] == "brightest" else int(found[4])) == 1 + 4 * (number - 1), label
+        factor = float(found[7] or 1)
+        values = step.get_data().values
+        unit = values.max() / y[pair].max() if unit is None else unit
+        first = int(np.argmax(y[pair])) - int(np.argmax(values))
+        np.testing.assert_allclose(values, y[pair, first:first + values.size] * unit * factor, rtol=1e-12,
+                                   atol=1e-12 * top, err_msg=label)
+        assert 0.4 * top <= values.max() <= top * (1 + 1e-12), label

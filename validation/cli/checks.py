@@ -9,7 +9,7 @@ from pathlib import Path
 from .common import (UsageError, add_quiet, add_window_option, announce_window, apply_window, check_samples_type,
                      load_scene_argument, seed_type, show_progress)
 from .counts import RENDER_STREAM, draw_scene_counts, refuse_unreachable_counts, write_counts
-from .reconstruct import add_lambda_options
+from .reconstruct import add_lambda_options, information_text
 
 __all__ = ["add_commands", "command_validate", "command_run", "show_reconstruction_warnings"]
 
@@ -157,8 +157,9 @@ def command_run(args) -> int:
         if "skipped" in recon:
             print(f"no reconstruction: {recon['skipped']}")
         if "model" in recon:
-            print(f"reconstruction PSNR: {recon['model']['psnr']:.1f} dB from model data, "
-                  f"{recon['render']['psnr']:.1f} dB from rendered data -> {Path(args.out) / 'report.md'}")
+            print(f"reconstruction: {information_text(recon['information'])}PSNR {recon['model']['psnr']:.1f} dB "
+                  f"from model data, {recon['render']['psnr']:.1f} dB from rendered data -> "
+                  f"{Path(args.out) / 'report.md'}")
     return 0 if check.agreement.agrees else 1
 
 
@@ -194,19 +195,22 @@ def show_reconstruction_warnings(reconstructions: dict) -> None:
     """Each warning of ``run``'s reconstructions again, naming the data it came from, for the one-line policy.
 
     ``reconstructions`` is :func:`validation.harness.reconstruct_from_noisy_data`'s
-    result; its ``model`` and ``render`` entries may hold ``warnings``, a
-    list of ``{"category": name, "message": text}`` with the category's
+    result; its ``warnings`` (about A and σ: shown once, "from the scene")
+    and its ``model`` and ``render`` entries' ``warnings`` are lists of
+    ``{"category": name, "message": text}`` with the category's
     name in :mod:`analytic.inversion` (``RankDeficiencyWarning``,
     ``RegularizationWarning``); another name is shown as a RuntimeWarning.
     """
     from analytic import inversion
 
-    for key, data in (("model", "the model's data"), ("render", "the render's data")):
-        for entry in reconstructions.get(key, {}).get("warnings", ()):
-            category = getattr(inversion, str(entry.get("category")), None)
-            if not (isinstance(category, type) and issubclass(category, Warning)):
-                category = RuntimeWarning
-            warnings.warn(f"reconstruction from {data}: {entry['message']}", category, stacklevel=2)
+    shown = [("the scene", entry) for entry in reconstructions.get("warnings", ())]     # A's and σ's: once
+    shown += [(data, entry) for key, data in (("model", "the model's data"), ("render", "the render's data"))
+              for entry in reconstructions.get(key, {}).get("warnings", ())]
+    for data, entry in shown:
+        category = getattr(inversion, str(entry.get("category")), None)
+        if not (isinstance(category, type) and issubclass(category, Warning)):
+            category = RuntimeWarning
+        warnings.warn(f"reconstruction from {data}: {entry['message']}", category, stacklevel=2)
 
 
 def add_commands(subparsers) -> None:

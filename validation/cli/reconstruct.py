@@ -68,12 +68,13 @@ def command_reconstruct(args) -> int:
                              save_exr, save_json, save_npy, save_png_image, staged_writes)
     from analytic.inversion import RankDeficiencyWarning, RegularizationWarning, image_metrics, reconstruct
     from analytic.system import system_matrix
-    from validation.harness import data_driven_rule
+    from validation.harness import data_driven_rule, noise_sigma
     from validation.plots import criterion_figure, reconstruction_figure, save_figure
     from validation.report import write_markdown
 
     scene = load_scene_argument(args.scene)
     rule, sigma = data_driven_rule(scene, args.rule)
+    known_sigma = noise_sigma(scene)       # counts what the data fix at their noise, whatever the rule
     if args.regularizer == "tv":
         if rule in ("gcv", "lcurve") and args.rule == "auto":
             raise UsageError("--regularizer tv: its default rule, discrepancy, needs the scene's Gaussian σ "
@@ -98,7 +99,7 @@ def command_reconstruct(args) -> int:
         options = {} if args.regularizer == "tv" else {"method": args.method}
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            result = reconstruct(matrix, data, scene.pixels, rule=rule, truth=truth, sigma=sigma,
+            result = reconstruct(matrix, data, scene.pixels, rule=rule, truth=truth, sigma=known_sigma,
                                  lambdas=grid, regularizer=args.regularizer, **options)
         notes = [str(w.message) for w in caught]
         metrics = image_metrics(result.image, truth, data_range=1.0)
@@ -110,7 +111,8 @@ def command_reconstruct(args) -> int:
             "metrics_note": "against the scene's reflectance; PSNR and SSIM over a data range of 1.0 "
                             "(reflectance in [0, 1]); the estimate is not clipped (the PNG is)",
             "residual_norm": result.residual_norm, "seminorm": result.seminorm, "rank": result.rank,
-            "unknowns": result.unknowns, "measurements": result.measurements, "sigma": sigma,
+            "effective_rank": result.effective_rank, "degrees_of_freedom": result.degrees_of_freedom,
+            "unknowns": result.unknowns, "measurements": result.measurements, "sigma": known_sigma,
             "seconds": result.seconds, "assembly_seconds": assembly,
             "regularizer": ("squared 5-point Laplacian, reflecting (Neumann) boundaries, unit spacing"
                             if args.regularizer == "laplacian" else
@@ -144,7 +146,7 @@ def command_reconstruct(args) -> int:
                 + (f" (σ = {sigma:g} from the scene's [noise])" if sigma is not None else "") + ". "
                 f"PSNR {metrics['psnr']:.2f} dB, SSIM {metrics['ssim']:.3f} against the scene's "
                 f"reflectance (data range 1).", "",
-                *_result_table(result, metrics, sigma, args.regularizer), "",
+                *_result_table(result, metrics, sigma, args.regularizer, scene.noise), "",
                 "![truth, reconstruction and error](comparison.png)", "",
                 "![the λ rule's criterion and the L-curve](criterion.png)", "",
                 *_warning_lines(notes)])
@@ -159,14 +161,39 @@ def command_reconstruct(args) -> int:
                       f"(float64) is the exact record", PrecisionWarning, stacklevel=1)
     if not args.quiet:
         print(f"reconstruct: M = {scene.pixels}, {how} ({result.method}) in {result.seconds:.2f} s "
-              f"(A assembled in {assembly:.2f} s); PSNR {metrics['psnr']:.2f} dB, SSIM "
-              f"{metrics['ssim']:.3f} (range 1) -> {out}")
+              f"(A assembled in {assembly:.2f} s); {information_text(result)}PSNR {metrics['psnr']:.2f} dB, "
+              f"SSIM {metrics['ssim']:.3f} (range 1) -> {out}")
     return 0
 
 
-def _result_table(result, metrics: dict, sigma: float | None, regularizer: str) -> list[str]:
+def information_text(result) -> str:
+    """:func:`analytic.inversion.information.information_summary` as a clause ending in "; " (or "").
+
+    ``result`` is a :class:`analytic.inversion.Reconstruction`, or a dict with its ``rank``,
+    ``effective_rank``, ``sigma`` and ``unknowns``.
+    """
+    from analytic.inversion.information import information_summary
+
+    fields = result if isinstance(result, dict) else vars(result)
+    text = information_summary(**{name: fields[name] for name in ("rank", "effective_rank", "sigma", "unknowns")})
+    return f"{text}; " if text else ""
+
+
+def _noise_why(noise) -> str:
+    """Why no effective rank was counted, in a few words."""
+    if noise is None:
+        return "the scene states no noise"
+    if noise.kind != "gaussian":
+        return f"the scene's noise is {noise.kind}, not one Gaussian σ"
+    return "A is too large for a dense SVD"
+
+
+def _result_table(result, metrics: dict, sigma: float | None, regularizer: str, noise=None) -> list[str]:
     """The reconstruction's numbers as a table, with what each means in words below it."""
-    rank = "-" if result.rank is None else f"{result.rank}"
+    rank = "-" if result.rank is None else f"{result.rank} of {result.unknowns}"
+    effective = (f"{result.effective_rank} of {result.unknowns} (σ = {result.sigma:g})"
+                 if result.effective_rank is not None else f"- ({_noise_why(noise)})")
+    freedom = "-" if result.degrees_of_freedom is None else f"{result.degrees_of_freedom:.1f}"
     penalty = (("‖D f‖", "the image's roughness, the penalty's size (D the 5-point Laplacian)")
                if regularizer == "laplacian" else
                ("TV(f)", "the image's total variation, the penalty's size"))
@@ -184,8 +211,14 @@ def _result_table(result, metrics: dict, sigma: float | None, regularizer: str) 
         ("‖A f − y‖", f"{result.residual_norm:.4g}", "the residual: how far the image's modelled transient is "
                                                      "from the data (units of y)"),
         (penalty[0], f"{result.seminorm:.4g}", penalty[1]),
-        ("rank of A", f"{rank} of {result.unknowns}", "how many independent numbers of the image the data fix "
-                                                      "(svd method only); the penalty fills the rest"),
+        ("rank of A", rank, "how many independent numbers of the image noiseless data would fix: A's numerical "
+                            "rank (svd method, or any when σ is known)"),
+        ("fixed at the noise", effective, "how many numbers of the image these data fix at their noise σ: the "
+                                          "singular values of A/σ above 1 (an image component along one of "
+                                          "the others reaches the data below the noise); the penalty fills "
+                                          "the rest"),
+        ("degrees of freedom", freedom, "trace of the fit's influence matrix: how many numbers the chosen λ "
+                                        "lets the data set (svd method)"),
         ("m", f"{result.measurements}", "measurements: sensors (or pairs) x bins, the rows of A"),
     ]
     return (["| quantity | value |", "|---|---|"] + [f"| {name} | {value} |" for name, value, _ in rows]

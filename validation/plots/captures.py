@@ -9,7 +9,10 @@ from .axes import time_axis
 from .common import new_figure
 from .transients import finish_time_figure
 
-__all__ = ["capture_figure"]
+__all__ = ["capture_figure", "trace_labels", "TRACES_LEGEND"]
+
+#: The legend title of traces drawn with :func:`trace_labels`.
+TRACES_LEGEND = "ranked by light summed over time;\neach drawn × the factor in its label"
 
 
 def _plane_axes(positions: np.ndarray) -> tuple[int, int]:
@@ -24,6 +27,61 @@ def _traced(totals: np.ndarray, count: int) -> list[int]:
     order = np.argsort(-totals, kind="stable")
     ranks = np.unique((np.arange(min(count, totals.size)) * totals.size) // max(count, 1))
     return [int(order[rank]) for rank in ranks]
+
+
+def _ordinal(number: int) -> str:
+    suffix = "th" if number % 100 in (11, 12, 13) else {1: "st", 2: "nd", 3: "rd"}.get(number % 10, "th")
+    return f"{number}{suffix}"
+
+
+def _nice_factor(ratio: float) -> float:
+    """The largest of 1, 2, 5, 10, 20, 50, ... not above ``ratio`` (1 below 1)."""
+    if not ratio >= 1:
+        return 1.0
+    power = 10.0 ** np.floor(np.log10(ratio))
+    return max(step * power for step in (1.0, 2.0, 5.0) if step * power <= ratio * (1 + 1e-12))
+
+
+def trace_labels(totals: np.ndarray, chosen: list[int], peaks: np.ndarray,
+                 names: list[str]) -> tuple[list[str], np.ndarray]:
+    """Each traced row's label (its number, row, rank of brightness) and the power of ten it is drawn times.
+
+    A few pairs near the laser outshine the rest by orders of magnitude, so a
+    fainter trace drawn as it is lies flat at zero beside the brightest: each
+    is multiplied by the largest of 1, 2, 5, 10, 20, ... not above the
+    brightest's peak over its own (its label says by how much), so that every
+    trace peaks between 0.4 and 1 times the first's height while the labels
+    give the true scale.
+
+    Parameters
+    ----------
+    totals : ndarray
+        ``(P,)`` every row's light summed over the window (what ranks them).
+    chosen : list of int
+        The traced rows, the brightest first (:func:`_traced`).
+    peaks : ndarray
+        ``(len(chosen),)`` the largest |value| of each traced row as drawn.
+    names : list of str
+        What each traced row is ("pair 34", "point 34 (0.1, 0.2)").
+
+    Returns
+    -------
+    (labels, factors)
+        ``factors`` of the traces, each 1, 2 or 5 times a power of ten (1 for the first).
+    """
+    rank_of = np.empty(totals.size, dtype=np.int64)
+    rank_of[np.argsort(-totals, kind="stable")] = np.arange(1, totals.size + 1)
+    top = float(peaks[0]) if peaks.size else 0.0
+    factors = np.ones(len(chosen))
+    labels = []
+    for number, (row, peak, name) in enumerate(zip(chosen, peaks, names), start=1):
+        if number > 1 and top > 0 and peak > 0:
+            factors[number - 1] = _nice_factor(top / peak)
+        rank = int(rank_of[row])
+        place = "the brightest" if rank == 1 else f"the {_ordinal(rank)} brightest of {totals.size}"
+        scaled = "" if factors[number - 1] == 1 else f", × {factors[number - 1]:g}"
+        labels.append(f"{number}: {name}, {place}{scaled}")
+    return labels, factors
 
 
 def _grid_cells(first: np.ndarray, second: np.ndarray):
@@ -105,18 +163,19 @@ def capture_figure(sampling, transient: np.ndarray, positions: np.ndarray, *, ti
     map_axis.set_ylabel(f"{names[along]} (m)", fontsize=8)
     map_axis.set_title(f"light per point, summed over time ({len(totals)} points)", fontsize=8, loc="left")
     chosen = _traced(totals, traces)
-    for number, k in enumerate(chosen, start=1):
+    labels, factors = trace_labels(totals, chosen, np.abs(transient[chosen, first:last]).max(axis=1, initial=0.0),
+                                   [f"point {k} ({positions[k, across]:.3g}, {positions[k, along]:.3g})"
+                                    for k in chosen])
+    for number, (k, label, factor) in enumerate(zip(chosen, labels, factors), start=1):
         colour = f"C{number - 1}"
         map_axis.annotate(str(number), (positions[k, across], positions[k, along]), color=colour, fontsize=8,
                           fontweight="bold", ha="center", va="center",
                           bbox={"boxstyle": "circle,pad=0.15", "fc": "white", "ec": colour, "lw": 0.8})
-        trace_axis.stairs(transient[k, first:last] * scale, edges, color=colour, lw=1.2,
-                          label=f"{number}: point {k} ({positions[k, across]:.3g}, {positions[k, along]:.3g})")
-    trace_axis.set_title("traces of the numbered points: 1 the brightest, then by falling brightness",
-                         fontsize=8, loc="left")
+        trace_axis.stairs(transient[k, first:last] * scale * factor, edges, color=colour, lw=1.2, label=label)
+    trace_axis.set_title("traces of the numbered points", fontsize=8, loc="left")
     trace_axis.set_ylabel(f"H{_units(scale)}", fontsize=8)
     trace_axis.set_xlabel(time.x_label, fontsize=8)
-    trace_axis.legend(fontsize=7, loc="upper right")
+    trace_axis.legend(fontsize=7, loc="upper right", title=TRACES_LEGEND, title_fontsize=7)
     for axis in (map_axis, trace_axis):
         axis.tick_params(labelsize=8)
     finish_time_figure(figure, trace_axis, time, title)

@@ -11,6 +11,9 @@ from .common import columns_for_legend, new_figure, suptitle
 
 __all__ = ["check_transients_figure", "check_z_figure"]
 
+#: Line widths (points) of the model as given (a band beneath) and of the fitted model (a line on top).
+AS_GIVEN_WIDTH, FITTED_WIDTH = 4.0, 1.2
+
 
 class _Bins(NamedTuple):
     """The bins of a transient that is not a scene's own (``check``'s data): edges and count."""
@@ -62,14 +65,18 @@ def check_transients_figure(result, *, max_panels: int = 9):
             axis.axis("off")
             continue
         k = int(order[panel])
-        drawn = [axis.stairs(result.model[k, first:last] * scale, time.edges, color="C0"),
-                 axis.stairs(result.fitted_model[k, first:last] * scale, time.edges, color="C1", ls="--")]
+        # the model as given, a broad pale band beneath; the fitted one, thin and dashed on top: where they
+        # coincide (scale 1, offset 0: the usual case) both stay visible
+        drawn = [axis.stairs(result.model[k, first:last] * scale, time.edges, color="C0", lw=AS_GIVEN_WIDTH,
+                             alpha=0.45, zorder=2),
+                 axis.stairs(result.fitted_model[k, first:last] * scale, time.edges, color="C1", ls="--",
+                             lw=FITTED_WIDTH, zorder=3)]
         data = result.data[k, first:last] * scale
         if result.stderr is not None:
             drawn.append(axis.errorbar(time.centres, data, yerr=result.stderr[k, first:last] * scale, fmt="o",
-                                       ms=2.5, color="k", elinewidth=1.0, capsize=1.5))
+                                       ms=2.5, color="k", elinewidth=1.0, capsize=1.5, zorder=4))
         else:
-            drawn.append(axis.plot(time.centres, data, "o", ms=2.5, color="k")[0])
+            drawn.append(axis.plot(time.centres, data, "o", ms=2.5, color="k", zorder=4)[0])
         if panel == 0:
             handles = drawn
         axis.set_title(f"sensor {k}", fontsize=9, loc="left")

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .axes import power_of_ten, relay_wall_label, time_axis
-from .captures import _traced
+from .captures import TRACES_LEGEND, _traced, trace_labels
 from .common import new_figure, plain_text
 from .transients import finish_time_figure
 
@@ -184,8 +184,11 @@ def relay_wall_figure(sampling, y: np.ndarray, scan: WallScan, *, stderr: np.nda
     wall's read grid for a single or confocal scan (the lit point starred
     for a single scan), per (lit point, read point) for an exhaustive one;
     right, the traces of the brightest pair and of pairs at evenly spaced
-    ranks of brightness, numbered on the middle panel, with ±1 standard
-    error as a band and noisy samples as points when given.
+    ranks of brightness (each labelled with its rank), numbered on the
+    middle panel, each fainter one drawn times the power of ten that brings
+    its peak near the brightest's (in its label;
+    :func:`validation.plots.captures.trace_labels`), with ±1 standard error
+    as a band and noisy samples as points when given.
 
     Parameters
     ----------
@@ -223,25 +226,39 @@ def relay_wall_figure(sampling, y: np.ndarray, scan: WallScan, *, stderr: np.nda
     pairs_axis, wall_axis, trace_axis = figure.subplots(1, 3, gridspec_kw={"width_ratios": [1.15, 1.0, 1.05]})
     _pairs_panel(figure, pairs_axis, y, time, scan)
     _wall_panel(figure, wall_axis, totals, scan, chosen)
-    for number, p in enumerate(chosen, start=1):
+    labels, factors = trace_labels(totals, chosen, np.abs(y[chosen, time.first:time.last]).max(axis=1, initial=0.0),
+                                   [f"pair {p}" for p in chosen])
+    low = high = 0.0                   # the lines' (and bands') extent: the points' may be far wider
+    points = []
+    for number, (p, name, factor) in enumerate(zip(chosen, labels, factors), start=1):
         colour = f"C{number - 1}"
-        values = y[p, time.first:time.last] * time.scale
-        trace_axis.stairs(values, time.edges, color=colour, lw=1.2, label=f"{number}: pair {p}")
+        drawn = time.scale * factor           # a faint pair times a power of ten, said in its label
+        values = y[p, time.first:time.last] * drawn
+        trace_axis.stairs(values, time.edges, color=colour, lw=1.2, label=name)
+        error = 0.0
         if stderr is not None:
-            error = np.atleast_2d(stderr)[p, time.first:time.last] * time.scale
+            error = np.atleast_2d(stderr)[p, time.first:time.last] * drawn
             trace_axis.fill_between(time.edges, np.append(values - error, values[-1] - error[-1]),
                                     np.append(values + error, values[-1] + error[-1]), step="post", color=colour,
                                     alpha=0.3, lw=0)
+        low, high = min(low, float(np.min(values - error))), max(high, float(np.max(values + error)))
         if noisy is not None:
-            trace_axis.plot(time.centres, np.atleast_2d(noisy)[p, time.first:time.last] * time.scale, "o", ms=2.5,
-                            color=colour)
+            points.append(np.atleast_2d(noisy)[p, time.first:time.last] * drawn)
+            trace_axis.plot(time.centres, points[-1], "o", ms=2.5, color=colour)
     band = (", ±1 standard error (band)" if stderr is not None else "") \
         + (" and model + noise (points)" if noisy is not None else "")
-    trace_axis.set_title(plain_text(f"{label}{band}; pairs by brightness, 1 the brightest"),
-                         fontsize=8, loc="left", parse_math=False)
+    trace_axis.set_title(plain_text(f"{label}{band}"), fontsize=8, loc="left", parse_math=False)
+    legend_title = TRACES_LEGEND
+    if points and high > low:
+        # the noise of a faint pair, times its factor, would stretch the axis until every line lies flat
+        margin = 0.08 * (high - low)
+        trace_axis.set_ylim(low - margin, high + margin)
+        beyond = int(sum(np.count_nonzero((row < low - margin) | (row > high + margin)) for row in points))
+        if beyond:
+            legend_title += f"\n{beyond} noisy points beyond the axis not shown"
     trace_axis.set_ylabel(relay_wall_label(time.y_label), fontsize=8)
     trace_axis.set_xlabel(time.x_label, fontsize=8)
-    trace_axis.legend(fontsize=7, loc="upper right")
+    trace_axis.legend(fontsize=7, loc="upper right", title=legend_title, title_fontsize=7)
     for axis in (pairs_axis, wall_axis, trace_axis):
         axis.tick_params(labelsize=8)
     finish_time_figure(figure, trace_axis, time, title)

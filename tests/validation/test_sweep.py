@@ -15,6 +15,7 @@ import csv
 import json
 import os
 import signal
+import sys
 
 import numpy as np
 import pytest
@@ -222,6 +223,20 @@ def test_a_cuda_variant_without_a_gpu_is_refused_before_any_cluster_or_file(tmp_
     (line,) = done.stderr.strip().splitlines()
     assert line.startswith("diffuse-imaging: error: variant cuda_ad_mono") and "CUDA" in line
     assert not out.exists()
+
+
+def test_without_dask_a_sweep_is_refused_in_one_line_naming_the_extra(tmp_path, capsys, monkeypatch):
+    """The lean install (no ``sweep`` extra): the command and the Python call say which extra to install."""
+    path = write_sweep(tmp_path)
+    monkeypatch.setitem(sys.modules, "distributed", None)       # as if not installed: find_spec gives None
+    out = tmp_path / "out"
+    assert main(["sweep", str(path), "--out", str(out)]) == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert line.startswith("diffuse-imaging: error: sweep: runs on Dask") and "diffuse-imaging[sweep]" in line
+    assert not out.exists()
+    with pytest.raises(ResourceError, match=r"diffuse-imaging\[sweep\]"):
+        run_sweep(load_sweep(path), tmp_path / "python")
+    assert not (tmp_path / "python").exists()
 
 
 def test_the_sweep_renders_what_render_renders():

@@ -21,8 +21,9 @@ __all__ = ["add_commands", "command_sweep"]
 def command_sweep(args) -> int:
     """Run the sweep; exit status 0 when done (and every cross-checked item agrees), else 1."""
     from analytic.files import output_folder
-    from validation.sweep import check_variant, load_sweep, run_sweep
+    from validation.sweep import check_variant, load_sweep, require_dask, run_sweep
 
+    require_dask()                   # the lean install has no Dask: one line naming the extra, before any work
     if args.workers is not None and not 1 <= args.workers <= 1024:
         raise UsageError(f"--workers: must be in [1, 1024], got {args.workers}")
     sweep = load_sweep(args.sweep)   # SceneError (exit 2) before any output is written

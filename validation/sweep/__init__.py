@@ -37,6 +37,6 @@ import lazy_loader
 __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "config": ["Sweep", "SweepItem", "load_sweep", "sweep_from_dict", "DEFAULT_SWEEP_CHUNK"],
     "tasks": ["render_chunk", "model_transient"],
-    "driver": ["SweepResult", "run_sweep", "sweep_client", "check_variant"],
+    "driver": ["SweepResult", "run_sweep", "sweep_client", "check_variant", "require_dask"],
     "checkpoint": ["STATE_FILE", "ITEM_FILE"],
 })

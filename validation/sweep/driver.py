@@ -67,6 +67,26 @@ class SweepResult:
         return all(verdicts)
 
 
+#: The extra that brings Dask (``pip install 'diffuse-imaging[sweep]'``).
+EXTRA = "sweep"
+
+
+def require_dask() -> None:
+    """Refuse in one line, naming the extra that brings it, when Dask's ``distributed`` is not installed.
+
+    Raises
+    ------
+    analytic.errors.ResourceError
+    """
+    import importlib.util
+
+    from analytic.errors import ResourceError
+
+    if importlib.util.find_spec("distributed") is None:
+        raise ResourceError(f"sweep: runs on Dask, which is an optional extra not installed here; install it "
+                            f"with pip install 'diffuse-imaging[{EXTRA}]'")
+
+
 @contextlib.contextmanager
 def sweep_client(scheduler: str | None = None, workers: int | None = None) -> Iterator:
     """A ``distributed.Client``: to the cluster at ``scheduler``, or to a new local one.
@@ -81,6 +101,7 @@ def sweep_client(scheduler: str | None = None, workers: int | None = None) -> It
         Local cluster only: worker processes (default: one per core), one
         thread each, dashboard off, listening on loopback only.
     """
+    require_dask()
     from distributed import Client, LocalCluster
 
     if scheduler is not None:
@@ -206,6 +227,8 @@ def run_sweep(sweep: Sweep, out_dir: str | Path, *, client=None, scheduler: str 
 
     Raises
     ------
+    analytic.errors.ResourceError
+        When Dask is not installed (the ``sweep`` extra), before anything is done.
     KeyboardInterrupt
         After the finished chunks of every unfinished item are checkpointed
         and the cluster's outstanding tasks cancelled.
@@ -216,6 +239,7 @@ def run_sweep(sweep: Sweep, out_dir: str | Path, *, client=None, scheduler: str 
         When the workers cannot run the sweep's variant (:func:`check_variant`),
         before anything is written.
     """
+    require_dask()
     out_dir = Path(out_dir)
     if client is not None and (scheduler is not None or workers is not None):
         raise ValueError("give either client or scheduler/workers, not both")

@@ -86,8 +86,8 @@ from .kernels.assembly import Assembly, ImageGrid, Jobs, Slots, StepAssembly, au
 from .kernels.cache import compiled
 from .kernels.isochrone import rectangle_range
 from .kernels.quadrature import nested_integral_arguments, pixel_isochrone_integral
-from .kernels.routes import SAFETY, CutRoute, DirectRoute, RouteOutcome, StripRoute, TimeAxis, make_scratch, \
-    pair_by_method, pixel_bins
+from .kernels import routes
+from .kernels.routes import SAFETY, Route, TimeAxis, make_scratch, pixel_bins
 from .blocks import run_blocks, thread_count
 from .resources import available_memory
 from .scene import MAX_TOLERANCE, MIN_TOLERANCE, Sampling, Scene, check_heights, check_tolerance
@@ -105,7 +105,7 @@ __all__ = ["system_matrix", "rectangle_matrix", "forward", "count_entries", "che
 _BLOCKS_PER_THREAD = 16  # blocks of pixels per thread (pulled by the threads as they finish the last)
 _COUNTS_BYTES = 2**28    # at most this much (and an eighth of the memory limit) for the blocks' counts per row
 
-#: Quadrature routes of :func:`pair_entries`, in the order of analytic.kernels' route codes.
+#: Quadrature routes :func:`pair_entries` can be asked for ("auto": what assembly does).
 METHODS = ("auto", "smooth", "isochrone", "adaptive", "strip")
 
 
@@ -131,13 +131,15 @@ def _problem(rectangle: Rectangle, pairs: PointPairs, sampling: Sampling, wavefo
                     np.asarray(pairs.scales, dtype=np.float64))
 
 
-def _record(problem: _Problem, rtol: float) -> Assembly | StepAssembly:
+def _record(problem: _Problem, rtol: float, *, first_pass: bool = False) -> Assembly | StepAssembly:
     """The compiled kernels' record of the problem, their quadrature asked for ``rtol``.
 
-    Its type says whether S is a step function (the impulse), for which the first pass is compiled
-    without the moments route (:class:`analytic.kernels.assembly.StepAssembly`).
+    For the first pass of :func:`analytic.kernels.assembly.fill_block`, its type says whether S is a
+    step function (the impulse), for which that pass is compiled without the moments route
+    (:class:`~analytic.kernels.assembly.StepAssembly`); every other kernel takes an
+    :class:`~analytic.kernels.assembly.Assembly` (one compile for both).
     """
-    kind = StepAssembly if problem.waveform.terms.degree == 0 else Assembly
+    kind = StepAssembly if first_pass and problem.waveform.terms.degree == 0 else Assembly
     return kind(problem.pairs, problem.mode, problem.grid, problem.axis, problem.waveform.terms, float(rtol),
                 problem.scales)
 
@@ -358,7 +360,7 @@ def rectangle_matrix(rectangle: Rectangle, pairs: PointPairs, sampling: Sampling
     index_type = np.int32 if _index_bytes(max(nnz, rows, columns)) == 4 else np.int64
     indices = np.empty(nnz, dtype=index_type)
     data = np.empty(nnz, dtype=np.float64)
-    record = _record(problem, SAFETY * tolerance)
+    record = _record(problem, SAFETY * tolerance, first_pass=True)
     bounds, widest = layout.bounds, counts.widest
     bar = None
     if progress:
@@ -370,7 +372,8 @@ def rectangle_matrix(rectangle: Rectangle, pairs: PointPairs, sampling: Sampling
                             len(bounds) - 1, threads=layout.threads, bar=bar, weights=np.diff(bounds))
         failures, served, reached, left = (int(total) for total in np.sum(totals, axis=0))
         if left:
-            more_failures, more_served = _left_pairs(record, data, indices, indptr, sampling.count, layout.threads)
+            more_failures, more_served = _left_pairs(_record(problem, SAFETY * tolerance), data, indices, indptr,
+                                                     sampling.count, layout.threads)
             failures += more_failures
             served += more_served
     finally:
@@ -424,32 +427,47 @@ def _left_pairs(record: Assembly, data: np.ndarray, indices: np.ndarray, indptr:
                 threads: int) -> tuple[int, int]:
     """The general routes on the pairs the first pass left, one route at a time; (pieces failed, served smooth).
 
-    Each route's kernel is compiled (or loaded) only when some pair needs it
-    (:mod:`analytic.kernels.assembly`); a route that does not serve a pair leaves it to the next.
+    Their kernel is compiled (or loaded) only when some pair is left (:mod:`analytic.kernels.assembly`); a
+    route that does not serve a pair leaves it to the next.
     """
-    jobs = _left_jobs(data, indices, indptr, bins)
+    return _run_left(record, _left_jobs(data, indices, indptr, bins), data, threads)
+
+
+#: The general routes assembly runs, in order, on the pairs its first pass leaves.
+_GENERAL_ROUTES = (Route(routes.DIRECT), Route(routes.STRIP), Route(routes.CUT))
+
+
+def _run_left(record: Assembly, jobs: Jobs, data: np.ndarray, threads: int) -> tuple[int, int]:
+    """:data:`_GENERAL_ROUTES` on ``jobs``, each trying those the one before did not serve; (failures, smooth)."""
     flags = np.zeros(jobs.pairs.size, dtype=np.int64)
     compiled(assembly.job_routes, record, jobs, flags)(record, jobs, flags)
     waiting = np.ones(jobs.pairs.size, dtype=bool)
     failures, smooth = 0, 0
-    for route, applies in ((DirectRoute(), flags & assembly.DIRECT_APPLIES > 0),
-                           (StripRoute(), flags & assembly.STRIPS_APPLY > 0), (CutRoute(), None)):
+    for route, applies in zip(_GENERAL_ROUTES, (flags & assembly.DIRECT_APPLIES > 0,
+                                                flags & assembly.STRIPS_APPLY > 0, None)):
         chosen = waiting if applies is None else waiting & applies
         if not np.any(chosen):
             continue
-        if isinstance(route, CutRoute):
-            _compile_nested()
         batch = _subset(jobs, chosen)
-        served = np.zeros(batch.pairs.size, dtype=np.bool_)
-        count = batch.pairs.size
-        blocks = max(1, -(-count // _JOBS_PER_BLOCK))
-        failures += int(sum(run_blocks(assembly.run_jobs, lambda b: (route, record, batch, b * count // blocks,
-                                                                     (b + 1) * count // blocks, data, served),
-                                       blocks, threads=threads)))
-        if isinstance(route, DirectRoute):
+        outcomes, more = _run_route(route, record, batch, data, threads)
+        failures += more
+        served = outcomes == routes.SERVED
+        if route.code == routes.DIRECT:
             smooth += int(served.sum())
         waiting[np.flatnonzero(chosen)[served]] = False
     return failures, smooth
+
+
+def _run_route(route: Route, record: Assembly, jobs: Jobs, data: np.ndarray, threads: int):
+    """(outcomes, pieces failed) of one route on every job, in blocks on ``threads`` threads."""
+    _compile_nested()
+    outcomes = np.zeros(jobs.pairs.size, dtype=np.int64)
+    count = jobs.pairs.size
+    blocks = max(1, -(-count // _JOBS_PER_BLOCK))
+    failures = run_blocks(assembly.run_jobs, lambda b: (route, record, jobs, b * count // blocks,
+                                                        (b + 1) * count // blocks, data, outcomes),
+                          blocks, threads=threads)
+    return outcomes, int(sum(failures))
 
 
 def pair_entries(scene: Scene, sensor: int, pixel: int, *, method: str = "auto",
@@ -503,33 +521,44 @@ def pair_entries(scene: Scene, sensor: int, pixel: int, *, method: str = "auto",
     rectangle, pairs = scene.geometry()
     problem = _problem(rectangle, pairs, scene.sampling,
                        make_waveform(scene.illumination, scene.sampling.bin_width_opl))
+    record = _record(problem, SAFETY * tolerance)
     terms = problem.waveform.terms
     frame = pair_frame_of(problem.pairs, sensor, problem.mode)
     box = pixel_box(problem.grid, pixel)
     axis = problem.axis._replace(start_opl=problem.axis.start_opl - float(problem.pairs[sensor]["offset"]))
     low, high = rectangle_range(frame, box)
     run = pixel_bins(low, high, axis, terms.lead, terms.duration)
-    out = np.zeros(max(run.bins, 1))
-    scratch = make_scratch(max(run.bins, 1))
-    _compile_nested()
+    jobs = Jobs(np.array([sensor]), np.array([pixel]), np.array([run.first]), np.array([0, run.bins]),
+                np.arange(run.bins), np.array([low]), np.array([high]))
+    data = np.zeros(max(run.bins, 1))
+    failures = 0
     if method == "auto":
         # assembly's own run of bins (the tests hold it to the exact range's, which the other routes use)
-        run, _ = auto_entries(frame, box, terms, axis, SAFETY * tolerance, out, scratch)
-        failures = scratch.work.failures[0] + scratch.inner.failures[0] + scratch.moments.failures[0]
-        outcome = RouteOutcome(True, True, int(failures))
-    else:
-        outcome = pair_by_method(frame, box, low, high, terms, axis, run, SAFETY * tolerance,
-                                 METHODS.index(method), bool(taylor), out, scratch)
-    if not outcome.applies:
-        raise ValueError(f"the {method} rule does not apply to pixel {pixel}, sensor {sensor}: "
-                         + ("x* or a foot is near" if method == "strip" else
-                            "a kernel breakpoint crosses it or a foot is near"))
-    if not outcome.converged:
-        raise ValueError(f"the {method} rule did not converge on pixel {pixel}, sensor {sensor}")
-    if outcome.failures > 0:
-        warnings.warn(f"{outcome.failures} quadrature pieces stopped refining before reaching tolerance "
+        scratch = make_scratch(max(run.bins, 1))
+        column, served, _ = auto_entries(frame, box, terms, axis, SAFETY * tolerance, data, scratch)
+        failures = int(scratch.work.failures[0] + scratch.inner.failures[0] + scratch.moments.failures[0])
+        run = column.run
+        data[:run.bins] *= problem.scales[sensor]
+        if not served:
+            jobs = jobs._replace(firsts=np.array([run.first]), offsets=np.array([0, run.bins]),
+                                 slots=np.arange(run.bins), lows=np.array([column.low]),
+                                 highs=np.array([column.high]))
+            failures += _run_left(record, jobs, data, 1)[0]
+    elif run.bins > 0:
+        code, arcs = {"smooth": (routes.MOMENTS if taylor else routes.DIRECT, routes.AUTO_ARCS),
+                      "strip": (routes.STRIP, routes.AUTO_ARCS), "isochrone": (routes.CUT, routes.SMOOTH_ARCS),
+                      "adaptive": (routes.CUT, routes.ADAPTIVE_ARCS)}[method]
+        outcomes, failures = _run_route(Route(code, arcs, bool(taylor)), record, jobs, data, 1)
+        if outcomes[0] == routes.DOES_NOT_APPLY:
+            raise ValueError(f"the {method} rule does not apply to pixel {pixel}, sensor {sensor}: "
+                             + ("x* or a foot is near" if method == "strip" else
+                                "a kernel breakpoint crosses it or a foot is near"))
+        if outcomes[0] == routes.NOT_CONVERGED:
+            raise ValueError(f"the {method} rule did not converge on pixel {pixel}, sensor {sensor}")
+    if failures > 0:
+        warnings.warn(f"{failures} quadrature pieces stopped refining before reaching tolerance "
                       f"{tolerance:g}", QuadratureWarning, stacklevel=2)
-    return run.first, out[:run.bins] * problem.scales[sensor]
+    return run.first, data[:run.bins]
 
 
 def forward(scene: Scene, matrix=None) -> np.ndarray:

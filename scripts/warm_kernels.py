@@ -1,27 +1,49 @@
-"""Compile (or load from Numba's cache) the kernels that only the tests and diagnosis call.
+"""Compile (or load) the model's kernels that the commands and the tests use: every route, both waveform kinds.
 
-``scripts/setup.sh`` runs this beside its warm-up of the main job (which
-compiles A's assembly), so that the two compiles share the machine's cores
-instead of the first test paying minutes: :func:`analytic.system.pair_entries`
-by every route (each route is held to the adaptive one by the tests). The
-values computed are discarded.
+A command compiles only what its scene needs, once (``analytic.kernels.cache``); the tests need every
+route. ``scripts/setup.sh`` runs this beside the renderer's warm-up so that the two use both cores and no
+test pays a compile. With ``--renderer`` it renders the built-in scene instead (Dr.Jit's kernels, cached in
+``~/.drjit``). The values computed are discarded.
 """
 
 from __future__ import annotations
 
 import contextlib
+import sys
+import warnings
 
-from analytic.scene import default_scene
-from analytic.system import METHODS, pair_entries
+import numpy as np
 
 
-def main() -> None:
-    scene = default_scene(pixels=4, noise=None)
-    for method in METHODS:
-        for taylor in (True, False):
-            with contextlib.suppress(ValueError):      # a route that does not apply here is still compiled
-                pair_entries(scene, 0, 5, method=method, taylor=taylor)
+def model() -> None:
+    from analytic.response import impulse_response
+    from analytic.scene import Illumination, Sampling, Scene
+    from analytic.system import METHODS, pair_entries, system_matrix
+    from analytic.window import window_share
+
+    # a sensor near the plane (the cut route by its foot), bins finer than the pixels (strips), a far sensor
+    scene = Scene(pixels=6, reflectance=1.0, source=(0.3, 0.6, 0.4), sensors=[(0.7, 0.2, 0.5), (0.5, 0.5, 0.02)],
+                  sampling=Sampling(bin_width_opl=0.03, start_opl=0.4, count=90), noise=None)
+    for waveform in ("impulse", "square"):       # a step function's first pass, and the moments' one
+        shaped = scene.replace(illumination=Illumination(waveform=waveform))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            system_matrix(shaped)
+            window_share(shaped)
+            for method in METHODS:               # the tests hold each route to the adaptive one
+                for taylor in (True, False):
+                    with contextlib.suppress(ValueError):     # a route that does not apply is compiled anyway
+                        pair_entries(shaped, 1, 14, method=method, taylor=taylor)
+    impulse_response(scene, 0, [1.2, 1.3])
+
+
+def renderer() -> None:
+    from analytic.scene import default_scene
+    from transient.render import render
+
+    render(default_scene(noise=None), spp=4096, seed=0, progress=False)
 
 
 if __name__ == "__main__":
-    main()
+    np.seterr(all="ignore")
+    (renderer if sys.argv[1:] == ["--renderer"] else model)()

@@ -30,12 +30,11 @@ cuts takes its moments over that range.
 
 Every other (pixel, pair) is *left* by the first pass: its slots hold NaN
 (and its column), and :func:`run_jobs` computes it afterwards by the general
-routes of :mod:`analytic.kernels.routes`, one route at a time, each
-compiled only when a scene needs it (:class:`~analytic.kernels.routes.DirectRoute`,
-:class:`~analytic.kernels.routes.StripRoute`, :class:`~analytic.kernels.routes.CutRoute`,
-in that order, each trying what the one before did not serve): the paper's
-scene needs none of them, and its first run compiles only this module's
-first pass. The entries are the same numbers either way: every route is a
+routes of :mod:`analytic.kernels.routes`, one route at a time (the direct
+smooth route, strips, the cut quadrature, each trying what the one before
+did not serve), compiled only when a scene leaves some pair: the paper's
+scene leaves none, and its first run compiles only this module's first
+pass. The entries are the same numbers either way: every route is a
 function of its (pixel, pair) alone.
 """
 
@@ -52,8 +51,7 @@ from .cache import njit
 from .isochrone import PixelBox, pair_frame, range_bound, rectangle_range
 from .moments import pixel_integral, smooth_by_moments
 from .pieces import WaveformTerms
-from .routes import Column, clear_of_feet, clear_of_birth, general_entries, make_scratch, route_entries, \
-    scratch_failures
+from .routes import SERVED, Column, clear_of_feet, clear_of_birth, make_scratch, route_entries, scratch_failures
 from .strips import single_cut
 
 __all__ = ["ImageGrid", "Assembly", "StepAssembly", "Slots", "Jobs", "pixel_box", "settled_run", "pixel_run", "SEGMENT",
@@ -297,7 +295,7 @@ def _left_smooth(problem, outcome, frame, box, column, table, axis, out, scratch
     raise TypeError("_left_smooth is called from compiled code")
 
 
-@overload(_left_smooth, jit_options={"error_model": "numpy"})
+@overload(_left_smooth, jit_options={"error_model": "numpy"}, inline="always")
 def _left_smooth_of(problem, outcome, frame, box, column, table, axis, out, scratch):
     kind = getattr(problem, "instance_class", None)
     if kind is StepAssembly:
@@ -314,7 +312,7 @@ def _block_scratch(problem, width):
     raise TypeError("_block_scratch is called from compiled code")
 
 
-@overload(_block_scratch, jit_options={"error_model": "numpy"})
+@overload(_block_scratch, jit_options={"error_model": "numpy"}, inline="always")
 def _block_scratch_of(problem, width):
     kind = getattr(problem, "instance_class", None)
     if kind is StepAssembly:
@@ -329,7 +327,7 @@ def _failures(scratch):
     raise TypeError("_failures is called from compiled code")
 
 
-@overload(_failures, jit_options={"error_model": "numpy"})
+@overload(_failures, jit_options={"error_model": "numpy"}, inline="always")
 def _failures_of(scratch):
     if getattr(scratch, "instance_class", None) is not None:
         return lambda scratch: scratch_failures(scratch)
@@ -338,19 +336,24 @@ def _failures_of(scratch):
 
 @njit(cache=True, error_model="numpy")
 def auto_entries(frame, box, terms, axis, rtol, out, scratch):
-    """(run, smooth) of one (pixel, pair) exactly as assembly computes it, its left routes included (for tests)."""
+    """(column, served, smooth): one (pixel, pair) as the first pass computes it (for tests and diagnosis).
+
+    ``served`` False: the first pass leaves it (to :func:`run_jobs`), with ``column`` its exact range.
+    ``smooth``: a smooth route served it.
+    """
     table = step_table(terms)
     column, outcome = _step_column(frame, box, table, terms, axis, rtol, out)
     run = column.run
     if run.bins == 0 or outcome == _SERVED:
-        return run, run.bins > 0
+        return column, True, run.bins > 0
     if (table.steps and column.exact
             and _single_cut_column(frame, box, column, table, axis, rtol, out, np.empty(run.bins))):
-        return run, False
-    served, column = _finish(outcome, frame, box, column, terms, axis, rtol, out, scratch)
-    if served:
-        return run, True
-    return run, general_entries(frame, box, column, terms, axis, rtol, out, scratch)
+        return column, True, False
+    if table.steps:
+        served, column = _finish_steps(frame, box, column, table, axis, rtol, out)
+    else:
+        served, column = _finish(outcome, frame, box, column, terms, axis, rtol, out, scratch)
+    return column, served, served
 
 
 @njit(cache=True, error_model="numpy")
@@ -512,11 +515,11 @@ def job_routes(problem, jobs, routes):
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
-def run_jobs(route, problem, jobs, begin, end, data, served):
-    """Jobs begin ... end - 1 by one ``route`` (a route record); returns the quadrature pieces failed.
+def run_jobs(route, problem, jobs, begin, end, data, outcomes):
+    """Jobs begin ... end - 1 by one :class:`~analytic.kernels.routes.Route`; returns the quadrature pieces failed.
 
-    Where the route serves a job, its entries go to its slots of ``data`` and served[j] is set True;
-    elsewhere both are left for the next route.
+    outcomes[j]: what :func:`~analytic.kernels.routes.route_entries` did; where it served, the job's
+    entries went to its slots of ``data``, elsewhere both are left for the next route.
     """
     width = 1
     for j in range(begin, end):
@@ -534,8 +537,8 @@ def run_jobs(route, problem, jobs, begin, end, data, served):
         box = pixel_box(problem.grid, jobs.pixels[j])
         first, last = jobs.offsets[j], jobs.offsets[j + 1]
         column = Column(BinRun(jobs.firsts[j], last - first), jobs.lows[j], jobs.highs[j], True)
-        if route_entries(route, frame, box, column, problem.terms, pair_axis, problem.rtol, out, scratch):
-            served[j] = True
+        outcomes[j] = route_entries(route, frame, box, column, problem.terms, pair_axis, problem.rtol, out, scratch)
+        if outcomes[j] == SERVED:
             scale = problem.scales[k]
             for i in range(last - first):
                 data[jobs.slots[first + i]] = out[i] * scale

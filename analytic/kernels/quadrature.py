@@ -141,6 +141,9 @@ def time_weight(problem, tau, scale, values, noise):
 def implements(stub, record):
     """Decorator: the compiled function is ``stub``'s implementation for problems of type ``record``.
 
+    The dispatch is inlined where a driver calls the stub (Numba's overload, resolved when the driver is
+    compiled for that problem type), so it adds no compiled function of its own.
+
     Parameters
     ----------
     stub : {integrand, surface_integrand, time_weight}
@@ -148,18 +151,34 @@ def implements(stub, record):
         A NamedTuple class; its instances are the first argument.
     """
     def register(kernel):
-        @overload(stub, jit_options={"error_model": "numpy"})
-        def typed(problem, *arguments):
-            if getattr(problem, "instance_class", None) is record:
-                def call(problem, *arguments):
-                    return kernel(problem, *arguments)
-                return call
-            return None
+        def chosen(problem):
+            return getattr(problem, "instance_class", None) is record
+
+        if stub is integrand:
+            @overload(integrand, jit_options={"error_model": "numpy"}, inline="always")
+            def _typed(problem, t, values, noise):
+                if chosen(problem):
+                    return lambda problem, t, values, noise: kernel(problem, t, values, noise)
+                return None
+        elif stub is surface_integrand:
+            @overload(surface_integrand, jit_options={"error_model": "numpy"}, inline="always")
+            def _typed(problem, x, y, values, noise):
+                if chosen(problem):
+                    return lambda problem, x, y, values, noise: kernel(problem, x, y, values, noise)
+                return None
+        elif stub is time_weight:
+            @overload(time_weight, jit_options={"error_model": "numpy"}, inline="always")
+            def _typed(problem, tau, scale, values, noise):
+                if chosen(problem):
+                    return lambda problem, tau, scale, values, noise: kernel(problem, tau, scale, values, noise)
+                return None
+        else:
+            raise ValueError(f"implements: {stub!r} is not one of integrand, surface_integrand, time_weight")
         return kernel
     return register
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _gauss(problem, lo, hi, order, size, work, out):
     """G_order of f on [lo, hi] into out[:size]; of |f| and of f's rounding into work.magnitude, work.rounding."""
     centre = 0.5 * (lo + hi)
@@ -308,7 +327,7 @@ def adapt(problem, lo, hi, rtol, size, total, work, resolution, max_pieces):
     return failures
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def integrate(problem, lo, hi, rtol, size, total, work, resolution):
     """Add ∫_lo^hi f(t) dt to total[:size]: :func:`adapt` with :func:`ladder_rule` of ``problem``'s :func:`integrand`.
 
@@ -600,7 +619,7 @@ def rule(problem, lo, hi, rtol, size, work):
     raise TypeError("rule is called from compiled code")
 
 
-@overload(rule, jit_options={"error_model": "numpy"})
+@overload(rule, jit_options={"error_model": "numpy"}, inline="always")
 def _rule_of(problem, lo, hi, rtol, size, work):
     if getattr(problem, "instance_class", None) is IsochronePiece:
         return lambda problem, lo, hi, rtol, size, work: isochrone_rule(problem, lo, hi, rtol, size, work)

@@ -5,7 +5,8 @@
 for one pair k (a :class:`~analytic.kernels.isochrone.Frame` in the rectangle's
 frame) and one pixel p (a :class:`~analytic.kernels.isochrone.PixelBox`), over the
 run of bins its light reaches (:class:`BinRun` of a :class:`TimeAxis`).
-:func:`pair_entries` chooses the route, :func:`pair_by_method` forces one
+:mod:`analytic.kernels.assembly` takes its own fast paths first, then the general routes here one at a
+time (:func:`route_entries` with a :class:`Route`), and the tests force any one of them
 (so that each fast route can be held to the adaptive one); the module
 docstring of :mod:`analytic.system` says what each route does.
 
@@ -21,7 +22,6 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba.extending import overload
 
 from .bins import BinRun, KernelProblem, TimeAxis, bin_edge, bin_of, kernel_cut, kernel_values, pixel_bins
 from .isochrone import Frame, PixelBox, ellipse, first_arrival_point, path_length_at, segment_minimum
@@ -34,9 +34,10 @@ from .moments import MomentProblem, bin_moments, moment_weight, smooth_by_moment
 from .strips import strip_entries
 from .taylor import MAX_TERMS, kernel_taylor
 
-__all__ = ["TimeAxis", "BinRun", "Scratch", "Column", "RouteOutcome", "DirectRoute", "StripRoute", "CutRoute",
-           "route_entries", "general_entries", "make_scratch", "pixel_bins", "pair_entries",
-           "pair_by_method", "clear_of_feet", "clear_of_birth", "scratch_failures", "bin_of", "FOOT_CLEARANCE", "SAFETY", "AUTO", "SMOOTH", "ISOCHRONE", "ADAPTIVE", "STRIP"]
+__all__ = ["TimeAxis", "BinRun", "Scratch", "Column", "Route", "route_entries", "make_scratch", "pixel_bins",
+           "clear_of_feet", "clear_of_birth", "scratch_failures", "bin_of", "MOMENTS", "DIRECT", "STRIP", "CUT",
+           "AUTO_ARCS", "SMOOTH_ARCS", "ADAPTIVE_ARCS", "SERVED", "DOES_NOT_APPLY", "NOT_CONVERGED",
+           "FOOT_CLEARANCE", "SAFETY"]
 
 #: A pixel is integrated as a smooth 2-D function only if every foot is at
 #: least this many pixel sides away, counting its height: sqrt(δ² + h²) >=
@@ -57,8 +58,11 @@ _TENSOR_PIECES = 64      # τ-pieces the (τ, φ) tensor rule may split into bef
 # rounding makes G(τ) noise on finer scales (about 2·10⁴ roundings of τ).
 _TAU_RESOLUTION = 4e-12
 
-#: Routes of :func:`pair_by_method` (``analytic.system.METHODS`` names them).
-AUTO, SMOOTH, ISOCHRONE, ADAPTIVE, STRIP = 0, 1, 2, 3, 4
+#: :class:`Route` codes, and how the cut route treats its arcs.
+MOMENTS, DIRECT, STRIP, CUT = 0, 1, 2, 3
+AUTO_ARCS, SMOOTH_ARCS, ADAPTIVE_ARCS = 0, 1, 2
+#: What :func:`route_entries` did.
+SERVED, DOES_NOT_APPLY, NOT_CONVERGED = 0, 1, 2
 
 
 class Scratch(NamedTuple):
@@ -83,30 +87,19 @@ class Column(NamedTuple):
     exact: bool             # [low, high] is the pixel's exact range (else a bound around it)
 
 
-class DirectRoute(NamedTuple):
-    """The smooth route with every kernel at every node (:func:`_smooth_direct`), as a type to compile by."""
+class Route(NamedTuple):
+    """Which general route :func:`route_entries` takes for a (pixel, pair), and how (runtime values: one compile).
 
-    code: int = 1
+    ``code``: :data:`MOMENTS` (the Taylor moments of a smooth pixel), :data:`DIRECT` (the smooth route with
+    every kernel at every node), :data:`STRIP` (slabs between isochrones) or :data:`CUT` (the (τ, φ)
+    quadrature). ``arcs`` (:data:`CUT` only): :data:`AUTO_ARCS` (the tensor rule in (τ, φ) where the
+    pixel is clear of the feet and of x*), :data:`SMOOTH_ARCS` (always first) or :data:`ADAPTIVE_ARCS`
+    (never). ``taylor`` (:data:`CUT` only): each τ-piece first through its moments.
+    """
 
-
-class StripRoute(NamedTuple):
-    """Cut pixels by strips (:func:`analytic.kernels.strips.strip_entries`), as a type to compile by."""
-
-    code: int = 2
-
-
-class CutRoute(NamedTuple):
-    """The cut (τ, φ) quadrature (:func:`_cut_entries`), as a type to compile by."""
-
-    code: int = 3
-
-
-class RouteOutcome(NamedTuple):
-    """What :func:`pair_by_method` did: whether its route applied and converged, and the failed pieces."""
-
-    applies: bool
-    converged: bool
-    failures: int
+    code: int
+    arcs: int = 0
+    taylor: bool = True
 
 
 class SmoothProblem(NamedTuple):
@@ -271,7 +264,7 @@ def _pixel_breakpoints(frame, box, low, high, terms, axis, run):
 def _cut_entries(frame, box, low, high, terms, axis, run, rtol, smooth_arcs, taylor, out, scratch):
     """Add the pair's entries to out[:run.bins] by the cut (τ, φ) quadrature.
 
-    A real call (not inlined): compiled once for :func:`pair_entries` and :func:`pair_by_method`;
+    A real call (not inlined): compiled once for every caller;
     its cost per call (a reference count on each of the scratch's arrays) is small beside a cut
     pair's quadrature.
 
@@ -381,148 +374,39 @@ def _smooth_direct(frame, box, terms, axis, run, rtol, out, work):
     return tensor_integrate(SmoothProblem(frame, KernelProblem(terms, axis, run)), box, rtol, run.bins, out, work)
 
 
-@njit(cache=True, error_model="numpy")
-def pair_entries(frame, box, low, high, terms, axis, run, rtol, out, scratch):
-    """out[i] = A[(k, first + i), p] for one (pair, pixel); True if the smooth route served.
+@njit(cache=True, error_model="numpy", inline="always")
+def route_entries(route, frame, box, column, terms, axis, rtol, out, scratch):
+    """One route's entries of one (pixel, pair) into out[:run.bins]: :data:`SERVED`, :data:`DOES_NOT_APPLY`
+    or :data:`NOT_CONVERGED` (out zeroed then).
 
-    A real call (not inlined): assembly takes it only for the pairs its own smooth path
-    (:mod:`analytic.kernels.assembly`) does not serve.
-
-    Parameters
-    ----------
-    frame : Frame
-        The pair, in the rectangle's frame.
-    box : PixelBox
-        The pixel, metres.
-    low, high : float
-        The pixel's range of d (:func:`analytic.kernels.isochrone.rectangle_range`), metres.
-    terms : WaveformTerms
-        The waveform's pieces.
-    axis : TimeAxis
-        The pair's bins.
-    run : BinRun
-        The bins the pixel's light reaches (:func:`pixel_bins`).
-    rtol : float
-        Relative accuracy of each entry.
-    out : float64[:]
-        At least ``run.bins`` long; overwritten.
-    scratch : Scratch
-        The thread's scratch (:func:`make_scratch` of at least ``run.bins``).
+    Where each applies: the smooth routes (:data:`MOMENTS`, :data:`DIRECT`) to a pixel clear of the feet
+    whose ``column`` (its exact range of d) no kernel breakpoint cuts; strips to one clear of the feet and
+    of x*; the cut route to any, and it always serves (pieces that stop refining are counted as failures
+    in ``scratch``).
     """
+    run = column.run
     for i in range(run.bins):
         out[i] = 0.0
     clear = clear_of_feet(frame, box)
-    if clear and not kernel_cut(low, high, terms, axis, run):
-        if smooth_by_moments(frame, box, low, high, terms, axis, run, rtol, out, scratch):
-            return True
-        if _smooth_direct(frame, box, terms, axis, run, rtol, out, scratch.work):
-            return True
+    if route.code == MOMENTS or route.code == DIRECT:
+        if not clear or kernel_cut(column.low, column.high, terms, axis, run):
+            return DOES_NOT_APPLY
+        if route.code == MOMENTS:
+            served = smooth_by_moments(frame, box, column.low, column.high, terms, axis, run, rtol, out, scratch)
+        else:
+            served = _smooth_direct(frame, box, terms, axis, run, rtol, out, scratch.work)
+        return SERVED if served else NOT_CONVERGED
     smooth_arcs = clear_of_birth(frame, box, clear)
-    if smooth_arcs and strip_entries(frame, box, low, high, terms, axis, run, rtol, out, scratch.work):
-        return False
-    _cut_entries(frame, box, low, high, terms, axis, run, rtol, smooth_arcs, True, out, scratch)
-    return False
-
-
-@njit(cache=True, error_model="numpy")
-def _direct(frame, box, column, terms, axis, rtol, out, scratch):
-    """:class:`DirectRoute`: where it applies (clear of the feet, no breakpoint inside), True when it converged."""
-    for i in range(column.run.bins):
-        out[i] = 0.0
-    if not clear_of_feet(frame, box) or kernel_cut(column.low, column.high, terms, axis, column.run):
-        return False
-    return _smooth_direct(frame, box, terms, axis, column.run, rtol, out, scratch.work)
-
-
-@njit(cache=True, error_model="numpy")
-def _strips(frame, box, column, terms, axis, rtol, out, scratch):
-    """:class:`StripRoute`: where it applies (clear of the feet and of x*), True when it served."""
-    for i in range(column.run.bins):
-        out[i] = 0.0
-    if not clear_of_birth(frame, box, clear_of_feet(frame, box)):
-        return False
-    return strip_entries(frame, box, column.low, column.high, terms, axis, column.run, rtol, out, scratch.work)
-
-
-@njit(cache=True, error_model="numpy")
-def _cut(frame, box, column, terms, axis, rtol, out, scratch):
-    """:class:`CutRoute`: always serves (its pieces that stop refining are counted as failures)."""
-    for i in range(column.run.bins):
-        out[i] = 0.0
-    smooth_arcs = clear_of_birth(frame, box, clear_of_feet(frame, box))
-    _cut_entries(frame, box, column.low, column.high, terms, axis, column.run, rtol, smooth_arcs, True, out, scratch)
-    return True
-
-
-def route_entries(route, frame, box, column, terms, axis, rtol, out, scratch):
-    """One route's entries of one (pixel, pair) into out[:run.bins]; True when it served (compiled code only).
-
-    ``route`` is a :class:`DirectRoute`, :class:`StripRoute` or :class:`CutRoute`: its type chooses the
-    route when the caller is compiled, so that a route is compiled only when a scene needs it.
-    """
-    raise TypeError("route_entries is called from compiled code")
-
-
-@overload(route_entries, jit_options={"error_model": "numpy"})
-def _route_of(route, frame, box, column, terms, axis, rtol, out, scratch):
-    chosen = {DirectRoute: _direct, StripRoute: _strips, CutRoute: _cut}.get(getattr(route, "instance_class", None))
-    if chosen is None:
-        return None
-    return lambda route, frame, box, column, terms, axis, rtol, out, scratch: chosen(frame, box, column, terms, axis,
-                                                                                     rtol, out, scratch)
-
-
-@njit(cache=True, error_model="numpy")
-def general_entries(frame, box, column, terms, axis, rtol, out, scratch):
-    """The routes after the moments, in order, on the exact ``column``; True if the smooth one served.
-
-    What :func:`pair_entries` does once its moments did not serve; assembly runs the same routes
-    one at a time over the pairs it left (:func:`analytic.kernels.assembly.run_jobs`).
-    """
-    if _direct(frame, box, column, terms, axis, rtol, out, scratch):
-        return True
-    if not _strips(frame, box, column, terms, axis, rtol, out, scratch):
-        _cut(frame, box, column, terms, axis, rtol, out, scratch)
-    return False
-
-
-@njit(cache=True, error_model="numpy")
-def pair_by_method(frame, box, low, high, terms, axis, run, rtol, method, taylor, out, scratch):
-    """One (pair, pixel)'s entries by one route (``SMOOTH``, ``STRIP``, ``ISOCHRONE`` or ``ADAPTIVE``).
-
-    ``taylor`` (except for ``STRIP``): through the moments and the kernels' Taylor coefficients
-    (:mod:`analytic.kernels.taylor`), or False: with the kernels at every quadrature node. ``AUTO``
-    is :func:`pair_entries` (what assembly does for the pairs its smooth path does not serve;
-    :func:`analytic.kernels.assembly.auto_entries` is assembly's whole route).
-
-    Returns
-    -------
-    RouteOutcome
-        ``applies`` False when the route does not apply (a kernel breakpoint
-        crosses the pixel or a foot is near; for ``STRIP``, x* or a foot is
-        near), ``converged`` False when it did not converge; ``failures``:
-        quadrature pieces kept without meeting the tolerance.
-    """
-    for i in range(run.bins):
-        out[i] = 0.0
-    if method == AUTO:
-        pair_entries(frame, box, low, high, terms, axis, run, rtol, out, scratch)
-    elif method == SMOOTH:
-        if kernel_cut(low, high, terms, axis, run) or not clear_of_feet(frame, box):
-            return RouteOutcome(False, False, 0)
-        if taylor:
-            if not smooth_by_moments(frame, box, low, high, terms, axis, run, rtol, out, scratch):
-                return RouteOutcome(True, False, 0)
-        elif not _smooth_direct(frame, box, terms, axis, run, rtol, out, scratch.work):
-            return RouteOutcome(True, False, 0)
-    elif method == STRIP:
-        if not clear_of_birth(frame, box, clear_of_feet(frame, box)):
-            return RouteOutcome(False, False, 0)
-        if not strip_entries(frame, box, low, high, terms, axis, run, rtol, out, scratch.work):
-            return RouteOutcome(True, False, 0)
-    else:
-        _cut_entries(frame, box, low, high, terms, axis, run, rtol, method == ISOCHRONE, taylor, out, scratch)
-    return RouteOutcome(True, True, scratch_failures(scratch))
+    if route.code == STRIP:
+        if not smooth_arcs:
+            return DOES_NOT_APPLY
+        served = strip_entries(frame, box, column.low, column.high, terms, axis, run, rtol, out, scratch.work)
+        return SERVED if served else NOT_CONVERGED
+    if route.arcs != AUTO_ARCS:
+        smooth_arcs = route.arcs == SMOOTH_ARCS
+    _cut_entries(frame, box, column.low, column.high, terms, axis, run, rtol, smooth_arcs, route.taylor, out,
+                 scratch)
+    return SERVED
 
 
 @njit(cache=True, error_model="numpy")

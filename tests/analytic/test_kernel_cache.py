@@ -18,7 +18,7 @@ ROOT = PACKAGE.parent
 #: What a kernel module may import besides its siblings: compiled code and constants only.
 ALLOWED = {"__future__", "math", "typing", "numpy", "numba", "numba.extending", "numba.core",
            "numba.core.caching", "numba.core.config", "contextlib", "functools", "hashlib", "os", "sys", "tempfile",
-           "threading", "pathlib", "fcntl"}
+           "threading", "pathlib", "fcntl", "lazy_loader"}
 
 
 def test_the_kernels_import_only_each_other_numpy_numba_and_the_standard_library():

@@ -18,17 +18,17 @@ python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ig
 # pip compiles a regular install's modules, not an editable one's: compile them here, so that commands
 # do not recompile them at every start where PYTHONDONTWRITEBYTECODE is set
 python3 -m compileall -q analytic transient validation
-# Numba compiles the model's kernels on their first use (tens of seconds on 2 cores) and caches them beside
-# the sources; Dr.Jit caches the renderer's kernels in ~/.drjit. One small run of the main job pays both
-# here, so that the first real command runs at its warm speed (the README states both times)
-warm=$(mktemp -d)
-# the tests' own routes compile beside the main job's kernels: two compiles, two cores
+# A command compiles the model's kernels that its scene needs on their first use (seconds for the
+# built-in scene) and the renderer's on its first render; the tests need every route. Both are compiled
+# and cached here (analytic/kernels/__pycache__, ~/.drjit), each in its own process, while tal's
+# environment installs beside them.
 python3 scripts/warm_kernels.py &
-routes=$!
-trap 'kill "$routes" 2>/dev/null || true' EXIT      # a failed warm-up leaves no compile running
-python3 -m validation.cli run examples/paper.toml --spp 4096 --out "$warm/run" --quiet
-wait "$routes"
-trap - EXIT
-rm -rf "$warm"
+model=$!
+python3 scripts/warm_kernels.py --renderer &
+renderer=$!
+trap 'kill "$model" "$renderer" 2>/dev/null || true' EXIT      # a failed step leaves no compile running
 # tal (y-tal) pins numpy < 2: it gets its own environment, used by the tests that read our HDF5 with it
 bash scripts/setup_interop.sh
+wait "$model"
+wait "$renderer"
+trap - EXIT

@@ -3,7 +3,8 @@
 A command compiles only what its scene needs, once (``analytic.kernels.cache``); the tests need every
 route. ``scripts/setup.sh`` runs this beside the renderer's warm-up so that the two use both cores and no
 test pays a compile. With ``--renderer`` it renders the built-in scene instead (Dr.Jit's kernels, cached in
-``~/.drjit``). The values computed are discarded.
+``~/.drjit``) and imports matplotlib (which builds its font cache on its first import). The values
+computed are discarded.
 """
 
 from __future__ import annotations
@@ -42,6 +43,7 @@ def renderer() -> None:
     from transient.render import render
 
     render(default_scene(noise=None), spp=4096, seed=0, progress=False)
+    import matplotlib.pyplot  # noqa: F401 (matplotlib builds its font cache on its first import)
 
 
 if __name__ == "__main__":

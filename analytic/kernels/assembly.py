@@ -116,7 +116,7 @@ class Jobs(NamedTuple):
     highs: np.ndarray
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def pixel_box(grid, p):
     """The :class:`~analytic.kernels.isochrone.PixelBox` of pixel p = r M + c (row r from the top), metres."""
     du = grid.width / grid.pixels
@@ -126,7 +126,7 @@ def pixel_box(grid, p):
     return PixelBox(c * du, (c + 1) * du, (grid.pixels - r - 1) * dv, (grid.pixels - r) * dv)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def settled_run(frame, box, axis, lead, duration):
     """(run, low, high, settled): the bins of every range of d inside the box's bound, when they are one run.
 
@@ -147,7 +147,7 @@ def settled_run(frame, box, axis, lead, duration):
     return BinRun(0, 0), low, high, False
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def pixel_run(frame, box, axis, lead, duration):
     """(run, low, high, exact): the bins a (pixel, pair) reaches and a range of d holding the pixel's.
 
@@ -168,13 +168,13 @@ def pixel_run(frame, box, axis, lead, duration):
 SEGMENT = 8
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def _segment_length(grid, axis):
     side = max(grid.width, grid.height) / grid.pixels
     return max(1, min(SEGMENT, int(axis.bin_width_opl / (8.0 * side))))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def _segment(grid, p, end, length):
     """(stop, box): pixels p ... stop - 1, at most ``length`` of one image row before ``end``, and their union."""
     stop = min(p + length, end, (p // grid.pixels + 1) * grid.pixels)

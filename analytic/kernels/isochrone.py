@@ -110,8 +110,12 @@ class Frame(NamedTuple):
 
 
 @njit(cache=True, error_model="numpy")
-def _frame(source_x, source_y, source_height, sensor_x, sensor_y, sensor_height, mode, source_cosine,
-           source_form, sensor_cosine, sensor_form):
+def _frame(source, sensor, mode, source_surface, sensor_surface):
+    """The :class:`Frame` of two ends (x, y, height) and their surfaces (has one, (n·(x - p) at 0, ∂u, ∂v))."""
+    source_x, source_y, source_height = source
+    sensor_x, sensor_y, sensor_height = sensor
+    source_cosine, source_form = source_surface
+    sensor_cosine, sensor_form = sensor_surface
     dx = sensor_x - source_x
     dy = sensor_y - source_y
     dist = math.hypot(dx, dy)
@@ -139,18 +143,17 @@ def make_frame(source, sensor, mode):
     -------
     Frame
     """
-    none = (1.0, 0.0, 0.0)
-    return _frame(source[0], source[1], source[2], sensor[0], sensor[1], sensor[2], mode, False, none, False,
-                  none)
+    none = (False, (1.0, 0.0, 0.0))
+    return _frame((source[0], source[1], source[2]), (sensor[0], sensor[1], sensor[2]), mode, none, none)
 
 
 @njit(cache=True, error_model="numpy")
 def pair_frame(pair, mode):
     """The :class:`Frame` of one record of :data:`analytic.geometry.PAIR_DTYPE`."""
-    return _frame(pair.source_x, pair.source_y, pair.source_height, pair.sensor_x, pair.sensor_y,
-                  pair.sensor_height, mode, pair.source_cosine,
-                  (pair.source_cosine_0, pair.source_cosine_u, pair.source_cosine_v), pair.sensor_cosine,
-                  (pair.sensor_cosine_0, pair.sensor_cosine_u, pair.sensor_cosine_v))
+    return _frame((pair.source_x, pair.source_y, pair.source_height), (pair.sensor_x, pair.sensor_y,
+                                                                       pair.sensor_height), mode,
+                  (pair.source_cosine, (pair.source_cosine_0, pair.source_cosine_u, pair.source_cosine_v)),
+                  (pair.sensor_cosine, (pair.sensor_cosine_0, pair.sensor_cosine_u, pair.sensor_cosine_v)))
 
 
 @njit(cache=True, error_model="numpy")

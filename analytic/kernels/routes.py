@@ -87,6 +87,16 @@ class Column(NamedTuple):
     exact: bool             # [low, high] is the pixel's exact range (else a bound around it)
 
 
+class TauPiece(NamedTuple):
+    """One τ-piece of a cut pixel: :func:`analytic.kernels.quadrature.piece_map`'s ``kind``, [τ_a, τ_a + span]
+    (metres), and the width in v below which it is not refined (its τ would only round)."""
+
+    kind: int
+    tau_a: float
+    span: float
+    resolution: float
+
+
 class Route(NamedTuple):
     """Which general route :func:`route_entries` takes for a (pixel, pair), and how (runtime values: one compile).
 
@@ -138,7 +148,7 @@ def make_scratch(width):
                    make_workspace(MAX_TERMS))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def clear_of_feet(frame, box):
     """Whether the attenuation's peaks under both feet are far enough for the tensor rule."""
     side = FOOT_CLEARANCE * max(box.x1 - box.x0, box.y1 - box.y0)
@@ -261,8 +271,8 @@ def _pixel_breakpoints(frame, box, low, high, terms, axis, run):
 
 
 @njit(cache=True, error_model="numpy")
-def _cut_entries(frame, box, low, high, terms, axis, run, rtol, smooth_arcs, taylor, out, scratch):
-    """Add the pair's entries to out[:run.bins] by the cut (τ, φ) quadrature.
+def _cut_entries(frame, box, column, terms, axis, rtol, smooth_arcs, taylor, out, scratch):
+    """Add the pair's entries to out[:run.bins] by the cut (τ, φ) quadrature (``column``: the exact range).
 
     A real call (not inlined): compiled once for every caller;
     its cost per call (a reference count on each of the scratch's arrays) is small beside a cut
@@ -277,8 +287,9 @@ def _cut_entries(frame, box, low, high, terms, axis, run, rtol, smooth_arcs, tay
     duration = terms.duration
     lead = terms.lead
     work = scratch.work
-    low = max(low, bin_edge(axis, 0) - duration)
-    high = min(high, bin_edge(axis, run.first + run.bins) - lead)
+    run = column.run
+    low = max(column.low, bin_edge(axis, 0) - duration)
+    high = min(column.high, bin_edge(axis, run.first + run.bins) - lead)
     breakpoints, root = _pixel_breakpoints(frame, box, low, high, terms, axis, run)
     for piece in range(len(breakpoints) - 1):
         tau_a = breakpoints[piece]
@@ -297,8 +308,8 @@ def _cut_entries(frame, box, low, high, terms, axis, run, rtol, smooth_arcs, tay
                 else ROOT_END if root[piece + 1] else LINEAR)
         # dτ/dv <= 2 span: a v-piece this narrow spans under _TAU_RESOLUTION of τ
         resolution = _TAU_RESOLUTION * max(abs(tau_a), abs(tau_b)) / (2.0 * span)
-        if taylor and _piece_by_moments(frame, box, terms, axis, piece_run, kind, tau_a, span, rtol, smooth_arcs,
-                                        resolution, target, scratch):
+        if taylor and _piece_by_moments(frame, box, terms, axis, piece_run, TauPiece(kind, tau_a, span, resolution),
+                                        rtol, smooth_arcs, target, scratch):
             continue
         kernel = KernelProblem(terms, axis, piece_run)
         if smooth_arcs:
@@ -318,8 +329,7 @@ def _cut_entries(frame, box, low, high, terms, axis, run, rtol, smooth_arcs, tay
 
 
 @njit(cache=True, error_model="numpy")
-def _piece_by_moments(frame, box, terms, axis, run, kind, tau_a, span, rtol, smooth_arcs, resolution, target,
-                      scratch):
+def _piece_by_moments(frame, box, terms, axis, run, piece, rtol, smooth_arcs, target, scratch):
     """A τ-piece's entries through its moments (:mod:`analytic.kernels.taylor`), added to target; False if not.
 
     The moments m_j = ∫ (τ - c)^j G(τ) dτ over the piece, by the (τ, φ) tensor rule where the arcs
@@ -327,6 +337,7 @@ def _piece_by_moments(frame, box, terms, axis, run, kind, tau_a, span, rtol, smo
     a kernel needs more Taylor terms than allowed over the piece, the tensor rule fails or an
     entry's terms cancel, and the caller integrates the kernels directly.
     """
+    kind, tau_a, span, resolution = piece
     centre = tau_a + 0.5 * span
     half = 0.5 * span
     count = kernel_taylor(terms, axis, run, centre, half, rtol, scratch.coefficients, scratch.lower_edge,
@@ -353,7 +364,7 @@ def _piece_by_moments(frame, box, terms, axis, run, kind, tau_a, span, rtol, smo
     return bin_moments(scratch, count, run.bins, half, target)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def clear_of_birth(frame, box, clear):
     """Whether the pixel is ``clear`` (of the feet) and clear of x*: its arcs are smooth enough for the (τ, φ) tensor rule.
 
@@ -404,12 +415,11 @@ def route_entries(route, frame, box, column, terms, axis, rtol, out, scratch):
         return SERVED if served else NOT_CONVERGED
     if route.arcs != AUTO_ARCS:
         smooth_arcs = route.arcs == SMOOTH_ARCS
-    _cut_entries(frame, box, column.low, column.high, terms, axis, run, rtol, smooth_arcs, route.taylor, out,
-                 scratch)
+    _cut_entries(frame, box, column, terms, axis, rtol, smooth_arcs, route.taylor, out, scratch)
     return SERVED
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def scratch_failures(scratch):
     """Quadrature pieces kept without meeting the tolerance, over the scratch's three workspaces."""
     return scratch.work.failures[0] + scratch.inner.failures[0] + scratch.moments.failures[0]

@@ -29,6 +29,7 @@ the G_4 x G_4 rule with its arrays).
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -39,7 +40,41 @@ from .cache import njit
 from .quadrature import GAUSS_NODES, GAUSS_WEIGHTS
 from .pieces import ROUNDING
 
-__all__ = ["strip_entries", "single_cut", "HIGH_ORDER", "LOW_ORDER", "FIRST_RUNG", "LAST_RUNG"]
+__all__ = ["strip_entries", "single_cut", "Across", "Slab", "Sums", "HIGH_ORDER", "LOW_ORDER", "FIRST_RUNG",
+           "LAST_RUNG"]
+
+class Across(NamedTuple):
+    """The pixel in the axes the strips integrate in: rows along w at each u (``swap``: u is y, w is x)."""
+
+    swap: bool
+    w0: float               # the pixel's w-edges, metres
+    w1: float
+
+
+class Slab(NamedTuple):
+    """The region between the isochrones d = τ_a and d = τ_b (a side may be absent: the pixel's edge bounds it)."""
+
+    lower: tuple            # the conic of d = τ_a (analytic.kernels.conics.isochrone_conic)
+    upper: tuple            # the conic of d = τ_b
+    tau_a: float            # metres
+    tau_b: float
+    has_lower: bool
+    has_upper: bool
+
+
+class Sums(NamedTuple):
+    """Where a rule adds: one node's kernels (``values``, ``noise``), and per-bin totals (``total``; with
+    ``judged``, ∫ |f| in ``magnitude`` and f's rounding in ``rounding``); ``steps``: the kernels are
+    constant on the slab (a step-function S), so the rule integrates a_k alone."""
+
+    values: np.ndarray
+    noise: np.ndarray
+    total: np.ndarray
+    magnitude: np.ndarray
+    rounding: np.ndarray
+    judged: bool
+    steps: bool
+
 
 #: The rule kept (G_n in each variable) and the one that judges it.
 HIGH_ORDER = 4
@@ -60,7 +95,7 @@ def _add_crossings(frame, conic, tau, w, lo, hi, swap, points, used):
 
 
 @njit(cache=True, error_model="numpy", forceinline=True)
-def _slab_pieces(frame, box, lower, upper, tau_a, tau_b, has_lower, has_upper, swap, points):
+def _slab_pieces(frame, box, slab, swap, points):
     """Sorted u-breakpoints of the slab's region (the pixel's u-edges and the sides' crossings of its w-edges).
 
     Returns the count, or -1 when a side turns inside the pixel (the route does not apply).
@@ -68,7 +103,7 @@ def _slab_pieces(frame, box, lower, upper, tau_a, tau_b, has_lower, has_upper, s
     u0, u1, w0, w1 = (box.y0, box.y1, box.x0, box.x1) if swap else (box.x0, box.x1, box.y0, box.y1)
     points[0] = u0
     used = 1
-    for present, conic, tau in ((has_lower, lower, tau_a), (has_upper, upper, tau_b)):
+    for present, conic, tau in ((slab.has_lower, slab.lower, slab.tau_a), (slab.has_upper, slab.upper, slab.tau_b)):
         if present:
             if turns_inside(conic, u0, u1, w0, w1):
                 return -1
@@ -81,19 +116,19 @@ def _slab_pieces(frame, box, lower, upper, tau_a, tau_b, has_lower, has_upper, s
 
 
 @njit(cache=True, error_model="numpy", forceinline=True)
-def _region_rows(frame, lower, upper, tau_a, tau_b, has_lower, has_upper, swap, u, w0, w1):
+def _region_rows(frame, slab, swap, u, w0, w1):
     """The inner intervals of the slab's region on the line at u: up to two (w_a, w_b), as four numbers.
 
     {d <= τ_b} is one interval on the line (d is convex), {d >= τ_a} the complement of one.
     """
     below_low, below_high = -np.inf, np.inf          # {d <= τ_b}
-    if has_upper:
-        below_low, below_high, real = inner_roots(frame, upper, tau_b, u, swap)
+    if slab.has_upper:
+        below_low, below_high, real = inner_roots(frame, slab.upper, slab.tau_b, u, swap)
         if not real:
             return 0.0, 0.0, 0.0, 0.0
     hole_low, hole_high = np.inf, np.inf              # {d < τ_a}: removed
-    if has_lower:
-        low, high, real = inner_roots(frame, lower, tau_a, u, swap)
+    if slab.has_lower:
+        low, high, real = inner_roots(frame, slab.lower, slab.tau_a, u, swap)
         if real:
             hole_low, hole_high = low, high
     start, stop = max(w0, below_low), min(w1, below_high)
@@ -113,34 +148,34 @@ def _row_node(frame, swap, u, wa, wb, order, jw):
 
 
 @njit(cache=True, error_model="numpy", forceinline=True)
-def _row_rule(frame, kernel, swap, u, wu, wa, wb, order, values, noise, total, magnitude, rounding, judged, steps):
-    """G_order in w over [wa, wb] of the row at u (weight ``wu``), added as :func:`_slab_rule` says."""
+def _row_rule(frame, kernel, swap, u, wu, wa, wb, order, sums):
+    """G_order in w over [wa, wb] of the row at u (weight ``wu``), added to ``sums`` as :func:`_slab_rule` says."""
     scalar = 0.0
     scalar_magnitude = 0.0
     if not wb > wa:
         return scalar, scalar_magnitude
-    if steps:
+    if sums.steps:
         scalar, scalar_magnitude = _row_integral(frame, swap, u, wa, wb, order)
         return wu * scalar, wu * scalar_magnitude
+    values, noise, total = sums.values, sums.noise, sums.total
     for jw in range(order):
         tau, weight = _row_node(frame, swap, u, wa, wb, order, jw)
         kernel_values(kernel, tau, wu * weight, values, noise)
         for i in range(kernel.run.bins):
             total[i] += values[i]
-        if judged:
+        if sums.judged:
             for i in range(kernel.run.bins):
-                magnitude[i] += abs(values[i])
-                rounding[i] += noise[i]
+                sums.magnitude[i] += abs(values[i])
+                sums.rounding[i] += noise[i]
     return scalar, scalar_magnitude
 
 
 @njit(cache=True, error_model="numpy", forceinline=True)
-def _slab_rule(frame, kernel, lower, upper, tau_a, tau_b, has_lower, has_upper, swap, ua, ub, w0, w1, order,
-               values, noise, total, magnitude, rounding, judged, steps):
-    """G_order x G_order of a_k κ_n(d) over the slab's region for u in [ua, ub], added to total (per bin).
+def _slab_rule(frame, kernel, slab, across, ua, ub, order, sums):
+    """G_order x G_order of a_k κ_n(d) over the slab's region for u in [ua, ub], added to sums.total (per bin).
 
-    ``judged``: also add ∫ |f| and f's rounding to magnitude and rounding (the rule that is kept;
-    the rule that only judges it needs neither). ``steps``: the kernels are constant on the slab
+    ``sums.judged``: also add ∫ |f| and f's rounding to its magnitude and rounding (the rule that is kept;
+    the rule that only judges it needs neither). ``sums.steps``: the kernels are constant on the slab
     (a step-function S): the rule integrates a_k alone and returns (∫ a_k, ∫ |a_k|), adding nothing,
     and its caller multiplies by the kernels once; else it returns (0, 0).
     """
@@ -151,49 +186,45 @@ def _slab_rule(frame, kernel, lower, upper, tau_a, tau_b, has_lower, has_upper, 
     for ju in range(order):
         u = cu + hu * GAUSS_NODES[order, ju]
         wu = hu * GAUSS_WEIGHTS[order, ju]
-        first_a, first_b, second_a, second_b = _region_rows(frame, lower, upper, tau_a, tau_b, has_lower, has_upper,
-                                                            swap, u, w0, w1)
+        first_a, first_b, second_a, second_b = _region_rows(frame, slab, across.swap, u, across.w0, across.w1)
         for wa, wb in ((first_a, first_b), (second_a, second_b)):
-            value, value_size = _row_rule(frame, kernel, swap, u, wu, wa, wb, order, values, noise, total, magnitude,
-                                          rounding, judged, steps)
+            value, value_size = _row_rule(frame, kernel, across.swap, u, wu, wa, wb, order, sums)
             scalar += value
             scalar_magnitude += value_size
     return scalar, scalar_magnitude
 
 
 @njit(cache=True, error_model="numpy", forceinline=True)
-def _cut_node(frame, conic, tau, swap, ua, ub, w0, w1, order, ju):
+def _cut_node(frame, conic, tau, across, ua, ub, order, ju):
     """(u, weight, rows) at node ju of G_order over [ua, ub]: the rows below d = τ, then the two above.
 
     Each row is (w_a, w_b) within [w0, w1], empty where w_b <= w_a.
     """
     hu = 0.5 * (ub - ua)
     u = 0.5 * (ua + ub) + hu * GAUSS_NODES[order, ju]
-    low, high, real = inner_roots(frame, conic, tau, u, swap)
+    low, high, real = inner_roots(frame, conic, tau, u, across.swap)
     if not real:        # the row lies wholly above
         low, high = np.inf, np.inf
+    w0, w1 = across.w0, across.w1
     return (u, hu * GAUSS_WEIGHTS[order, ju],
             ((max(w0, low), min(w1, high)), (w0, min(w1, low)), (max(w0, high), w1)))
 
 
 @njit(cache=True, error_model="numpy", forceinline=True)
-def _cut_rule(frame, kernels, conic, tau, swap, ua, ub, w0, w1, order, values, noise, totals, magnitudes, roundings,
-              judged, steps):
+def _cut_rule(frame, kernels, conic, tau, across, ua, ub, order, sums):
     """:func:`_slab_rule` of both slabs of a pixel that one isochrone d = τ cuts, at once.
 
     The slabs {d <= τ} and {d >= τ} have the same side, so their u-pieces and their inner limits
-    at each node are the same roots, found once. ``kernels``, ``totals``, ``magnitudes`` and
-    ``roundings`` are pairs (slab below, slab above); returns the steps' scalars of both,
-    (∫ a, ∫ |a|) below, then above.
+    at each node are the same roots, found once. ``kernels`` and ``sums`` are pairs (slab below,
+    slab above); returns the steps' scalars of both, (∫ a, ∫ |a|) below, then above.
     """
     below, below_size, above, above_size = 0.0, 0.0, 0.0, 0.0
     for ju in range(order):
-        u, wu, rows = _cut_node(frame, conic, tau, swap, ua, ub, w0, w1, order, ju)
+        u, wu, rows = _cut_node(frame, conic, tau, across, ua, ub, order, ju)
         for row in range(3):
             slab = min(row, 1)
-            value, value_size = _row_rule(frame, kernels[slab], swap, u, wu, rows[row][0], rows[row][1], order,
-                                          values, noise, totals[slab], magnitudes[slab], roundings[slab], judged,
-                                          steps)
+            value, value_size = _row_rule(frame, kernels[slab], across.swap, u, wu, rows[row][0], rows[row][1], order,
+                                          sums[slab])
             if slab == 0:
                 below += value
                 below_size += value_size
@@ -243,6 +274,7 @@ def single_cut(frame, box, tau, rtol):
         Relative accuracy of each integral.
     """
     swap, u0, u1, w0, w1 = across(frame, box)
+    sides = Across(swap, w0, w1)
     conic = isochrone_conic(frame, tau, swap)
     if conic[2] == 0.0 or turns_inside(conic, u0, u1, w0, w1):
         return 0.0, 0.0, False
@@ -262,7 +294,7 @@ def single_cut(frame, box, tau, rtol):
             if not start < stop <= u1:
                 continue
             for ju in range(order):
-                u, wu, rows = _cut_node(frame, conic, tau, swap, start, stop, w0, w1, order, ju)
+                u, wu, rows = _cut_node(frame, conic, tau, sides, start, stop, order, ju)
                 for row in range(3):
                     value, size = _row_integral(frame, swap, u, rows[row][0], rows[row][1], order)
                     if row == 0:
@@ -326,6 +358,7 @@ def strip_entries(frame, box, low, high, terms, axis, run, rtol, out, work):
         Of at least ``run.bins`` components.
     """
     swap, _, _, w0, w1 = across(frame, box)
+    sides = Across(swap, w0, w1)
     kinks = 0
     for i in range(terms.starts.size):
         if terms.kinks[i]:
@@ -335,6 +368,7 @@ def strip_entries(frame, box, low, high, terms, axis, run, rtol, out, work):
     points = np.empty(10)
     steps = terms.degree == 0
     low_order, magnitude, rounding = work.lower, work.magnitude, work.rounding
+    entries = (out, low_order, magnitude, rounding)
     for i in range(run.bins):
         low_order[i] = 0.0
         magnitude[i] = 0.0
@@ -352,34 +386,33 @@ def strip_entries(frame, box, low, high, terms, axis, run, rtol, out, work):
         conic = isochrone_conic(frame, tau, swap)
         if conic[2] == 0.0:
             return _discard(out, run.bins)
-        pieces = _slab_pieces(frame, box, conic, conic, tau, tau, True, False, swap, points)
+        pieces = _slab_pieces(frame, box, Slab(conic, conic, tau, tau, True, False), swap, points)
         if pieces < 0:
             return _discard(out, run.bins)
         kernels = (below, above)
         sums = np.zeros(6)      # ∫ a_k below and above, by the kept and the judging rule, and ∫ |a_k| (steps)
+        kept = (Sums(work.values, work.noise, out[below_offset:], magnitude[below_offset:], rounding[below_offset:],
+                     True, steps),
+                Sums(work.values, work.noise, out[above_offset:], magnitude[above_offset:], rounding[above_offset:],
+                     True, steps))
+        judge = (Sums(work.values, work.noise, low_order[below_offset:], magnitude, rounding, False, steps),
+                 Sums(work.values, work.noise, low_order[above_offset:], magnitude, rounding, False, steps))
         for piece in range(pieces - 1):
             ua, ub = points[piece], points[piece + 1]
             if not ub > ua:
                 continue
-            value, value_size, other, other_size = _cut_rule(
-                frame, kernels, conic, tau, swap, ua, ub, w0, w1, HIGH_ORDER, work.values, work.noise,
-                (out[below_offset:], out[above_offset:]), (magnitude[below_offset:], magnitude[above_offset:]),
-                (rounding[below_offset:], rounding[above_offset:]), True, steps)
+            value, value_size, other, other_size = _cut_rule(frame, kernels, conic, tau, sides, ua, ub, HIGH_ORDER,
+                                                             kept)
             sums[0] += value
             sums[1] += value_size
             sums[2] += other
             sums[3] += other_size
-            value, _, other, _ = _cut_rule(
-                frame, kernels, conic, tau, swap, ua, ub, w0, w1, LOW_ORDER, work.values, work.noise,
-                (low_order[below_offset:], low_order[above_offset:]), (magnitude, magnitude), (rounding, rounding),
-                False, steps)
+            value, _, other, _ = _cut_rule(frame, kernels, conic, tau, sides, ua, ub, LOW_ORDER, judge)
             sums[4] += value
             sums[5] += other
         if steps:
-            _add_steps(below, 0.5 * (low + tau), sums[0], sums[4], sums[1], below_offset, out, low_order, magnitude,
-                       rounding, work)
-            _add_steps(above, 0.5 * (tau + high), sums[2], sums[5], sums[3], above_offset, out, low_order,
-                       magnitude, rounding, work)
+            _add_steps(below, 0.5 * (low + tau), (sums[0], sums[4], sums[1]), below_offset, entries, work)
+            _add_steps(above, 0.5 * (tau + high), (sums[2], sums[5], sums[3]), above_offset, entries, work)
         return _judged(out, low_order, magnitude, rounding, rtol, run.bins)
     for slab in range(slabs - 1):
         tau_a, tau_b = taus[slab], taus[slab + 1]
@@ -392,7 +425,8 @@ def strip_entries(frame, box, low, high, terms, axis, run, rtol, out, work):
         lower, upper = isochrone_conic(frame, tau_a, swap), isochrone_conic(frame, tau_b, swap)
         if (has_lower and lower[2] == 0.0) or (has_upper and upper[2] == 0.0):
             return _discard(out, run.bins)
-        pieces = _slab_pieces(frame, box, lower, upper, tau_a, tau_b, has_lower, has_upper, swap, points)
+        region = Slab(lower, upper, tau_a, tau_b, has_lower, has_upper)
+        pieces = _slab_pieces(frame, box, region, swap, points)
         if pieces < 0:
             return _discard(out, run.bins)
         high_sum, low_sum, size = 0.0, 0.0, 0.0       # ∫ a_k over the slab (step-function S)
@@ -400,17 +434,16 @@ def strip_entries(frame, box, low, high, terms, axis, run, rtol, out, work):
             ua, ub = points[piece], points[piece + 1]
             if not ub > ua:
                 continue
-            value, value_size = _slab_rule(frame, kernel, lower, upper, tau_a, tau_b, has_lower, has_upper, swap, ua,
-                                           ub, w0, w1, HIGH_ORDER, work.values, work.noise, out[offset:],
-                                           magnitude[offset:], rounding[offset:], True, steps)
+            value, value_size = _slab_rule(frame, kernel, region, sides, ua, ub, HIGH_ORDER,
+                                           Sums(work.values, work.noise, out[offset:], magnitude[offset:],
+                                                rounding[offset:], True, steps))
             high_sum += value
             size += value_size
-            low_sum += _slab_rule(frame, kernel, lower, upper, tau_a, tau_b, has_lower, has_upper, swap, ua, ub, w0,
-                                  w1, LOW_ORDER, work.values, work.noise, low_order[offset:], magnitude, rounding,
-                                  False, steps)[0]
+            low_sum += _slab_rule(frame, kernel, region, sides, ua, ub, LOW_ORDER,
+                                  Sums(work.values, work.noise, low_order[offset:], magnitude, rounding, False,
+                                       steps))[0]
         if steps:
-            _add_steps(kernel, 0.5 * (tau_a + tau_b), high_sum, low_sum, size, offset, out, low_order, magnitude,
-                       rounding, work)
+            _add_steps(kernel, 0.5 * (tau_a + tau_b), (high_sum, low_sum, size), offset, entries, work)
     return _judged(out, low_order, magnitude, rounding, rtol, run.bins)
 
 
@@ -432,8 +465,14 @@ def _add_slab(kernel, tau, value, offset, out, work):
 
 
 @njit(cache=True, error_model="numpy", forceinline=True)
-def _add_steps(kernel, tau, high_sum, low_sum, size, offset, out, low_order, magnitude, rounding, work):
-    """A step-function S's slab: κ_n is constant there, its value at τ (the middle) times ∫ a_k by each rule."""
+def _add_steps(kernel, tau, integrals, offset, entries, work):
+    """A step-function S's slab: κ_n is constant there, its value at τ (the middle) times ∫ a_k by each rule.
+
+    ``integrals``: (∫ a_k by the rule kept, by the rule judging it, ∫ |a_k|); ``entries``: (out, low_order,
+    magnitude, rounding), the kept rule's entries and the judging rule's, and their magnitudes and roundings.
+    """
+    high_sum, low_sum, size = integrals
+    out, low_order, magnitude, rounding = entries
     kernel_values(kernel, tau, 1.0, work.values, work.noise)
     for i in range(kernel.run.bins):
         out[offset + i] += work.values[i] * high_sum

@@ -111,7 +111,6 @@ def kernel_taylor(terms, axis, run, centre, half, rtol, coefficients, lower_edge
     needed = 1
     lower_u = axis.start_opl + axis.bin_width_opl * run.first - centre
     lower_piece, lower_constant, lower_value = _edge_value(terms, lower_u)
-    lower_ready = 0                     # derivatives of the lower edge computed so far (orders 1 ... ready - 1)
     for i in range(run.bins):
         upper_u = axis.start_opl + axis.bin_width_opl * (run.first + i + 1) - centre
         upper_piece, upper_constant, upper_value = _edge_value(terms, upper_u)
@@ -122,11 +121,10 @@ def kernel_taylor(terms, axis, run, centre, half, rtol, coefficients, lower_edge
         if not (_constant_forms(terms, lower_piece) and _constant_forms(terms, upper_piece)
                 and _constant_forms(terms, piece_of(terms, lower_u - half))
                 and _constant_forms(terms, piece_of(terms, upper_u + half))):
-            terms_here = _more_terms(terms, lower_u, upper_u, lower_piece, upper_piece, half, rtol, coefficients, i,
-                                     lower_edge, upper_edge, lower_ready)
+            terms_here = _more_terms(terms, (lower_u, lower_piece), (upper_u, upper_piece), half, rtol, coefficients,
+                                     i, lower_edge, upper_edge)
             if terms_here == 0:
                 return 0
-            lower_ready = 0
         needed = max(needed, terms_here)
         for j in range(MAX_TERMS + 1):
             lower_edge[j] = upper_edge[j]
@@ -167,9 +165,13 @@ def _polynomial_taylor(terms, axis, run, centre, coefficients, lower_edge, upper
 
 
 @njit(cache=True, error_model="numpy")
-def _more_terms(terms, lower_u, upper_u, lower_piece, upper_piece, half, rtol, coefficients, i, lower_edge,
-                upper_edge, lower_ready):
-    """Terms 1, 2, ... of bin i's kernel until the remainder is within the tolerance; 0 if more than MAX_TERMS."""
+def _more_terms(terms, lower, upper, half, rtol, coefficients, i, lower_edge, upper_edge):
+    """Terms 1, 2, ... of bin i's kernel until the remainder is within the tolerance; 0 if more than MAX_TERMS.
+
+    ``lower``, ``upper``: (u, piece) at the bin's two edges (u in metres from the range's centre).
+    """
+    lower_u, lower_piece = lower
+    upper_u, upper_piece = upper
     for j in range(MAX_TERMS + 1):
         lower_edge[j] = 0.0
         upper_edge[j] = 0.0

@@ -241,6 +241,7 @@ class RelayWallScene:
                                           f"are supported")
         self._check_hidden()
         self._check_points()
+        self._check_lines()
         # y, its noisy copy, the render's mean, error and replicas: P N doubles each
         require_memory(8 * 8 * pairs * self.sampling.count,
                        f"{pairs:,} pairs x sampling.count = {self.sampling.count} bins",
@@ -322,18 +323,41 @@ class RelayWallScene:
         return Rectangle(self.center - 0.5 * (self.u + self.v), self.u, self.v, self.pixels)
 
     def blocked(self, start: np.ndarray, ends: np.ndarray) -> np.ndarray:
-        """Which segments ``start`` -> ``ends[i]`` cross the hidden rectangle (a renderer that traces them
-        loses that light; the model counts the laser's and the sensor's lines clear)."""
+        """Which segments ``start`` -> ``ends[i]`` cross or touch the hidden rectangle, ``(len(ends),)`` bool.
+
+        A renderer that traces the laser's and the sensor's lines loses the light of those; the model
+        counts only the third bounce, so a scene with any blocked line is refused (:meth:`_check_lines`).
+        A segment in the rectangle's plane counts as clear (it meets it, at most, edge on).
+        """
         rectangle = self.rectangle()
         normal = rectangle.normal
+        start = np.asarray(start, dtype=np.float64)
         toward = np.asarray(ends, dtype=np.float64) - start
         along = toward @ normal
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = np.where(along != 0, (rectangle.corner - start) @ normal / along, np.inf)
-        crossing = start + t[:, None] * toward - rectangle.corner
-        u = crossing @ rectangle.u / (rectangle.u @ rectangle.u)
-        v = crossing @ rectangle.v / (rectangle.v @ rectangle.v)
-        return (t > 0) & (t < 1) & (u >= 0) & (u <= 1) & (v >= 0) & (v <= 1)
+        crosses = along != 0
+        with np.errstate(over="ignore", invalid="ignore"):      # a nearly parallel segment: t far outside (0, 1)
+            t = (rectangle.corner - start) @ normal / np.where(crosses, along, 1.0)
+            crossing = start + np.where(crosses & (t > 0) & (t < 1), t, 0.0)[:, None] * toward - rectangle.corner
+            u = crossing @ rectangle.u / (rectangle.u @ rectangle.u)
+            v = crossing @ rectangle.v / (rectangle.v @ rectangle.v)
+        return crosses & (t > 0) & (t < 1) & (u >= 0) & (u <= 1) & (v >= 0) & (v <= 1)
+
+    def _check_lines(self) -> None:
+        """The laser's line to every lit point and the sensor's to every read point clear of the hidden rectangle.
+
+        One rule for every entry point (the model, renders, exports, tal configurations): the model
+        counts only the third bounce laser -> l -> x -> s, which a blocked line would cut (mitransient
+        and tal trace both lines), so a capture where any pair would lose it is refused.
+        """
+        for who, origin, points in (("laser", self.laser_position, self.laser_points),
+                                    ("sensor", self.sensor_position, self.read_points)):
+            blocked = self.blocked(origin, points)
+            if blocked.any():
+                where = points[int(np.argmax(blocked))].tolist()
+                raise SceneError("hidden.center", f"the hidden rectangle blocks the {who}'s line from "
+                                                  f"{origin.tolist()} to the wall point {where} ({int(blocked.sum()):,} "
+                                                  f"of {len(points):,} such lines; the model counts them clear); "
+                                                  f"move the {who} or the rectangle so that it sees the wall")
 
     def laser_leg(self, lit: np.ndarray) -> np.ndarray:
         """I cos θ_l^las / |o_l - l|² (ρ_w / π)² for lit points ``(P, 3)``: each pair's constant factor."""

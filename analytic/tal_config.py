@@ -531,11 +531,6 @@ def tal_config_scene(data: dict, *, name: str = "tal", config: str = "",
         raise SceneError(mapped, error.problem) from None
     except TypeError as error:                        # Noise(**mapping) with a key it does not take
         raise SceneError(f"{_OURS}.noise", f"{error}; its keys are kind, sigma or photons, seed") from None
-    blocked = scene.blocked(scene.laser_position, scene.laser_points)
-    if blocked.any():
-        raise SceneError(hidden_key, f"it blocks the laser's line to the wall point "
-                                     f"{scene.laser_points[int(np.argmax(blocked))].tolist()}: mitransient traces it "
-                                     f"(the light is lost), the model counts it clear; move the laser or the surface")
     return scene
 
 
@@ -547,7 +542,8 @@ def _reflectances(emission: np.ndarray, wall: np.ndarray, hidden: np.ndarray) ->
 
 
 def _facing(corner, u, v, halves, scan: Scan, laser: np.ndarray, key: str) -> None:
-    """The hidden rectangle in front of the wall, its lit face toward every scanned point, the laser's line clear."""
+    """The hidden rectangle in front of the wall, its lit face toward every scanned point (the scene checks the
+    laser's and the sensor's lines: :meth:`analytic.relay_wall.RelayWallScene.blocked`)."""
     corners = corner + np.array([[0, 0], [1, 0], [0, 1], [1, 1]]) @ np.array([u, v])
     if not np.all(corners[:, 2] > 0):
         raise SceneError(key, f"the hidden surface crosses or lies behind the relay wall (a corner at z = "

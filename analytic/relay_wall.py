@@ -39,10 +39,11 @@ from .detector import Detector
 from .errors import SceneError
 from .geometry import PointPairs, Rectangle
 from .resources import require_memory
-from .scene import (MAX_LENGTH, Illumination, Noise, Sampling, _choice, _integer, _number, check_tolerance,
+from .scene import (MAX_LENGTH, MIN_LENGTH, Illumination, Noise, Sampling, _choice, _integer, _number, check_tolerance,
                     MAX_INTENSITY)
 
-__all__ = ["RelayWallScene", "Scan", "SCAN_TYPES", "MAX_PAIRS", "grid_points", "default_relay_wall_scene"]
+__all__ = ["RelayWallScene", "Scan", "SCAN_TYPES", "MAX_PAIRS", "grid_points", "check_edges",
+           "default_relay_wall_scene"]
 
 SCAN_TYPES = ("single", "confocal", "exhaustive")
 
@@ -96,6 +97,27 @@ def _pair(key: str, value: Any, *, whole: bool) -> tuple:
     return tuple(_number(f"{key}[{i}]", v, positive=True, length=True) for i, v in enumerate(value))
 
 
+def check_edges(u, v) -> tuple[float, float]:
+    """The hidden rectangle's sides |u| and |v|, metres, or SceneError naming ``hidden.u`` or ``hidden.v``.
+
+    Each side is at least :data:`MIN_LENGTH` (below it the rectangle's area, |u| |v|, and its normal
+    u x v underflow toward 0) and u ⟂ v. The lengths are taken by ``math.hypot``, which neither
+    underflows nor overflows (``numpy.linalg.norm`` of [1e-300, 0, 0] is 0).
+    """
+    lengths = []
+    for key, edge in (("hidden.u", u), ("hidden.v", v)):
+        length = math.hypot(*(float(x) for x in edge))
+        if not length >= MIN_LENGTH:
+            shown = "0 (the edge vector must be non-zero)" if length == 0.0 else f"{length!r} m"
+            raise SceneError(key, f"the rectangle's side along it is {shown}; the smallest length supported is "
+                                  f"{MIN_LENGTH:g} m")
+        lengths.append(length)
+    dot = float(np.dot(u, v))
+    if abs(dot) > 1e-9 * lengths[0] * lengths[1]:
+        raise SceneError("hidden.v", f"must be orthogonal to hidden.u (u·v = {dot:.3g})")
+    return lengths[0], lengths[1]
+
+
 @dataclass(frozen=True, kw_only=True)
 class Scan:
     """Which wall points are lit and read (docs/design.md section 7).
@@ -139,6 +161,23 @@ class Scan:
         if not isinstance(self.account_first_and_last_bounces, (bool, np.bool_)):
             raise SceneError("scan.account_first_and_last_bounces",
                              f"expected true or false, got {self.account_first_and_last_bounces!r}")
+
+    @property
+    def pairs(self) -> int:
+        """P, the (laser point, read point) pairs, from the grids alone (no point is built)."""
+        width, height = self.grid
+        if self.type == "exhaustive":
+            lasers = self.laser_grid or self.grid
+            return width * height * lasers[0] * lasers[1]
+        return width * height
+
+    def check_pairs(self) -> int:
+        """P, or SceneError("scan.grid") beyond :data:`MAX_PAIRS`: called before any grid of points is built."""
+        pairs = self.pairs
+        if pairs > MAX_PAIRS:
+            raise SceneError("scan.grid", f"{pairs:,} (laser point, read point) pairs; at most {MAX_PAIRS:,} "
+                                          f"are supported")
+        return pairs
 
 
 def _reflectance(key: str, value: Any, pixels: int) -> np.ndarray:
@@ -235,10 +274,7 @@ class RelayWallScene:
         object.__setattr__(self, "tolerance", check_tolerance(self.tolerance))
         if not isinstance(self.name, str):
             raise SceneError("name", f"expected a string, got {self.name!r}")
-        pairs = self.sensor_count          # from the grids alone: before any array of points is built
-        if pairs > MAX_PAIRS:
-            raise SceneError("scan.grid", f"{pairs:,} (laser point, read point) pairs; at most {MAX_PAIRS:,} "
-                                          f"are supported")
+        pairs = self.scan.check_pairs()    # from the grids alone: before any array of points is built
         self._check_hidden()
         self._check_points()
         self._check_lines()
@@ -248,13 +284,9 @@ class RelayWallScene:
                        "use a smaller scan grid or fewer bins")
 
     def _check_hidden(self) -> None:
-        """u ⟂ v, non-zero; the rectangle wholly in front of the wall and its lit face toward it."""
+        """u ⟂ v, each at least MIN_LENGTH; the rectangle wholly in front of the wall and its lit face toward it."""
+        check_edges(self.u, self.v)
         u, v = self.u, self.v
-        width, height = float(np.linalg.norm(u)), float(np.linalg.norm(v))
-        if not (width > 0.0 and height > 0.0):
-            raise SceneError("hidden.u" if not width > 0.0 else "hidden.v", "the edge vector must be non-zero")
-        if abs(float(u @ v)) > 1e-9 * width * height:
-            raise SceneError("hidden.v", f"must be orthogonal to hidden.u (u·v = {float(u @ v):.3g})")
         corners = self.rectangle().corners()
         if not np.all(corners[:, 2] > 0.0):
             raise SceneError("hidden.center", f"the hidden rectangle crosses or touches the relay wall (a corner "
@@ -305,11 +337,7 @@ class RelayWallScene:
     @property
     def sensor_count(self) -> int:
         """P, the transient's rows: the (laser point, read point) pairs."""
-        width, height = self.scan.grid
-        if self.scan.type == "exhaustive":
-            lasers = self.scan.laser_grid or self.scan.grid
-            return width * height * lasers[0] * lasers[1]
-        return width * height
+        return self.scan.pairs
 
     @property
     def pixel_size(self) -> tuple[float, float]:

@@ -60,7 +60,7 @@ import numpy as np
 from .errors import SceneError
 from .relay_wall import RelayWallScene, Scan, grid_points
 from .resources import require_memory
-from .scene import Noise, Sampling, _integer, _number
+from .scene import MAX_INTENSITY, MAX_LENGTH, MIN_LENGTH, Noise, Sampling, _integer, _number
 
 __all__ = ["TalScene", "TalConfigWarning", "load_tal_config", "tal_config_scene", "is_tal_config",
            "TAL_DEFAULTS", "TAL_VERSION"]
@@ -272,8 +272,9 @@ def _hidden_rectangle(geometry: dict, key: str, cwd: Path) -> tuple[np.ndarray, 
     kind = mesh.get("type") if isinstance(mesh, dict) else None
     matrix, translation = _transform(geometry, key)
     if kind == "rectangle":
-        return (matrix @ [-1.0, -1.0, 0.0] + translation, matrix @ [2.0, 0.0, 0.0], matrix @ [0.0, 2.0, 0.0],
-                None)
+        with np.errstate(over="ignore", invalid="ignore"):       # beyond float64: _extent refuses it
+            return (matrix @ [-1.0, -1.0, 0.0] + translation, matrix @ [2.0, 0.0, 0.0], matrix @ [0.0, 2.0, 0.0],
+                    None)
     if kind != "obj":
         raise SceneError(f"{key}.mesh.type", f"{kind!r}: the model holds one planar Lambertian polygon (a "
                                              f"rectangle, or a planar OBJ whose sides follow a pixel grid); "
@@ -287,9 +288,13 @@ def _hidden_rectangle(geometry: dict, key: str, cwd: Path) -> tuple[np.ndarray, 
                                                  f"(tal resolves it there, not beside the YAML); run from "
                                                  f"the folder tal render runs in")
     vertices, faces, normals = read_obj(path, f"{key}.mesh.filename")
-    world = vertices @ matrix.T + translation
+    with np.errstate(over="ignore", invalid="ignore"):        # beyond float64: planar_polygon refuses it
+        world = vertices @ matrix.T + translation
     if normals is not None:
-        normals = normals @ np.linalg.inv(matrix)             # normals go by the inverse transpose
+        # normals go by the inverse transpose; only their directions count, so scale them to at most 1 first
+        normals = normals / np.maximum(np.max(np.abs(normals), axis=1, keepdims=True), 1e-300)
+        with np.errstate(over="ignore", invalid="ignore"):
+            normals = normals @ np.linalg.inv(matrix)
     corner, u, v, outline = planar_polygon(world, faces, normals, f"{key}.mesh.filename", filename)
     # start at the corner whose u runs most nearly along +x (the image's columns), v along -y if it can
     for _ in range(4):
@@ -356,7 +361,8 @@ def _variant_channels(config: dict) -> int:
     return 3 if "rgb" in variant else 1
 
 
-def _check_integrator(config: dict) -> None:
+def _check_integrator(config: dict) -> list[str]:
+    """Refuse what the model cannot hold; the notes (:class:`TalConfigWarning`) on what tal renders otherwise."""
     for key in ("integrator_discard_direct_paths", "integrator_nlos_laser_sampling",
                 "integrator_nlos_hidden_geometry_sampling", "integrator_nlos_hidden_geometry_sampling_do_rroulette",
                 "integrator_nlos_hidden_geometry_sampling_includes_relay_wall", "auto_detect_bins"):
@@ -373,17 +379,18 @@ def _check_integrator(config: dict) -> None:
         raise SceneError("integrator_filter_bounces", f"{bounces}: tal renders only the paths of {bounces + 1} "
                                                       f"vertices; the model is the third bounce "
                                                       f"(integrator_filter_bounces: 2)")
-    if bounces == -1:
-        warnings.warn("integrator_filter_bounces: -1 makes tal render every bounce; the model is the third "
-                      "bounce (laser -> l -> x -> s) only, so the interreflections of the hidden rectangle and "
-                      "the wall are missing from it; set integrator_filter_bounces: 2 to render what it models",
-                      TalConfigWarning, stacklevel=4)
-    if config["auto_detect_bins"]:
-        warnings.warn("auto_detect_bins: tal 0.20 leaves it out of the film (commented out of its XML); the bins "
-                      "are num_bins from start_opl", TalConfigWarning, stacklevel=4)
     if _or(config["histogram_mode"], "time") != "time":
         raise SceneError("histogram_mode", f"{config['histogram_mode']!r}: the model writes time histograms "
                                            f"(histogram_mode: time)")
+    notes = []
+    if bounces == -1:
+        notes.append("integrator_filter_bounces: -1 makes tal render every bounce; the model is the third "
+                     "bounce (laser -> l -> x -> s) only, so the interreflections of the hidden rectangle and "
+                     "the wall are missing from it; set integrator_filter_bounces: 2 to render what it models")
+    if config["auto_detect_bins"]:
+        notes.append("auto_detect_bins: tal 0.20 leaves it out of the film (commented out of its XML); the bins "
+                     "are num_bins from start_opl")
+    return notes
 
 
 def _scan(config: dict, halves: tuple[float, float]) -> Scan:
@@ -432,6 +439,9 @@ def _emission(config: dict, count: int) -> np.ndarray:
         raise SceneError("laser_emission_mode", f"{mode!r}: the model holds rgb or mono emission (a spectrum "
                                                 f"of wavelengths is refused)")
     emission = _channels("laser_emission", value, count, unit=False)
+    if emission.max() > MAX_INTENSITY:            # before Σ E, π Σ E and the reflectances' weights overflow
+        raise SceneError("laser_emission", f"{value!r}: an irradiance beyond {MAX_INTENSITY:g} (the laser's "
+                                           f"intensity π Σ E is at most {MAX_INTENSITY:g} W/sr)")
     if not emission.sum() > 0:
         raise SceneError("laser_emission", "the laser emits nothing; give an irradiance > 0")
     return emission
@@ -467,10 +477,12 @@ def tal_config_scene(data: dict, *, name: str = "tal", config: str = "",
     for key in data:
         if not isinstance(key, str) or (key not in TAL_DEFAULTS and key not in ("name", _OURS) + _LATER_KEYS):
             raise SceneError(str(key), f"unknown key for tal {TAL_VERSION} (tal would ignore it; a typo?)")
+    # the notes (TalConfigWarning) are said once the whole configuration is accepted: a refusal is one line
+    notes = []
     later = [key for key in _LATER_KEYS if key in data]
     if later:
-        warnings.warn(f"{', '.join(later)}: keys of later tal releases that tal {TAL_VERSION} does not read; "
-                      f"the scene is what {TAL_VERSION} renders", TalConfigWarning, stacklevel=3)
+        notes.append(f"{', '.join(later)}: keys of later tal releases that tal {TAL_VERSION} does not read; "
+                     f"the scene is what {TAL_VERSION} renders")
     merged = {**TAL_DEFAULTS, **data}                                  # tal's shallow merge
     ours = merged.get(_OURS) or {}
     if not isinstance(ours, dict):
@@ -482,21 +494,25 @@ def tal_config_scene(data: dict, *, name: str = "tal", config: str = "",
     if not isinstance(label, str):
         raise SceneError("name", f"expected a string, got {label!r}")
     count = _variant_channels(merged)
-    _check_integrator(merged)
+    notes += _check_integrator(merged)
     wall, hidden, hidden_key = _geometries(merged)
     halves = _wall(wall, f"geometry[{merged['relay_wall']}]")
     scan = _scan(merged, halves)
+    try:
+        scan.check_pairs()              # before _facing builds the grids' points
+    except SceneError as error:
+        raise SceneError(_KEY_NAMES[error.key], error.problem) from None
     corner, u, v, outline = _hidden_rectangle(hidden, hidden_key, Path(os.getcwd() if cwd is None else cwd))
+    _extent(corner, u, v, hidden_key)
     emission = _emission(merged, count)
     wall_channels = _material(wall, f"geometry[{merged['relay_wall']}]", count)
     hidden_channels = _material(hidden, hidden_key, count)
     rho_w, rho_h = _reflectances(emission, wall_channels, hidden_channels)
     stated = _flag(merged, "account_first_and_last_bounces")
     if stated:
-        warnings.warn("account_first_and_last_bounces: true reaches only tal 0.20's capture meter, which ignores "
-                      "it: the path lengths tal renders never include |o_l - l| + |s - o_s|, while its HDF5 says "
-                      "they do (t_accounts_first_and_last_bounces); the scene is what it renders",
-                      TalConfigWarning, stacklevel=3)
+        notes.append("account_first_and_last_bounces: true reaches only tal 0.20's capture meter, which ignores "
+                     "it: the path lengths tal renders never include |o_l - l| + |s - o_s|, while its HDF5 says "
+                     "they do (t_accounts_first_and_last_bounces); the scene is what it renders")
     position = {what: [merged[f"{what}_{axis}"] for axis in "xyz"] for what in ("laser", "sensor")}
     for what, values in position.items():
         for axis, value in zip("xyz", values):
@@ -505,10 +521,10 @@ def tal_config_scene(data: dict, *, name: str = "tal", config: str = "",
     if noise is not None and not isinstance(noise, dict):
         raise SceneError(f"{_OURS}.noise", "expected a mapping (kind, sigma or photons, seed)")
     pixels = _integer(f"{_OURS}.pixels", ours.get("pixels", 32))
+    require_memory(8 * 8 * pixels**2, f"{_OURS}.pixels = {pixels}", "use fewer pixels")
     if outline is not None:
         from .tal_mesh import indicator_image
 
-        require_memory(8 * 8 * pixels**2, f"{_OURS}.pixels = {pixels}", "use fewer pixels")
         covered = indicator_image(outline, corner, u, v, pixels, f"{hidden_key}.mesh.filename",
                                   hidden["mesh"]["filename"], f"{_OURS}.pixels")
         if covered is not None:
@@ -531,6 +547,8 @@ def tal_config_scene(data: dict, *, name: str = "tal", config: str = "",
         raise SceneError(mapped, error.problem) from None
     except TypeError as error:                        # Noise(**mapping) with a key it does not take
         raise SceneError(f"{_OURS}.noise", f"{error}; its keys are kind, sigma or photons, seed") from None
+    for note in notes:
+        warnings.warn(note, TalConfigWarning, stacklevel=3)
     return scene
 
 
@@ -539,6 +557,20 @@ def _reflectances(emission: np.ndarray, wall: np.ndarray, hidden: np.ndarray) ->
     if np.ptp(wall) == 0.0:
         return float(wall[0]), float(emission @ hidden / emission.sum())
     return 1.0, float(emission @ (wall**2 * hidden) / emission.sum())
+
+
+def _extent(corner, u, v, key: str) -> None:
+    """Before any area or normal is formed: corners within ±MAX_LENGTH, sides of at least MIN_LENGTH."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        corners = corner + np.array([[0, 0], [1, 0], [0, 1], [1, 1]]) @ np.array([u, v])
+    far = float(np.max(np.abs(corners)))
+    if not far <= MAX_LENGTH:
+        raise SceneError(key, f"a corner at {far:g} m is beyond the ±{MAX_LENGTH:g} m this tool resolves in "
+                              f"float64; scale it down")
+    sides = [math.hypot(*map(float, edge)) for edge in (u, v)]       # hypot: no underflow (the scene's rule)
+    if not min(sides) >= MIN_LENGTH:
+        raise SceneError(key, f"its sides are {sides[0]!r} m and {sides[1]!r} m; the smallest length supported is "
+                              f"{MIN_LENGTH:g} m: scale it up")
 
 
 def _facing(corner, u, v, halves, scan: Scan, laser: np.ndarray, key: str) -> None:

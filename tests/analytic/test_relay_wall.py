@@ -159,3 +159,15 @@ def test_a_line_the_hidden_rectangle_blocks_is_refused_in_one_line(changes, who)
     assert "\n" not in str(caught.value)
     moved = dict(changes, **{f"{who}_position": (-1.9, 1.9, 0.2)})      # beside it, the same scan is accepted
     RelayWallScene(**moved)
+
+
+@pytest.mark.parametrize("changes, key, shown", [
+    (dict(u=(1e-300, 0.0, 0.0)), "hidden.u", "1e-300 m"),                 # not "must be non-zero": |u| underflowed
+    (dict(v=(0.0, -1e-170, 0.0)), "hidden.v", "1e-170 m"),
+    (dict(u=(3e-10, 4e-10, 0.0), v=(-4e-10, 3e-10, 0.0)), "hidden.u", "5e-10 m"),
+    (dict(u=(0.0, 0.0, 0.0)), "hidden.u", "0 (the edge vector must be non-zero)"),
+])
+def test_a_side_below_the_smallest_length_is_refused_with_its_length(changes, key, shown):
+    with pytest.raises(SceneError) as caught:
+        RelayWallScene(**changes)
+    assert caught.value.key == key and shown in str(caught.value) and "smallest length supported" in str(caught.value)

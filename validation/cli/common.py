@@ -11,12 +11,14 @@ import argparse
 import math
 import re
 import sys
+import warnings
 
 from analytic.errors import UserError
 
 __all__ = ["UsageError", "OneLineParser", "seed_type", "samples_type", "positive_float_type",
            "load_scene_argument", "show_progress", "MAX_SAMPLES", "add_quiet",
-           "check_samples_type", "add_window_option", "apply_window", "announce_window", "rows_text"]
+           "check_samples_type", "add_window_option", "apply_window", "announce_window", "release_warnings",
+           "rows_text"]
 
 #: Most samples a render may be asked for: 2^44, about two days at 1e8 samples/s.
 MAX_SAMPLES = 2**44
@@ -89,6 +91,14 @@ def positive_float_type(option: str):
     return parse
 
 
+def release_warnings() -> None:
+    """A command has accepted its inputs: print the warnings held while it checked them (program.main holds
+    them, so that a refused command's stderr is its one error line)."""
+    release = getattr(warnings.showwarning, "release", None)
+    if release is not None:
+        release()
+
+
 def load_scene_argument(path: str | None):
     """The scene a command was given: a TOML file (a plane or a relay-wall capture), or the built-in
     default scene (a plane scene)."""
@@ -156,6 +166,7 @@ def announce_window(args, scene, share: float | None = None) -> float:
     """
     from analytic.window import response_range, warn_if_cut, warn_if_mostly_empty, window_share
 
+    release_warnings()          # the inputs are accepted: the scene's own warnings first
     if getattr(args, "window", "scene") == "auto":
         sampling = scene.sampling
         low, high = response_range(scene)

@@ -63,7 +63,7 @@ def draw_scene_counts(scene, y, *, stream: int = 0) -> tuple[np.ndarray, np.ndar
 
 
 def refuse_unreachable_counts(scene, *, margin: float = 2.0) -> None:
-    """Before a render: refuse a ``[detector]`` whose expected counts would pass what a Poisson draw takes.
+    """Before a render (``margin`` 2) or a model (1): refuse a ``[detector]`` whose expected counts would pass what a Poisson draw takes.
 
     A render's y is known only at its end, after its files; its counts are drawn then. A cheap
     bound comes first: :func:`analytic.window.impulse_totals` x (1 for the impulse, else the period
@@ -91,9 +91,10 @@ def refuse_unreachable_counts(scene, *, margin: float = 2.0) -> None:
         return
     expected = largest(float(np.max(forward(scene), initial=0.0)))
     if not expected <= MAX_MEAN:
-        raise SceneError("detector.photons", f"the largest expected count, {expected / margin:.6g} (x {margin:g} "
-                                             f"for a render's noise), is beyond the {MAX_MEAN:g} a Poisson draw "
-                                             f"supports; lower photons or cycles")
+        noise = f" (x {margin:g} for a render's noise)" if margin != 1.0 else ""
+        raise SceneError("detector.photons", f"the largest expected count, {expected / margin:.6g}{noise}, is "
+                                             f"beyond the {MAX_MEAN:g} a Poisson draw supports; lower photons or "
+                                             f"cycles")
 
 
 def write_counts(out: str | Path, scene, counts: tuple[np.ndarray, np.ndarray] | None, *, label: str = "model"

@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import DataError, SceneError
-from .values import _integer, _number
+from .values import _integer, _number, exact
 
 __all__ = ["Detector", "DEAD_TIMES", "rates", "expected_counts", "detection_probabilities", "draw_counts",
            "coates_estimate", "MAX_CYCLES", "MAX_MEAN"]
@@ -82,7 +82,7 @@ class Detector:
         object.__setattr__(self, "background", _number("detector.background", self.background, nonnegative=True))
         cycles = _number("detector.cycles", self.cycles, positive=True)
         if not (cycles.is_integer() and 1 <= cycles <= MAX_CYCLES):
-            raise SceneError("detector.cycles", f"must be a whole number in [1, 2^53], got {cycles:g}")
+            raise SceneError("detector.cycles", f"must be a whole number in [1, 2^53], got {exact(cycles)}")
         object.__setattr__(self, "cycles", cycles)
         if not isinstance(self.dead_time, str) or self.dead_time not in DEAD_TIMES:
             raise SceneError("detector.dead_time", f"must be one of {', '.join(map(repr, DEAD_TIMES))}, "
@@ -205,7 +205,7 @@ def draw_counts(y, detector: Detector, rng: np.random.Generator | None = None) -
         with np.errstate(over="ignore"):
             means = detector.cycles * lam
         if means.size and means.max() > MAX_MEAN:
-            raise SceneError("detector.photons", f"an expected count of {means.max():.3g} is beyond the "
+            raise SceneError("detector.photons", f"an expected count of {exact(means.max())} is beyond the "
                              f"{MAX_MEAN:g} a Poisson draw supports; lower photons or cycles")
         return rng.poisson(means).astype(np.int64)
     p, none = detection_probabilities(lam)

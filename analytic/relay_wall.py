@@ -39,8 +39,9 @@ from .detector import Detector
 from .errors import SceneError
 from .geometry import PointPairs, Rectangle
 from .resources import require_memory
-from .scene import (MAX_LENGTH, MIN_LENGTH, Illumination, Noise, Sampling, _choice, _integer, _number, check_tolerance,
-                    MAX_INTENSITY)
+from .scene import (MAX_INTENSITY, MAX_LENGTH, MIN_LENGTH, Illumination, Noise, Sampling, _choice, _integer, _number,
+                    check_tolerance, reflectance_image)
+from .values import exact
 
 __all__ = ["RelayWallScene", "Scan", "SCAN_TYPES", "MAX_PAIRS", "grid_points", "check_edges",
            "default_relay_wall_scene"]
@@ -114,7 +115,8 @@ def check_edges(u, v) -> tuple[float, float]:
         lengths.append(length)
     dot = float(np.dot(u, v))
     if abs(dot) > 1e-9 * lengths[0] * lengths[1]:
-        raise SceneError("hidden.v", f"must be orthogonal to hidden.u (u·v = {dot:.3g})")
+        raise SceneError("hidden.v", f"must be orthogonal to hidden.u (u·v = {exact(dot)}, over 1e-9 |u| |v| = "
+                                     f"{exact(1e-9 * lengths[0] * lengths[1])})")
     return lengths[0], lengths[1]
 
 
@@ -151,7 +153,7 @@ class Scan:
                 raise SceneError("scan.laser_point", f"applies to type = 'single' only, not {self.type!r}")
             point = _vector("scan.laser_point", self.laser_point)
             if point[2] != 0.0:
-                raise SceneError("scan.laser_point", f"z = {point[2]:g}: the laser point lies on the wall (z = 0)")
+                raise SceneError("scan.laser_point", f"z = {exact(point[2])}: the laser point lies on the wall (z = 0)")
             point.setflags(write=False)
             object.__setattr__(self, "laser_point", point)
         if self.laser_grid is not None:
@@ -178,23 +180,6 @@ class Scan:
             raise SceneError("scan.grid", f"{pairs:,} (laser point, read point) pairs; at most {MAX_PAIRS:,} "
                                           f"are supported")
         return pairs
-
-
-def _reflectance(key: str, value: Any, pixels: int) -> np.ndarray:
-    """An M x M image in [0, 1] from a number or an array (the plane scene's rule)."""
-    if isinstance(value, np.ndarray):
-        image = np.array(value, dtype=np.float64)
-        if image.shape != (pixels, pixels):
-            raise SceneError(key, f"image shape {image.shape} differs from ({pixels}, {pixels})")
-        if not np.all(np.isfinite(image)) or image.min() < 0 or image.max() > 1:
-            raise SceneError(key, "values must be finite and in [0, 1]")
-    else:
-        number = _number(key, value)
-        if not 0.0 <= number <= 1.0:
-            raise SceneError(key, f"must lie in [0, 1], got {number}")
-        image = np.full((pixels, pixels), number)
-    image.setflags(write=False)
-    return image
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -253,7 +238,7 @@ class RelayWallScene:
         pixels = _integer("hidden.pixels", self.pixels)
         require_memory(4 * 8 * pixels**2, f"hidden.pixels = {pixels}", "use fewer pixels")
         object.__setattr__(self, "pixels", pixels)
-        object.__setattr__(self, "reflectance", _reflectance("hidden.reflectance", self.reflectance, pixels))
+        object.__setattr__(self, "reflectance", reflectance_image("hidden.reflectance", self.reflectance, pixels))
         for name, key, front in (("center", "hidden.center", True), ("u", "hidden.u", False), ("v", "hidden.v", False),
                                  ("laser_position", "laser.position", True),
                                  ("sensor_position", "sensor.position", True)):
@@ -262,7 +247,8 @@ class RelayWallScene:
             object.__setattr__(self, name, vector)
         intensity = _number("laser.intensity", self.intensity, positive=True)
         if intensity > MAX_INTENSITY:
-            raise SceneError("laser.intensity", f"{intensity:g} W/sr is beyond the {MAX_INTENSITY:g} W/sr supported")
+            raise SceneError("laser.intensity", f"{exact(intensity)} W/sr is beyond the {MAX_INTENSITY:g} W/sr "
+                                                f"supported")
         object.__setattr__(self, "intensity", intensity)
         for name, kind in (("scan", Scan), ("illumination", Illumination), ("sampling", Sampling)):
             if not isinstance(getattr(self, name), kind):
@@ -304,8 +290,8 @@ class RelayWallScene:
         if self.scan.type == "single" and self.scan.laser_point is not None:
             x, y, _ = self.scan.laser_point
             if abs(x) > 0.5 * self.wall_size[0] or abs(y) > 0.5 * self.wall_size[1]:
-                raise SceneError("scan.laser_point", f"({x:g}, {y:g}) lies outside the {self.wall_size[0]:g} x "
-                                                     f"{self.wall_size[1]:g} m wall")
+                raise SceneError("scan.laser_point", f"({exact(x)}, {exact(y)}) lies outside the "
+                                                     f"{exact(self.wall_size[0])} x {exact(self.wall_size[1])} m wall")
 
     # -- the scan -----------------------------------------------------------------
 

@@ -49,6 +49,7 @@ from __future__ import annotations
 import math
 import os
 import re
+import sys
 import warnings
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
@@ -61,6 +62,7 @@ from .errors import SceneError
 from .relay_wall import RelayWallScene, Scan, grid_points
 from .resources import require_memory
 from .scene import MAX_INTENSITY, MAX_LENGTH, MIN_LENGTH, Noise, Sampling, _integer, _number
+from .values import exact
 
 __all__ = ["TalScene", "TalConfigWarning", "load_tal_config", "tal_config_scene", "is_tal_config",
            "TAL_DEFAULTS", "TAL_VERSION"]
@@ -165,6 +167,9 @@ def load_tal_config(path: str | Path, *, cwd: str | Path | None = None) -> TalSc
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
         reason = getattr(error, "problem", None) or type(error).__name__
         raise SceneError(shown, f"invalid YAML{where}: {reason}; fix the YAML syntax there") from None
+    except ValueError:          # int() past Python's digit limit, raised by PyYAML as it is
+        raise SceneError(shown, f"holds a whole number of more than {sys.get_int_max_str_digits()} digits, "
+                                f"which no key takes; shorten it") from None
     if not isinstance(config, dict):
         raise SceneError(shown, f"a tal configuration is a mapping of keys, got {type(config).__name__}")
     return tal_config_scene(config, name=Path(path).stem, config=str(path), cwd=cwd)
@@ -565,7 +570,7 @@ def _extent(corner, u, v, key: str) -> None:
         corners = corner + np.array([[0, 0], [1, 0], [0, 1], [1, 1]]) @ np.array([u, v])
     far = float(np.max(np.abs(corners)))
     if not far <= MAX_LENGTH:
-        raise SceneError(key, f"a corner at {far:g} m is beyond the ±{MAX_LENGTH:g} m this tool resolves in "
+        raise SceneError(key, f"a corner at {exact(far)} m is beyond the ±{MAX_LENGTH:g} m this tool resolves in "
                               f"float64; scale it down")
     sides = [math.hypot(*map(float, edge)) for edge in (u, v)]       # hypot: no underflow (the scene's rule)
     if not min(sides) >= MIN_LENGTH:

@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import SceneError
-from .values import MAX_LENGTH, MIN_LENGTH
+from .values import MAX_LENGTH, MIN_LENGTH, exact
 
 __all__ = ["read_obj", "planar_polygon", "indicator_image", "MAX_OBJ_BYTES"]
 
@@ -59,7 +59,8 @@ def read_obj(path: Path, key: str) -> tuple[np.ndarray, list[list[int]], np.ndar
         if path.stat().st_size > MAX_OBJ_BYTES:
             raise SceneError(key, f"{path}: larger than {MAX_OBJ_BYTES >> 20} MiB; a planar hidden polygon "
                                   f"needs a few lines")
-        text = path.read_text(encoding="utf-8", errors="replace")
+        # -sig: a byte-order mark would make the first record "\ufeffv", skipped, and every index off by one
+        text = path.read_text(encoding="utf-8-sig", errors="replace")
     except OSError as error:
         raise SceneError(key, f"cannot read {path} ({error.strerror})") from None
     vertices, normals, faces, face_normals = [], [], [], []
@@ -144,7 +145,7 @@ def planar_polygon(vertices: np.ndarray, faces: list[list[int]], stated_normals:
     points = vertices[used]
     far = float(np.max(np.abs(points)))
     if not far <= MAX_LENGTH:           # inf or NaN too (a transform that overflowed): areas would overflow
-        raise SceneError(key, f"{shown}: a vertex at {far:g} m is beyond the ±{MAX_LENGTH:g} m this tool "
+        raise SceneError(key, f"{shown}: a vertex at {exact(far)} m is beyond the ±{MAX_LENGTH:g} m this tool "
                               f"resolves in float64; scale the mesh down")
     size = float(np.ptp(points, axis=0).max())
     if not size > 0:

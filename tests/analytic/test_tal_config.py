@@ -315,3 +315,10 @@ def test_a_refused_configuration_warns_of_nothing_first(refused, key):
     assert len(said) == 3 and all(str(w.message).split(":")[0] in ("integrator_filter_bounces",
                                                                    "account_first_and_last_bounces",
                                                                    "simultaneous_scan") for w in said)
+
+
+def test_a_whole_number_past_pythons_digit_limit_is_one_line(tmp_path):
+    path = tmp_path / "big.yaml"
+    path.write_text("sensor_width: 1" + "0" * 5000 + "\n")
+    with pytest.raises(SceneError, match="whole number of more than 4300 digits"):
+        load_tal_config(path)

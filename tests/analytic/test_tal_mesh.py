@@ -59,3 +59,12 @@ def test_a_coordinate_that_is_no_finite_number_is_a_malformed_record(tmp_path, v
     path.write_text(SQUARE.format(s=1) + f"vn 0 0 {value}\n")
     with pytest.raises(SceneError, match="line 6: not a valid OBJ vn record"):
         read_obj(path, KEY)
+
+
+def test_a_byte_order_mark_does_not_hide_the_first_vertex(tmp_path):
+    plain = tmp_path / "plain.obj"
+    plain.write_text(SQUARE.format(s=0.5))
+    marked = tmp_path / "marked.obj"
+    marked.write_text("\ufeff" + SQUARE.format(s=0.5), encoding="utf-8")
+    for got, expected in zip(read_obj(marked, KEY), read_obj(plain, KEY)):
+        np.testing.assert_array_equal(np.asarray(got, dtype=object), np.asarray(expected, dtype=object))

@@ -77,6 +77,7 @@ def refuse_unreachable_counts(scene, *, margin: float = 2.0) -> None:
     from analytic.detector import MAX_MEAN
     from analytic.errors import SceneError
     from analytic.system import forward
+    from analytic.values import exact
     from analytic.window import impulse_totals
 
     detector = scene.detector
@@ -92,7 +93,7 @@ def refuse_unreachable_counts(scene, *, margin: float = 2.0) -> None:
     expected = largest(float(np.max(forward(scene), initial=0.0)))
     if not expected <= MAX_MEAN:
         noise = f" (x {margin:g} for a render's noise)" if margin != 1.0 else ""
-        raise SceneError("detector.photons", f"the largest expected count, {expected / margin:.6g}{noise}, is "
+        raise SceneError("detector.photons", f"the largest expected count, {exact(expected / margin)}{noise}, is "
                                              f"beyond the {MAX_MEAN:g} a Poisson draw supports; lower photons or "
                                              f"cycles")
 
@@ -309,7 +310,7 @@ def _read_counts(path: str, scene) -> np.ndarray:
         raise DataError(f"{file}: every count must be a finite whole number >= 0")
     detector = scene.detector
     if detector.dead_time == "cycle" and np.any(values.sum(axis=1) > detector.cycles):
-        raise DataError(f"{file}: a row holds more counts than the {detector.cycles:g} cycles a first-photon "
+        raise DataError(f"{file}: a row holds more counts than the {detector.cycles:.0f} cycles a first-photon "
                         f"detector records (the scene's dead_time = 'cycle'); is it a dead-time-free histogram?")
     return values
 

@@ -10,7 +10,6 @@ replicas' jackknife when there are replicas, else from the per-bin errors
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -68,92 +67,50 @@ class ShiftedModel:
     evaluate : callable, optional
         scene -> ``(K, N)``: what is shifted (default :func:`analytic.system.forward`, the model;
         :func:`validation.check.offset_model` judges against mitransient's estimator the same way).
-
-    Attributes
-    ----------
-    evaluations : int
-        Model evaluations made so far (each :meth:`__call__` at a new δ and each :meth:`widened` window).
     """
 
     def __init__(self, scene: Scene, model: np.ndarray | None = None, evaluate=None):
         self.scene = scene
         self.evaluate = evaluate
         self.cache = {} if model is None else {0.0: np.asarray(model, dtype=np.float64)}
-        self.evaluations = 0
-
-    def _at(self, start_opl: float, count: int) -> np.ndarray:
-        from analytic.system import forward   # Numba: loaded when a model is first needed
-
-        sampling = Sampling(bin_width_opl=self.scene.sampling.bin_width_opl, start_opl=start_opl, count=count)
-        self.evaluations += 1
-        return (self.evaluate or forward)(self.scene.replace(sampling=sampling))
 
     def __call__(self, offset: float) -> np.ndarray:
         """``(K, N)`` y_model with every bin edge moved by +``offset`` metres of path length."""
+        from analytic.system import forward   # Numba: loaded when a model is first needed
+
         offset = float(offset)
         if offset not in self.cache:
             sampling = self.scene.sampling
-            self.cache[offset] = self._at(sampling.start_opl + offset, sampling.count)
+            shifted = Sampling(bin_width_opl=sampling.bin_width_opl, start_opl=sampling.start_opl + offset,
+                               count=sampling.count)
+            self.cache[offset] = (self.evaluate or forward)(self.scene.replace(sampling=shifted))
         return self.cache[offset]
 
-    def widened(self, offset: float, reach: int) -> np.ndarray:
-        """``(K, N + 2 reach)`` y_model over the window widened by ``reach`` bins at each end, every edge
-        moved by +``offset`` metres: column ``reach + k + n`` is bin n moved by ``offset`` + k bins, so one
-        evaluation gives the model at every whole-bin shift within ``reach`` (memoised)."""
-        key = ("widened", float(offset), int(reach))
-        if key not in self.cache:
-            sampling = self.scene.sampling
-            self.cache[key] = self._at(sampling.start_opl + float(offset) - reach * sampling.bin_width_opl,
-                                       sampling.count + 2 * int(reach))
-        return self.cache[key]
 
+def _coarse_offset(data, sigma, mask, model, bin_width) -> float:
+    """Starting offset: χ² minimised over a grid of shifts of the interpolated as-given model.
 
-#: The starting offset is scanned over shifts of 1/SCAN_FRACTIONS of a bin.
-SCAN_FRACTIONS = 4
-
-
-def _scan_offset(data, sigma, mask, model_at, bin_width_opl: float) -> float:
-    """Starting offset: the least χ² over shifts of a quarter bin, up to half the window either way.
-
-    With a :class:`ShiftedModel`, the model is exact at every shift tried:
-    one widened window per quarter-bin fraction (:meth:`ShiftedModel.widened`,
-    SCAN_FRACTIONS evaluations in all) holds every whole-bin shift of it.
-    Another callable is scanned on the interpolated as-given model instead:
-    its cumulative sum is the integral C(t) at the bin edges, and
-    y_n(δ) ≈ C(t_{n+1} + δ) - C(t_n + δ) with C linear between edges (exact
-    at whole bins, for light inside the window). Either way Gauss–Newton then
-    starts in the basin of the global optimum, for shifts of whole bins and
-    for fractions alike, whatever the waveform.
+    The cumulative sum of the model's bins is the integral C(t) at the bin
+    edges; y_n(δ) ≈ C(t_{n+1} + δ) - C(t_n + δ) with C linear between edges.
+    Shifts up to half the window, in steps of a quarter bin, keep
+    Gauss–Newton in the right basin when the data are off by whole bins.
     """
-    count = data.shape[1]
-    reach = max(1, math.ceil(count / 2))
+    count = model.shape[1]
+    edges = np.arange(count + 1, dtype=np.float64)
+    cumulative = np.concatenate([np.zeros((model.shape[0], 1)), np.cumsum(model, axis=1)], axis=1)
+    best, best_chi2 = 0.0, np.inf
     weights = np.where(mask, 1.0 / np.where(mask, sigma, 1.0) ** 2, 0.0)
-    weighted_data = weights * data
-    if isinstance(model_at, ShiftedModel):
-        windows = [(j / SCAN_FRACTIONS, model_at.widened(j / SCAN_FRACTIONS * bin_width_opl, reach))
-                   for j in range(SCAN_FRACTIONS)]
-    else:
-        model = model_at(0.0)
-        edges = np.arange(-reach, count + reach + 1, dtype=np.float64)
-        cumulative = np.concatenate([np.zeros((model.shape[0], 1)), np.cumsum(model, axis=1)], axis=1)
-        at_edges = np.arange(count + 1, dtype=np.float64)
-        windows = [(j / SCAN_FRACTIONS, np.diff(np.array([np.interp(edges + j / SCAN_FRACTIONS, at_edges, row)
-                                                          for row in cumulative]), axis=1))
-                   for j in range(SCAN_FRACTIONS)]
-    best, best_chi2 = 0.0, math.inf
-    for fraction, window in windows:
-        for whole in range(-reach, reach):
-            y = window[:, reach + whole:reach + whole + count]
-            norm = float(np.sum(weights * y * y))
-            if not norm > 0:
-                continue
-            scale = float(np.sum(weighted_data * y)) / norm
-            chi2 = float(np.sum(weights * (data - scale * y) ** 2))
-            shift = whole + fraction
-            # ties (a flat χ²) go to the smaller shift
-            if chi2 < best_chi2 or (chi2 == best_chi2 and abs(shift) < abs(best)):
-                best, best_chi2 = shift, chi2
-    return best * bin_width_opl
+    for shift in np.arange(-count / 2, count / 2 + 0.125, 0.25):
+        shifted = np.array([np.interp(edges + shift, edges, row) for row in cumulative])
+        y = np.diff(shifted, axis=1)
+        norm = np.sum(weights * y * y)
+        if norm <= 0:
+            continue
+        scale = np.sum(weights * data * y) / norm
+        chi2 = np.sum(weights * (data - scale * y) ** 2)
+        if chi2 < best_chi2 - 1e-12 * abs(best_chi2) or (chi2 <= best_chi2 and abs(shift) < abs(best)):
+            best, best_chi2 = float(shift), chi2
+    return best * bin_width
 
 
 @dataclass(frozen=True)
@@ -187,7 +144,7 @@ def _gauss_newton(data, sigma, mask, model_at, bin_width_opl: float, max_iterati
         slope = (whitened(offset + step_h) - y) / step_h
         return np.column_stack([y, scale * slope]), d / s_ - scale * y
 
-    offset = _scan_offset(data, sigma, mask, model_at, bin_width_opl)
+    offset = _coarse_offset(data, sigma, mask, model_at(0.0), bin_width_opl)
     y = whitened(offset)
     scale = float(y @ (d / s_)) / float(y @ y) if float(y @ y) > 0 else 0.0
     if scale == 0.0:
@@ -262,11 +219,8 @@ def fit_scale_offset(data, sigma, mask, model_at, bin_width_opl: float, *, repli
     with step h = 10⁻³ T (one extra model per iteration), whose error
     (~10⁻³ relative from the step, ~10⁻³ from the model's 10⁻⁶ accuracy
     over h) only slows convergence and changes the standard errors by
-    ~10⁻³ of themselves, never moves the optimum. The starting δ is the
-    least χ² over shifts of a quarter bin up to half the window either way
-    (:func:`_scan_offset`: with a :class:`ShiftedModel`, exact at each,
-    from SCAN_FRACTIONS widened model evaluations), so the fit finds the
-    global optimum's basin for data off by several bins of either sign.
+    ~10⁻³ of themselves, never moves the optimum. A coarse search over
+    shifts of a quarter bin picks the starting δ.
 
     Standard errors. With replicas y_r: the delete-one jackknife,
     cov θ̂ = (R - 1)/R Σ_r (θ̂_(r) - θ̄)(θ̂_(r) - θ̄)ᵀ, each θ̂_(r) one

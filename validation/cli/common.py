@@ -137,15 +137,25 @@ def add_window_option(parser) -> None:
 
 def apply_window(args, scene):
     """The scene with the window ``--window`` asks for: ``scene`` itself for ``scene``, for ``auto`` its copy
-    with :func:`analytic.window.auto_sampling` (a SceneError when no window of its period covers the light).
+    with :func:`analytic.window.auto_sampling` (a SceneError when no window of its period covers the light,
+    a UsageError with the estimate when the pulse is too long for the model over those bins:
+    :func:`analytic.cost.impractical_illumination`).
 
     Nothing is printed: :func:`announce_window` states it once the command's inputs are all accepted.
     """
     if getattr(args, "window", "scene") != "auto":
         return scene
+    from analytic.cost import impractical_illumination
     from analytic.window import auto_sampling
 
-    return scene.replace(sampling=auto_sampling(scene))
+    chosen = scene.replace(sampling=auto_sampling(scene))
+    problem = impractical_illumination(chosen)
+    if problem is not None:
+        sampling = chosen.sampling
+        raise UsageError(f"--window auto: the {sampling.count:,} bins of {sampling.bin_width_opl:g} m that hold "
+                         f"all the light are more than this pulse can be modelled over: {problem}; or set "
+                         f"[sampling] start and count to the bins you need")
+    return chosen
 
 
 def announce_window(args, scene, share: float | None = None) -> float:

@@ -323,6 +323,7 @@ def command_check_counts(args, scene) -> int:
     """
     import numpy as np
 
+    from analytic.cost import refuse_impractical_illumination
     from analytic.detector import expected_counts
     from analytic.files import json_ready, output_folder, save_json, staged_writes
     from analytic.system import forward
@@ -333,6 +334,7 @@ def command_check_counts(args, scene) -> int:
     from .common import announce_window
 
     names = check_counts_options(args, scene)
+    refuse_impractical_illumination(scene)
     counts = _read_counts(args.data[0], scene)
     detector = scene.detector
     alpha = DEFAULT_FALSE_ALARM if args.false_alarm is None else args.false_alarm

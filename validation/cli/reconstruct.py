@@ -63,6 +63,7 @@ def add_lambda_options(parser, *, default: str) -> None:
 
 def command_reconstruct(args) -> int:
     """Reconstruct the scene's image from a transient; write images, metrics, figures, report."""
+    from analytic.cost import refuse_impractical_illumination
     from analytic.errors import SceneError
     from analytic.files import (PrecisionWarning, discard, float32_problem, output_folder, reading_folder,
                              save_exr, save_json, save_npy, save_png_image, staged_writes)
@@ -73,6 +74,7 @@ def command_reconstruct(args) -> int:
     from validation.report import write_markdown
 
     scene = load_scene_argument(args.scene)
+    refuse_impractical_illumination(scene)
     rule, sigma = data_driven_rule(scene, args.rule)
     if args.regularizer == "tv":
         if rule in ("gcv", "lcurve") and args.rule == "auto":

@@ -7,7 +7,7 @@ import warnings
 from pathlib import Path
 
 from .common import (UsageError, add_quiet, add_window_option, announce_window, apply_window, check_samples_type,
-                     load_scene_argument, seed_type, show_progress)
+                     load_scene_argument, release_warnings, seed_type, show_progress)
 from .counts import RENDER_STREAM, draw_scene_counts, refuse_unreachable_counts, write_counts
 from .reconstruct import add_lambda_options
 
@@ -80,6 +80,7 @@ def command_validate(args) -> int:
             refuse_dark(scene, shares[-1])
         except UserError as error:
             raise _named(error, f"{label} at {spp:,} samples") from None
+    release_warnings()                                 # every scene accepted: what they warned of, before the work
     with output_folder(args.out) as out:
         checks = []
         iterator = list(zip(suite, labels, shares))

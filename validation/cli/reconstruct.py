@@ -8,7 +8,7 @@ import warnings
 
 import numpy as np
 
-from .common import (UsageError, add_quiet, load_scene_argument, positive_float_type,
+from .common import (UsageError, add_quiet, load_scene_argument, positive_float_type, release_warnings,
                      rows_text, show_progress)
 
 __all__ = ["add_commands", "command_reconstruct", "command_reproduce", "lambda_argument", "lambda_grid_of",
@@ -88,6 +88,7 @@ def command_reconstruct(args) -> int:
     grid = lambda_grid_of(args)
     with reading_folder(args.data, option="--data"):    # no command writes the data while they are read
         data = _read_data(args.data, scene)
+    release_warnings()                                   # the inputs are accepted: what they warned of first
     with output_folder(args.out) as out:
         assembly_started = time.perf_counter()
         matrix = system_matrix(scene, progress=show_progress(args))
@@ -214,6 +215,7 @@ def command_reproduce(args) -> int:
     from analytic.files import output_folder
     from validation.paper import reproduce
 
+    release_warnings()
     with output_folder(args.out) as out:
         summary = reproduce(out, quick=args.quick, progress=show_progress(args))
     if not args.quiet:

@@ -41,7 +41,7 @@ from .errors import DataError, SceneError
 from .values import _integer, _number, exact
 
 __all__ = ["Detector", "DEAD_TIMES", "rates", "expected_counts", "detection_probabilities", "draw_counts",
-           "coates_estimate", "MAX_CYCLES", "MAX_MEAN"]
+           "coates_estimate", "excess_key", "MAX_CYCLES", "MAX_MEAN"]
 
 DEAD_TIMES = ("none", "cycle")
 #: Most laser cycles: counts stay exact integers in float64 and int64.
@@ -163,7 +163,8 @@ def expected_counts(y, detector: Detector) -> np.ndarray:
     Raises
     ------
     SceneError
-        ``detector.photons``: without dead time, an expected count beyond float64.
+        ``detector.photons`` (or ``detector.background`` when it alone is the cause: :func:`excess_key`):
+        without dead time, an expected count beyond float64.
     """
     lam = rates(y, detector)
     if detector.dead_time == "cycle":
@@ -171,9 +172,18 @@ def expected_counts(y, detector: Detector) -> np.ndarray:
     with np.errstate(over="ignore"):
         counts = detector.cycles * lam
     if not np.all(np.isfinite(counts)):
-        raise SceneError("detector.photons", "an expected count is beyond the range of float64 (photons x y x "
-                                             "cycles); lower photons or cycles")
+        key = excess_key(detector, math.inf)
+        raise SceneError(key, f"an expected count is beyond the range of float64 ({key.split('.')[1]} x cycles); "
+                              f"lower {key.split('.')[1]} or cycles")
     return counts
+
+
+def excess_key(detector: Detector, limit: float) -> str:
+    """The key to name when an expected count passes ``limit``: ``detector.background`` when the background
+    alone does (cycles x background per bin), else ``detector.photons``."""
+    with np.errstate(over="ignore"):
+        background = detector.cycles * detector.background
+    return "detector.background" if not background < limit else "detector.photons"
 
 
 def draw_counts(y, detector: Detector, rng: np.random.Generator | None = None) -> np.ndarray:
@@ -197,7 +207,8 @@ def draw_counts(y, detector: Detector, rng: np.random.Generator | None = None) -
     Raises
     ------
     SceneError
-        ``detector.photons``: an expected count beyond :data:`MAX_MEAN`.
+        ``detector.photons`` (or ``detector.background``, :func:`excess_key`): an expected count beyond
+        :data:`MAX_MEAN`.
     """
     rng = np.random.default_rng(detector.seed) if rng is None else rng
     lam = rates(y, detector)
@@ -205,8 +216,9 @@ def draw_counts(y, detector: Detector, rng: np.random.Generator | None = None) -
         with np.errstate(over="ignore"):
             means = detector.cycles * lam
         if means.size and means.max() > MAX_MEAN:
-            raise SceneError("detector.photons", f"an expected count of {exact(means.max())} is beyond the "
-                             f"{MAX_MEAN:g} a Poisson draw supports; lower photons or cycles")
+            key = excess_key(detector, MAX_MEAN)
+            raise SceneError(key, f"an expected count of {exact(means.max())} is beyond the {MAX_MEAN:g} a Poisson "
+                                  f"draw supports; lower {key.split('.')[1]} or cycles")
         return rng.poisson(means).astype(np.int64)
     p, none = detection_probabilities(lam)
     rows = p.reshape(-1, p.shape[-1])

@@ -189,3 +189,14 @@ def test_coates_inversion_keeps_the_cycles_armed_with_huge_counts():
     assert np.all(np.isfinite(huge)) and np.all(np.isfinite(huge_variance))
     with pytest.raises(DataError, match="cycles must be finite"):
         coates_estimate(counts, float("nan"))
+
+
+def test_counts_past_the_limit_name_the_background_when_it_alone_is_the_cause():
+    detector = Detector(photons=1e-300, background=1e305, cycles=1e5)        # 1e310 expected per bin
+    for count in (expected_counts, draw_counts):
+        with pytest.raises(SceneError) as caught:
+            count(np.array([[0.0, 0.5]]), detector)
+        assert caught.value.key == "detector.background" and "lower background or cycles" in str(caught.value)
+    with pytest.raises(SceneError) as caught:
+        draw_counts(np.array([[0.0, 0.5]]), Detector(photons=1e30, background=1.0, cycles=1e5))
+    assert caught.value.key == "detector.photons"

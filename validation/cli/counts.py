@@ -74,7 +74,7 @@ def refuse_unreachable_counts(scene, *, margin: float = 2.0) -> None:
     """
     import numpy as np
 
-    from analytic.detector import MAX_MEAN
+    from analytic.detector import MAX_MEAN, excess_key
     from analytic.errors import SceneError
     from analytic.system import forward
     from analytic.values import exact
@@ -93,9 +93,9 @@ def refuse_unreachable_counts(scene, *, margin: float = 2.0) -> None:
     expected = largest(float(np.max(forward(scene), initial=0.0)))
     if not expected <= MAX_MEAN:
         noise = f" (x {margin:g} for a render's noise)" if margin != 1.0 else ""
-        raise SceneError("detector.photons", f"the largest expected count, {exact(expected / margin)}{noise}, is "
-                                             f"beyond the {MAX_MEAN:g} a Poisson draw supports; lower photons or "
-                                             f"cycles")
+        key = excess_key(detector, MAX_MEAN)
+        raise SceneError(key, f"the largest expected count, {exact(expected / margin)}{noise}, is beyond the "
+                              f"{MAX_MEAN:g} a Poisson draw supports; lower {key.split('.')[1]} or cycles")
 
 
 def write_counts(out: str | Path, scene, counts: tuple[np.ndarray, np.ndarray] | None, *, label: str = "model"

@@ -148,6 +148,15 @@ def _ranges(rectangle, pairs, pixels: int) -> np.ndarray:
     return np.array(ranges)
 
 
+def _bin_of(length: float, sampling) -> int:
+    """⌊(length - t_0) / T⌋ clamped to [-1, N] (a pulse of 1e308 m ends past every bin, not at an overflow)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        index = (length - sampling.start_opl) / sampling.bin_width_opl
+    if not index >= -1.0:
+        return -1
+    return sampling.count if index > sampling.count else math.floor(index)
+
+
 def _breakpoints(kinks: np.ndarray, start: float, width: float, first: int, bins: int, low: float,
                  high: float) -> int:
     """How many t_n - b_i lie in (low, high): t_n = start + n width, n = first ... first + bins, b_i the kinks
@@ -158,10 +167,11 @@ def _breakpoints(kinks: np.ndarray, start: float, width: float, first: int, bins
         edges = start + width * np.arange(first, first + bins + 1, dtype=np.float64)
         inside = np.searchsorted(kinks, edges - low, side="left") - np.searchsorted(kinks, edges - high, side="right")
     else:
-        # edges in (b_i + low, b_i + high): the indices between, clipped to the run
-        lowest = np.maximum(np.floor((kinks + low - start) / width) + 1, first)
-        highest = np.minimum(np.ceil((kinks + high - start) / width) - 1, first + bins)
-        inside = highest - lowest + 1
+        # edges in (b_i + low, b_i + high): the indices between, clipped to the run (a kink at 1e308 m: none)
+        with np.errstate(over="ignore", invalid="ignore"):
+            lowest = np.maximum(np.floor((kinks + low - start) / width) + 1, first)
+            highest = np.minimum(np.ceil((kinks + high - start) / width) - 1, first + bins)
+            inside = np.where(np.isfinite(lowest) & np.isfinite(highest), highest - lowest + 1, 0)
     return int(np.sum(np.maximum(inside, 0)))
 
 
@@ -202,8 +212,8 @@ def model_cost(scene) -> ModelCost:
     thread_seconds = listing_seconds = bins_total = pieces_total = largest_list = 0.0
     for low, high in ranges:
         thread_seconds += _SECONDS["pixel"]
-        first = max(0, math.floor((low + waveform.lead - start) / width))
-        last = min(count - 1, math.floor((high + waveform.duration - start) / width))
+        first = max(0, _bin_of(low + waveform.lead, sampling))
+        last = min(count - 1, _bin_of(high + waveform.duration, sampling))
         bins = max(last - first + 1, 0)
         if bins == 0:
             continue

@@ -39,8 +39,9 @@ from .detector import Detector
 from .errors import SceneError
 from .geometry import PointPairs, Rectangle
 from .resources import require_memory
+from .reflectance import reflectance_image
 from .scene import (MAX_INTENSITY, MAX_LENGTH, MIN_LENGTH, Illumination, Noise, Sampling, _choice, _integer, _number,
-                    check_tolerance, reflectance_image)
+                    check_tolerance)
 from .values import exact
 
 __all__ = ["RelayWallScene", "Scan", "SCAN_TYPES", "MAX_PAIRS", "grid_points", "check_edges",

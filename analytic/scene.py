@@ -32,13 +32,13 @@ import numpy as np
 from .detector import Detector
 from .errors import SceneError
 from .geometry import ATTENUATIONS, plane_geometry
-from .reflectance import builtin_reflectance
+from .reflectance import builtin_reflectance, reflectance_image
 from .resources import require_memory
 from .values import MAX_LENGTH, MIN_LENGTH, _integer, _number, exact
 
 __all__ = ["SceneError", "Illumination", "Sampling", "Noise", "Scene", "default_scene", "sensor_grid",
            "WAVEFORMS", "ATTENUATIONS", "NOISE_KINDS", "MAX_LENGTH", "MIN_LENGTH", "MIN_HEIGHT_FRACTION", "MAX_SENSORS", "MIN_TOLERANCE", "MAX_TOLERANCE",
-           "check_heights", "check_tolerance", "reflectance_image", "scene_extent", "minimum_height",
+           "check_heights", "check_tolerance", "scene_extent", "minimum_height",
            "DEFAULT_ARRAY"]
 
 WAVEFORMS = ("impulse", "square", "butterworth", "gaussian", "emg", "sampled")
@@ -124,28 +124,6 @@ def check_heights(size: float, source, sensors) -> None:
                              f"{exact(floor)} m ({MIN_HEIGHT_FRACTION:g} of the scene's extent "
                              f"{floor / MIN_HEIGHT_FRACTION:.6g} m): float64 cannot resolve the light "
                              f"under a point that low; raise it to at least {exact(floor)} m")
-
-
-def reflectance_image(key: str, value: Any, pixels: int) -> np.ndarray:
-    """A read-only M x M image in [0, 1] from a number or an array of numbers, or SceneError naming ``key``.
-
-    An array of strings, booleans or objects is refused (``np.array(["1"], float)`` would read "1" as 1).
-    """
-    if isinstance(value, np.ndarray):
-        if value.dtype.kind not in "iuf":
-            raise SceneError(key, f"expected an image of numbers, got an array of dtype {value.dtype}")
-        image = np.array(value, dtype=np.float64)
-        if image.shape != (pixels, pixels):
-            raise SceneError(key, f"image shape {image.shape} differs from ({pixels}, {pixels})")
-        if not np.all(np.isfinite(image)) or image.min() < 0 or image.max() > 1:
-            raise SceneError(key, "values must be finite and in [0, 1]")
-    else:
-        number = _number(key, value)
-        if not 0.0 <= number <= 1.0:
-            raise SceneError(key, f"must lie in [0, 1], got {number}")
-        image = np.full((pixels, pixels), number)
-    image.setflags(write=False)
-    return image
 
 
 def check_tolerance(tolerance: float) -> float:

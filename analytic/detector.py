@@ -37,11 +37,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import SceneError
-from .values import _integer, _number
+from .errors import DataError, SceneError
+from .values import _integer, _number, exact
 
 __all__ = ["Detector", "DEAD_TIMES", "rates", "expected_counts", "detection_probabilities", "draw_counts",
-           "coates_estimate", "MAX_CYCLES", "MAX_MEAN"]
+           "coates_estimate", "excess_key", "MAX_CYCLES", "MAX_MEAN"]
 
 DEAD_TIMES = ("none", "cycle")
 #: Most laser cycles: counts stay exact integers in float64 and int64.
@@ -82,7 +82,7 @@ class Detector:
         object.__setattr__(self, "background", _number("detector.background", self.background, nonnegative=True))
         cycles = _number("detector.cycles", self.cycles, positive=True)
         if not (cycles.is_integer() and 1 <= cycles <= MAX_CYCLES):
-            raise SceneError("detector.cycles", f"must be a whole number in [1, 2^53], got {cycles:g}")
+            raise SceneError("detector.cycles", f"must be a whole number in [1, 2^53], got {exact(cycles)}")
         object.__setattr__(self, "cycles", cycles)
         if not isinstance(self.dead_time, str) or self.dead_time not in DEAD_TIMES:
             raise SceneError("detector.dead_time", f"must be one of {', '.join(map(repr, DEAD_TIMES))}, "
@@ -107,7 +107,17 @@ def rates(y, detector: Detector) -> np.ndarray:
     y = np.asarray(y, dtype=np.float64)
     if not np.all(np.isfinite(y)):
         raise ValueError("y must be finite")
-    return detector.photons * np.maximum(y, 0.0) + detector.background
+    with np.errstate(over="ignore"):
+        # beyond float64 the rate is inf: every cycle fires at once (dead time), or the count is refused (none)
+        return detector.photons * np.maximum(y, 0.0) + detector.background
+
+
+def _photons_before(lam: np.ndarray) -> np.ndarray:
+    """Λ_n = Σ_{m<n} λ_m, summed from the start (``cumsum(λ) - λ`` cancels when one λ dwarfs those before it)."""
+    before = np.zeros_like(lam)
+    with np.errstate(over="ignore"):
+        np.cumsum(lam[..., :-1], axis=-1, out=before[..., 1:])
+    return before
 
 
 def detection_probabilities(lam) -> tuple[np.ndarray, np.ndarray]:
@@ -126,9 +136,13 @@ def detection_probabilities(lam) -> tuple[np.ndarray, np.ndarray]:
         ``(...)``, e^{-Λ_N}; Σ p_n + none = 1.
     """
     lam = np.asarray(lam, dtype=np.float64)
-    before = np.cumsum(lam, axis=-1) - lam           # Λ_n, exclusive
-    p = np.exp(-before) * -np.expm1(-lam)
-    return p, np.exp(-np.sum(lam, axis=-1))
+    p = np.exp(-_photons_before(lam)) * -np.expm1(-lam)
+    with np.errstate(over="ignore"):
+        none = np.exp(-np.sum(lam, axis=-1))
+    # Σ p_n = 1 - e^{-Λ_N} exactly; the products' rounding (a few ulps each) must not lift it above 1
+    total = np.sum(p, axis=-1, keepdims=True)
+    p = np.where(total > 1.0, p * ((1.0 - 2.0**-48) / np.where(total > 1.0, total, 1.0)), p)
+    return p, none
 
 
 def expected_counts(y, detector: Detector) -> np.ndarray:
@@ -144,12 +158,32 @@ def expected_counts(y, detector: Detector) -> np.ndarray:
     -------
     numpy.ndarray
         C λ_n (``dead_time = "none"``) or C e^{-Λ_n} (1 - e^{-λ_n})
-        (``"cycle"``); see the module docstring.
+        (``"cycle"``, summing to at most C); see the module docstring.
+
+    Raises
+    ------
+    SceneError
+        ``detector.photons`` (or ``detector.background`` when it alone is the cause: :func:`excess_key`):
+        without dead time, an expected count beyond float64.
     """
     lam = rates(y, detector)
-    if detector.dead_time == "none":
-        return detector.cycles * lam
-    return detector.cycles * detection_probabilities(lam)[0]
+    if detector.dead_time == "cycle":
+        return detector.cycles * detection_probabilities(lam)[0]
+    with np.errstate(over="ignore"):
+        counts = detector.cycles * lam
+    if not np.all(np.isfinite(counts)):
+        key = excess_key(detector, math.inf)
+        raise SceneError(key, f"an expected count is beyond the range of float64 ({key.split('.')[1]} x cycles); "
+                              f"lower {key.split('.')[1]} or cycles")
+    return counts
+
+
+def excess_key(detector: Detector, limit: float) -> str:
+    """The key to name when an expected count passes ``limit``: ``detector.background`` when the background
+    alone does (cycles x background per bin), else ``detector.photons``."""
+    with np.errstate(over="ignore"):
+        background = detector.cycles * detector.background
+    return "detector.background" if not background < limit else "detector.photons"
 
 
 def draw_counts(y, detector: Detector, rng: np.random.Generator | None = None) -> np.ndarray:
@@ -173,15 +207,18 @@ def draw_counts(y, detector: Detector, rng: np.random.Generator | None = None) -
     Raises
     ------
     SceneError
-        ``detector.photons``: an expected count beyond :data:`MAX_MEAN`.
+        ``detector.photons`` (or ``detector.background``, :func:`excess_key`): an expected count beyond
+        :data:`MAX_MEAN`.
     """
     rng = np.random.default_rng(detector.seed) if rng is None else rng
     lam = rates(y, detector)
     if detector.dead_time == "none":
-        means = detector.cycles * lam
+        with np.errstate(over="ignore"):
+            means = detector.cycles * lam
         if means.size and means.max() > MAX_MEAN:
-            raise SceneError("detector.photons", f"an expected count of {means.max():.3g} is beyond the "
-                             f"{MAX_MEAN:g} a Poisson draw supports; lower photons or cycles")
+            key = excess_key(detector, MAX_MEAN)
+            raise SceneError(key, f"an expected count of {exact(means.max())} is beyond the {MAX_MEAN:g} a Poisson "
+                                  f"draw supports; lower {key.split('.')[1]} or cycles")
         return rng.poisson(means).astype(np.int64)
     p, none = detection_probabilities(lam)
     rows = p.reshape(-1, p.shape[-1])
@@ -212,14 +249,23 @@ def coates_estimate(counts, cycles: float) -> tuple[np.ndarray, np.ndarray]:
         was armed (R_n = 0).
     variance : numpy.ndarray
         c_n / (R_n (R_n - c_n)) (the binomial's, through the logarithm).
+
+    Raises
+    ------
+    DataError
+        Negative or non-finite counts, cycles not finite and > 0, or more
+        counts than cycles still armed.
     """
     counts = np.asarray(counts, dtype=np.float64)
     if np.any(counts < 0) or not np.all(np.isfinite(counts)):
-        raise ValueError("counts must be finite and >= 0")
-    armed = cycles - (np.cumsum(counts, axis=-1) - counts)
+        raise DataError("counts must be finite and >= 0")
+    if not (math.isfinite(cycles) and cycles > 0):
+        raise DataError(f"cycles must be finite and > 0, got {cycles!r}")
+    armed = cycles - _photons_before(counts)
     if np.any(counts > armed):
-        raise ValueError("more counts than cycles: the histogram cannot come from a first-photon detector")
+        raise DataError("more counts than cycles: the histogram cannot come from a first-photon detector")
     with np.errstate(divide="ignore", invalid="ignore"):
-        estimate = -np.log1p(-counts / armed)
-        variance = counts / (armed * (armed - counts))
+        fraction = counts / armed
+        estimate = -np.log1p(-fraction)
+        variance = fraction / (armed - counts)          # not c / (R (R - c)): R^2 overflows for huge C
     return estimate, variance

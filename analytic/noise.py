@@ -6,6 +6,7 @@ import numpy as np
 
 from .errors import SceneError
 from .scene import Noise
+from .values import exact
 
 __all__ = ["add_noise", "MAX_EXPECTED_PHOTONS"]
 
@@ -47,8 +48,8 @@ def add_noise(y: np.ndarray, noise: Noise, rng: np.random.Generator | None = Non
     expected = noise.photons * np.clip(y, 0.0, None)
     largest = float(np.max(expected)) if expected.size else 0.0
     if not largest <= MAX_EXPECTED_PHOTONS:
-        raise SceneError("noise.photons", f"{noise.photons:g} photons per unit of y make a sample "
-                                          f"expect {largest:.3g} photons, over the "
+        raise SceneError("noise.photons", f"{exact(noise.photons)} photons per unit of y make a sample "
+                                          f"expect {exact(largest)} photons, over the "
                                           f"{MAX_EXPECTED_PHOTONS:g} Poisson sampling handles; "
                                           f"use fewer photons (or Gaussian noise)")
     return rng.poisson(expected).astype(np.float64) / noise.photons

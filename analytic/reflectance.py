@@ -17,12 +17,14 @@ import tempfile
 import threading
 import warnings
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from .errors import ImageError
+from .errors import ImageError, SceneError
+from .values import _number
 
-__all__ = ["builtin_reflectance", "read_reflectance", "regular_file_problem"]
+__all__ = ["builtin_reflectance", "read_reflectance", "reflectance_image", "regular_file_problem"]
 
 #: First bytes of every OpenEXR file (its magic number, little-endian 20000630).
 _EXR_MAGIC = b"\x76\x2f\x31\x01"
@@ -35,6 +37,28 @@ _ESCAPED_CONTROLS = {code: f"\\x{code:02x}" for code in [*range(0x20), 0x7F]}
 
 # file descriptors 1 and 2 are the process's: one capture of the library's output at a time
 _CAPTURE_LOCK = threading.Lock()
+
+
+def reflectance_image(key: str, value: Any, pixels: int) -> np.ndarray:
+    """A read-only M x M image in [0, 1] from a number or an array of numbers, or SceneError naming ``key``.
+
+    An array of strings, booleans or objects is refused (``np.array(["1"], float)`` would read "1" as 1).
+    """
+    if isinstance(value, np.ndarray):
+        if value.dtype.kind not in "iuf":
+            raise SceneError(key, f"expected an image of numbers, got an array of dtype {value.dtype}")
+        image = np.array(value, dtype=np.float64)
+        if image.shape != (pixels, pixels):
+            raise SceneError(key, f"image shape {image.shape} differs from ({pixels}, {pixels})")
+        if not np.all(np.isfinite(image)) or image.min() < 0 or image.max() > 1:
+            raise SceneError(key, "values must be finite and in [0, 1]")
+    else:
+        number = _number(key, value)
+        if not 0.0 <= number <= 1.0:
+            raise SceneError(key, f"must lie in [0, 1], got {number}")
+        image = np.full((pixels, pixels), number)
+    image.setflags(write=False)
+    return image
 
 
 def builtin_reflectance(pixels: int) -> np.ndarray:

@@ -39,10 +39,13 @@ from .detector import Detector
 from .errors import SceneError
 from .geometry import PointPairs, Rectangle
 from .resources import require_memory
-from .scene import (MAX_LENGTH, Illumination, Noise, Sampling, _choice, _integer, _number, check_tolerance,
-                    MAX_INTENSITY)
+from .reflectance import reflectance_image
+from .scene import (MAX_INTENSITY, MAX_LENGTH, MIN_LENGTH, Illumination, Noise, Sampling, _choice, _integer, _number,
+                    check_tolerance)
+from .values import exact
 
-__all__ = ["RelayWallScene", "Scan", "SCAN_TYPES", "MAX_PAIRS", "grid_points", "default_relay_wall_scene"]
+__all__ = ["RelayWallScene", "Scan", "SCAN_TYPES", "MAX_PAIRS", "grid_points", "check_edges",
+           "default_relay_wall_scene"]
 
 SCAN_TYPES = ("single", "confocal", "exhaustive")
 
@@ -96,6 +99,28 @@ def _pair(key: str, value: Any, *, whole: bool) -> tuple:
     return tuple(_number(f"{key}[{i}]", v, positive=True, length=True) for i, v in enumerate(value))
 
 
+def check_edges(u, v) -> tuple[float, float]:
+    """The hidden rectangle's sides |u| and |v|, metres, or SceneError naming ``hidden.u`` or ``hidden.v``.
+
+    Each side is at least :data:`MIN_LENGTH` (below it the rectangle's area, |u| |v|, and its normal
+    u x v underflow toward 0) and u ⟂ v. The lengths are taken by ``math.hypot``, which neither
+    underflows nor overflows (``numpy.linalg.norm`` of [1e-300, 0, 0] is 0).
+    """
+    lengths = []
+    for key, edge in (("hidden.u", u), ("hidden.v", v)):
+        length = math.hypot(*(float(x) for x in edge))
+        if not length >= MIN_LENGTH:
+            shown = "0 (the edge vector must be non-zero)" if length == 0.0 else f"{length!r} m"
+            raise SceneError(key, f"the rectangle's side along it is {shown}; the smallest length supported is "
+                                  f"{MIN_LENGTH:g} m")
+        lengths.append(length)
+    dot = float(np.dot(u, v))
+    if abs(dot) > 1e-9 * lengths[0] * lengths[1]:
+        raise SceneError("hidden.v", f"must be orthogonal to hidden.u (u·v = {exact(dot)}, over 1e-9 |u| |v| = "
+                                     f"{exact(1e-9 * lengths[0] * lengths[1])})")
+    return lengths[0], lengths[1]
+
+
 @dataclass(frozen=True, kw_only=True)
 class Scan:
     """Which wall points are lit and read (docs/design.md section 7).
@@ -129,7 +154,7 @@ class Scan:
                 raise SceneError("scan.laser_point", f"applies to type = 'single' only, not {self.type!r}")
             point = _vector("scan.laser_point", self.laser_point)
             if point[2] != 0.0:
-                raise SceneError("scan.laser_point", f"z = {point[2]:g}: the laser point lies on the wall (z = 0)")
+                raise SceneError("scan.laser_point", f"z = {exact(point[2])}: the laser point lies on the wall (z = 0)")
             point.setflags(write=False)
             object.__setattr__(self, "laser_point", point)
         if self.laser_grid is not None:
@@ -140,22 +165,22 @@ class Scan:
             raise SceneError("scan.account_first_and_last_bounces",
                              f"expected true or false, got {self.account_first_and_last_bounces!r}")
 
+    @property
+    def pairs(self) -> int:
+        """P, the (laser point, read point) pairs, from the grids alone (no point is built)."""
+        width, height = self.grid
+        if self.type == "exhaustive":
+            lasers = self.laser_grid or self.grid
+            return width * height * lasers[0] * lasers[1]
+        return width * height
 
-def _reflectance(key: str, value: Any, pixels: int) -> np.ndarray:
-    """An M x M image in [0, 1] from a number or an array (the plane scene's rule)."""
-    if isinstance(value, np.ndarray):
-        image = np.array(value, dtype=np.float64)
-        if image.shape != (pixels, pixels):
-            raise SceneError(key, f"image shape {image.shape} differs from ({pixels}, {pixels})")
-        if not np.all(np.isfinite(image)) or image.min() < 0 or image.max() > 1:
-            raise SceneError(key, "values must be finite and in [0, 1]")
-    else:
-        number = _number(key, value)
-        if not 0.0 <= number <= 1.0:
-            raise SceneError(key, f"must lie in [0, 1], got {number}")
-        image = np.full((pixels, pixels), number)
-    image.setflags(write=False)
-    return image
+    def check_pairs(self) -> int:
+        """P, or SceneError("scan.grid") beyond :data:`MAX_PAIRS`: called before any grid of points is built."""
+        pairs = self.pairs
+        if pairs > MAX_PAIRS:
+            raise SceneError("scan.grid", f"{pairs:,} (laser point, read point) pairs; at most {MAX_PAIRS:,} "
+                                          f"are supported")
+        return pairs
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -214,7 +239,7 @@ class RelayWallScene:
         pixels = _integer("hidden.pixels", self.pixels)
         require_memory(4 * 8 * pixels**2, f"hidden.pixels = {pixels}", "use fewer pixels")
         object.__setattr__(self, "pixels", pixels)
-        object.__setattr__(self, "reflectance", _reflectance("hidden.reflectance", self.reflectance, pixels))
+        object.__setattr__(self, "reflectance", reflectance_image("hidden.reflectance", self.reflectance, pixels))
         for name, key, front in (("center", "hidden.center", True), ("u", "hidden.u", False), ("v", "hidden.v", False),
                                  ("laser_position", "laser.position", True),
                                  ("sensor_position", "sensor.position", True)):
@@ -223,7 +248,8 @@ class RelayWallScene:
             object.__setattr__(self, name, vector)
         intensity = _number("laser.intensity", self.intensity, positive=True)
         if intensity > MAX_INTENSITY:
-            raise SceneError("laser.intensity", f"{intensity:g} W/sr is beyond the {MAX_INTENSITY:g} W/sr supported")
+            raise SceneError("laser.intensity", f"{exact(intensity)} W/sr is beyond the {MAX_INTENSITY:g} W/sr "
+                                                f"supported")
         object.__setattr__(self, "intensity", intensity)
         for name, kind in (("scan", Scan), ("illumination", Illumination), ("sampling", Sampling)):
             if not isinstance(getattr(self, name), kind):
@@ -235,25 +261,19 @@ class RelayWallScene:
         object.__setattr__(self, "tolerance", check_tolerance(self.tolerance))
         if not isinstance(self.name, str):
             raise SceneError("name", f"expected a string, got {self.name!r}")
-        pairs = self.sensor_count          # from the grids alone: before any array of points is built
-        if pairs > MAX_PAIRS:
-            raise SceneError("scan.grid", f"{pairs:,} (laser point, read point) pairs; at most {MAX_PAIRS:,} "
-                                          f"are supported")
+        pairs = self.scan.check_pairs()    # from the grids alone: before any array of points is built
         self._check_hidden()
         self._check_points()
+        self._check_lines()
         # y, its noisy copy, the render's mean, error and replicas: P N doubles each
         require_memory(8 * 8 * pairs * self.sampling.count,
                        f"{pairs:,} pairs x sampling.count = {self.sampling.count} bins",
                        "use a smaller scan grid or fewer bins")
 
     def _check_hidden(self) -> None:
-        """u ⟂ v, non-zero; the rectangle wholly in front of the wall and its lit face toward it."""
+        """u ⟂ v, each at least MIN_LENGTH; the rectangle wholly in front of the wall and its lit face toward it."""
+        check_edges(self.u, self.v)
         u, v = self.u, self.v
-        width, height = float(np.linalg.norm(u)), float(np.linalg.norm(v))
-        if not (width > 0.0 and height > 0.0):
-            raise SceneError("hidden.u" if not width > 0.0 else "hidden.v", "the edge vector must be non-zero")
-        if abs(float(u @ v)) > 1e-9 * width * height:
-            raise SceneError("hidden.v", f"must be orthogonal to hidden.u (u·v = {float(u @ v):.3g})")
         corners = self.rectangle().corners()
         if not np.all(corners[:, 2] > 0.0):
             raise SceneError("hidden.center", f"the hidden rectangle crosses or touches the relay wall (a corner "
@@ -271,8 +291,8 @@ class RelayWallScene:
         if self.scan.type == "single" and self.scan.laser_point is not None:
             x, y, _ = self.scan.laser_point
             if abs(x) > 0.5 * self.wall_size[0] or abs(y) > 0.5 * self.wall_size[1]:
-                raise SceneError("scan.laser_point", f"({x:g}, {y:g}) lies outside the {self.wall_size[0]:g} x "
-                                                     f"{self.wall_size[1]:g} m wall")
+                raise SceneError("scan.laser_point", f"({exact(x)}, {exact(y)}) lies outside the "
+                                                     f"{exact(self.wall_size[0])} x {exact(self.wall_size[1])} m wall")
 
     # -- the scan -----------------------------------------------------------------
 
@@ -304,11 +324,7 @@ class RelayWallScene:
     @property
     def sensor_count(self) -> int:
         """P, the transient's rows: the (laser point, read point) pairs."""
-        width, height = self.scan.grid
-        if self.scan.type == "exhaustive":
-            lasers = self.scan.laser_grid or self.scan.grid
-            return width * height * lasers[0] * lasers[1]
-        return width * height
+        return self.scan.pairs
 
     @property
     def pixel_size(self) -> tuple[float, float]:
@@ -322,18 +338,41 @@ class RelayWallScene:
         return Rectangle(self.center - 0.5 * (self.u + self.v), self.u, self.v, self.pixels)
 
     def blocked(self, start: np.ndarray, ends: np.ndarray) -> np.ndarray:
-        """Which segments ``start`` -> ``ends[i]`` cross the hidden rectangle (a renderer that traces them
-        loses that light; the model counts the laser's and the sensor's lines clear)."""
+        """Which segments ``start`` -> ``ends[i]`` cross or touch the hidden rectangle, ``(len(ends),)`` bool.
+
+        A renderer that traces the laser's and the sensor's lines loses the light of those; the model
+        counts only the third bounce, so a scene with any blocked line is refused (:meth:`_check_lines`).
+        A segment in the rectangle's plane counts as clear (it meets it, at most, edge on).
+        """
         rectangle = self.rectangle()
         normal = rectangle.normal
+        start = np.asarray(start, dtype=np.float64)
         toward = np.asarray(ends, dtype=np.float64) - start
         along = toward @ normal
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = np.where(along != 0, (rectangle.corner - start) @ normal / along, np.inf)
-        crossing = start + t[:, None] * toward - rectangle.corner
-        u = crossing @ rectangle.u / (rectangle.u @ rectangle.u)
-        v = crossing @ rectangle.v / (rectangle.v @ rectangle.v)
-        return (t > 0) & (t < 1) & (u >= 0) & (u <= 1) & (v >= 0) & (v <= 1)
+        crosses = along != 0
+        with np.errstate(over="ignore", invalid="ignore"):      # a nearly parallel segment: t far outside (0, 1)
+            t = (rectangle.corner - start) @ normal / np.where(crosses, along, 1.0)
+            crossing = start + np.where(crosses & (t > 0) & (t < 1), t, 0.0)[:, None] * toward - rectangle.corner
+            u = crossing @ rectangle.u / (rectangle.u @ rectangle.u)
+            v = crossing @ rectangle.v / (rectangle.v @ rectangle.v)
+        return crosses & (t > 0) & (t < 1) & (u >= 0) & (u <= 1) & (v >= 0) & (v <= 1)
+
+    def _check_lines(self) -> None:
+        """The laser's line to every lit point and the sensor's to every read point clear of the hidden rectangle.
+
+        One rule for every entry point (the model, renders, exports, tal configurations): the model
+        counts only the third bounce laser -> l -> x -> s, which a blocked line would cut (mitransient
+        and tal trace both lines), so a capture where any pair would lose it is refused.
+        """
+        for who, origin, points in (("laser", self.laser_position, self.laser_points),
+                                    ("sensor", self.sensor_position, self.read_points)):
+            blocked = self.blocked(origin, points)
+            if blocked.any():
+                where = points[int(np.argmax(blocked))].tolist()
+                raise SceneError("hidden.center", f"the hidden rectangle blocks the {who}'s line from "
+                                                  f"{origin.tolist()} to the wall point {where} ({int(blocked.sum()):,} "
+                                                  f"of {len(points):,} such lines; the model counts them clear); "
+                                                  f"move the {who} or the rectangle so that it sees the wall")
 
     def laser_leg(self, lit: np.ndarray) -> np.ndarray:
         """I cos θ_l^las / |o_l - l|² (ρ_w / π)² for lit points ``(P, 3)``: each pair's constant factor."""

@@ -42,6 +42,9 @@ def require_memory(needed: float, what: str, fix: str, *, limit: int | None = No
     """
     limit = available_memory() // 2 if limit is None else int(limit)
     if needed > limit:
-        size = f"{needed / 2**30:.3g} GiB" if needed < 2**1000 else "more than 10^291 GiB"
-        raise ResourceError(f"{what} needs {size} of memory, over the {limit / 2**30:.3g} GiB available; "
+        digits = 3
+        while needed < 2**1000 and digits < 17 and f"{needed / 2**30:.{digits}g}" == f"{limit / 2**30:.{digits}g}":
+            digits += 1         # as many digits as show the need above the limit
+        size = f"{needed / 2**30:.{digits}g} GiB" if needed < 2**1000 else "more than 10^291 GiB"
+        raise ResourceError(f"{what} needs {size} of memory, over the {limit / 2**30:.{digits}g} GiB available; "
                             f"{fix}")

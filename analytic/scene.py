@@ -32,9 +32,9 @@ import numpy as np
 from .detector import Detector
 from .errors import SceneError
 from .geometry import ATTENUATIONS, plane_geometry
-from .reflectance import builtin_reflectance
+from .reflectance import builtin_reflectance, reflectance_image
 from .resources import require_memory
-from .values import MAX_LENGTH, MIN_LENGTH, _integer, _number
+from .values import MAX_LENGTH, MIN_LENGTH, _integer, _number, exact
 
 __all__ = ["SceneError", "Illumination", "Sampling", "Noise", "Scene", "default_scene", "sensor_grid",
            "WAVEFORMS", "ATTENUATIONS", "NOISE_KINDS", "MAX_LENGTH", "MIN_LENGTH", "MIN_HEIGHT_FRACTION", "MAX_SENSORS", "MIN_TOLERANCE", "MAX_TOLERANCE",
@@ -120,10 +120,10 @@ def check_heights(size: float, source, sensors) -> None:
                enumerate(np.reshape(np.asarray(sensors, dtype=np.float64), (-1, 3)))]
     for key, point in checks:
         if not point[2] >= floor:
-            raise SceneError(key, f"height {point[2]:.3g} m is below the smallest height supported, "
-                             f"{floor:.3g} m ({MIN_HEIGHT_FRACTION:g} of the scene's extent "
-                             f"{floor / MIN_HEIGHT_FRACTION:.3g} m): float64 cannot resolve the light "
-                             f"under a point that low; raise it to at least {floor:.3g} m")
+            raise SceneError(key, f"height {exact(point[2])} m is below the smallest height supported, "
+                             f"{exact(floor)} m ({MIN_HEIGHT_FRACTION:g} of the scene's extent "
+                             f"{floor / MIN_HEIGHT_FRACTION:.6g} m): float64 cannot resolve the light "
+                             f"under a point that low; raise it to at least {exact(floor)} m")
 
 
 def check_tolerance(tolerance: float) -> float:
@@ -131,7 +131,7 @@ def check_tolerance(tolerance: float) -> float:
     tolerance = _number("model.tolerance", tolerance, positive=True)
     if not MIN_TOLERANCE <= tolerance < MAX_TOLERANCE:
         raise SceneError("model.tolerance", f"must be in [{MIN_TOLERANCE:g}, {MAX_TOLERANCE:g}), got "
-                         f"{tolerance:g}: below {MIN_TOLERANCE:g} float64 quadrature stops converging "
+                         f"{exact(tolerance)}: below {MIN_TOLERANCE:g} float64 quadrature stops converging "
                          f"(1e-12 already takes ~60 times as long as the default 1e-6)")
     return tolerance
 
@@ -240,7 +240,7 @@ class Illumination:
                              f"sample_width_ps (picoseconds); got {' and '.join(given) or 'neither'}")
         width = sample_width_metres(self.sample_width, self.sample_width_ps)
         if not width >= MIN_LENGTH:
-            raise SceneError(f"illumination.{given[0]}", f"{width:g} m is below the smallest length supported, "
+            raise SceneError(f"illumination.{given[0]}", f"{exact(width)} m is below the smallest length supported, "
                                                          f"{MIN_LENGTH:g} m")
         finite_span(len(samples), width, 0.0 if self.start is None else self.start, MAX_LENGTH, _BIN_RESOLUTION)
 
@@ -280,11 +280,11 @@ class Sampling:
         count = _integer("sampling.count", self.count)
         end = start + count * width
         if not abs(end) <= MAX_LENGTH:
-            raise SceneError("sampling.count", f"the window ends at {end:g} m, beyond the "
+            raise SceneError("sampling.count", f"the window ends at {exact(end)} m, beyond the "
                              f"±{MAX_LENGTH:g} m this tool resolves; use fewer or narrower bins")
         if width < _BIN_RESOLUTION * max(abs(start), abs(end)):
-            raise SceneError("sampling.period", f"bins of {width:g} m cannot be told apart at path "
-                             f"lengths of {max(abs(start), abs(end)):g} m in float64 (need period >= "
+            raise SceneError("sampling.period", f"bins of {exact(width)} m cannot be told apart at path "
+                             f"lengths of {exact(max(abs(start), abs(end)))} m in float64 (need period >= "
                              f"{_BIN_RESOLUTION:g} x the largest |path length|)")
         object.__setattr__(self, "bin_width_opl", width)
         object.__setattr__(self, "start_opl", start)
@@ -328,7 +328,7 @@ class Noise:
         if self.kind == "gaussian":
             sigma = _number("noise.sigma", 0.1 if self.sigma is None else self.sigma, nonnegative=True)
             if sigma > MAX_SIGMA:
-                raise SceneError("noise.sigma", f"{sigma:g} is beyond the {MAX_SIGMA:g} whose square "
+                raise SceneError("noise.sigma", f"{exact(sigma)} is beyond the {MAX_SIGMA:g} whose square "
                                                 f"stays finite")
             object.__setattr__(self, "sigma", sigma)
         else:
@@ -399,25 +399,12 @@ class Scene:
                        "use fewer pixels")
         object.__setattr__(self, "size", size)
         object.__setattr__(self, "pixels", pixels)
-        if isinstance(self.reflectance, np.ndarray):
-            image = np.array(self.reflectance, dtype=np.float64)
-            if image.shape != (pixels, pixels):
-                raise SceneError("plane.reflectance",
-                                 f"image shape {image.shape} differs from ({pixels}, {pixels})")
-            if not np.all(np.isfinite(image)) or image.min() < 0 or image.max() > 1:
-                raise SceneError("plane.reflectance", "values must be finite and in [0, 1]")
-        else:
-            value = _number("plane.reflectance", self.reflectance)
-            if not 0.0 <= value <= 1.0:
-                raise SceneError("plane.reflectance", f"must lie in [0, 1], got {value}")
-            image = np.full((pixels, pixels), value)
-        image.setflags(write=False)
-        object.__setattr__(self, "reflectance", image)
+        object.__setattr__(self, "reflectance", reflectance_image("plane.reflectance", self.reflectance, pixels))
         object.__setattr__(self, "source", _point("source.position", self.source))
         self.source.setflags(write=False)
         intensity = _number("source.intensity", self.intensity, positive=True)
         if intensity > MAX_INTENSITY:
-            raise SceneError("source.intensity", f"{intensity:g} W/sr is beyond the {MAX_INTENSITY:g} W/sr "
+            raise SceneError("source.intensity", f"{exact(intensity)} W/sr is beyond the {MAX_INTENSITY:g} W/sr "
                                                  f"supported (y and its squares must stay finite)")
         object.__setattr__(self, "intensity", intensity)
         if not isinstance(self.sensors, np.ndarray) and not isinstance(self.sensors, (list, tuple)):

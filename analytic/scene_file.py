@@ -12,6 +12,7 @@ import datetime
 import json
 import math
 import re
+import sys
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -23,6 +24,7 @@ from .errors import ImageError, SceneError
 from .reflectance import printable, read_reflectance, regular_file_problem
 from .scene import (_ILLUMINATION_KEYS, MAX_SENSORS, Illumination, Noise, Sampling, Scene, _integer, _number,
                     _point, sensor_grid)
+from .values import exact
 
 __all__ = ["load_scene", "read_toml", "scene_from_dict", "scene_to_tables", "MAX_FILE_BYTES"]
 
@@ -215,7 +217,8 @@ def _histogram_spacing(table: dict, width: float, start: float) -> None:
         except (TypeError, ValueError):
             stated = None     # not a number: Illumination names the key
         if stated is not None and not math.isclose(stated, width, rel_tol=1e-9):
-            raise SceneError(f"illumination.{given[0]}", f"{stated:g} m differs from the file's delta_t, {width:g} m; "
+            raise SceneError(f"illumination.{given[0]}", f"{exact(stated)} m differs from the file's delta_t, "
+                                                         f"{exact(width)} m; "
                                                          f"leave it out to use the file's")
     table.setdefault("start", start)
 
@@ -410,6 +413,9 @@ def read_toml(path: str | Path, what: str = "scene") -> dict:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:
         raise SceneError(shown, _toml_problem(error, text)) from None
+    except ValueError:          # int() past Python's digit limit, raised by tomllib as it is
+        raise SceneError(shown, f"{what} file holds a whole number of more than {sys.get_int_max_str_digits()} "
+                                f"digits, which no key takes; shorten it") from None
     if not data:
         raise SceneError(shown, f"{what} file has no keys (is it empty?); write its tables as in the "
                                 f"README's examples")

@@ -8,8 +8,9 @@ scene for mitransient's ``transient_nlos_path`` and an ``nlos_capture_meter``
 on the relay wall, and stores the capture as HDF5. What each key used here
 means there, and so here (docs/tal.md has the table):
 
-- every geometry's ``to_world`` is scale, then rotate about x, y, z (degrees,
-  right-handed), then translate: T Rz Ry Rx S, each value through Python's
+- every geometry's ``to_world`` (:mod:`analytic.tal_geometry`) is scale,
+  then rotate about x, y, z (degrees, right-handed), then translate:
+  T Rz Ry Rx S, each value through Python's
   ``or`` (a scale of 0 is 1); a ``rectangle`` is [-1, 1]² at z = 0 with normal
   +z; an OBJ ``filename`` is resolved against the working directory, and a
   planar OBJ polygon is its bounding rectangle with the polygon's indicator
@@ -49,6 +50,7 @@ from __future__ import annotations
 import math
 import os
 import re
+import sys
 import warnings
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
@@ -58,9 +60,10 @@ from typing import Any
 import numpy as np
 
 from .errors import SceneError
-from .relay_wall import RelayWallScene, Scan, grid_points
+from .relay_wall import RelayWallScene, Scan
 from .resources import require_memory
-from .scene import Noise, Sampling, _integer, _number
+from .scene import MAX_INTENSITY, Noise, Sampling, _integer, _number
+from .tal_geometry import check_extent, check_facing, geometries, hidden_rectangle, tal_or, wall_halves
 
 __all__ = ["TalScene", "TalConfigWarning", "load_tal_config", "tal_config_scene", "is_tal_config",
            "TAL_DEFAULTS", "TAL_VERSION"]
@@ -97,8 +100,6 @@ TAL_DEFAULTS: dict[str, Any] = {
 #: Keys of later tal releases that 0.20 does not read (its examples carry them): accepted, said in one line.
 _LATER_KEYS = ("simultaneous_scan", "integrator_force_equal_illumination_scanning",
                "integrator_illumination_scan_fov")
-_GEOMETRY_KEYS = {"name", "description", "mesh", "material", "displacement_x", "displacement_y", "displacement_z",
-                  "rot_degrees_x", "rot_degrees_y", "rot_degrees_z", "scale_x", "scale_y", "scale_z"}
 _OURS = "diffuse_imaging"
 _OUR_KEYS = {"pixels", "tolerance", "noise"}
 
@@ -165,14 +166,12 @@ def load_tal_config(path: str | Path, *, cwd: str | Path | None = None) -> TalSc
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
         reason = getattr(error, "problem", None) or type(error).__name__
         raise SceneError(shown, f"invalid YAML{where}: {reason}; fix the YAML syntax there") from None
+    except ValueError:          # int() past Python's digit limit, raised by PyYAML as it is
+        raise SceneError(shown, f"holds a whole number of more than {sys.get_int_max_str_digits()} digits, "
+                                f"which no key takes; shorten it") from None
     if not isinstance(config, dict):
         raise SceneError(shown, f"a tal configuration is a mapping of keys, got {type(config).__name__}")
     return tal_config_scene(config, name=Path(path).stem, config=str(path), cwd=cwd)
-
-
-def _or(value, default):
-    """tal's ``value or default`` (0, None, False and "" take the default)."""
-    return value if value else default
 
 
 def _flag(config: dict, key: str) -> bool:
@@ -240,114 +239,6 @@ def _material(geometry: dict, key: str, count: int) -> np.ndarray:
     return _channels(f"{key}.material.text", reflectance, count, unit=True)
 
 
-def _transform(geometry: dict, key: str) -> tuple[np.ndarray, np.ndarray]:
-    """tal's to_world of a geometry: the 3 x 3 part Rz Ry Rx S and the translation."""
-    values = {}
-    for name in ("scale_x", "scale_y", "scale_z", "rot_degrees_x", "rot_degrees_y", "rot_degrees_z",
-                 "displacement_x", "displacement_y", "displacement_z"):
-        raw = geometry.get(name)
-        if raw is not None:
-            _number(f"{key}.{name}", raw)
-        values[name] = float(_or(raw, 1.0 if name.startswith("scale") else 0.0))
-        if name.startswith("scale") and values[name] < 0:
-            raise SceneError(f"{key}.{name}", f"{raw}: a mirroring scale is not supported; rotate instead")
-    matrix = np.diag([values["scale_x"], values["scale_y"], values["scale_z"]])
-    for axis in "xyz":
-        angle = math.radians(values[f"rot_degrees_{axis}"])
-        c, s = math.cos(angle), math.sin(angle)
-        i, j = {"x": (1, 2), "y": (2, 0), "z": (0, 1)}[axis]
-        rotation = np.eye(3)
-        rotation[i, i], rotation[i, j], rotation[j, i], rotation[j, j] = c, -s, s, c
-        matrix = rotation @ matrix
-    translation = np.array([values["displacement_x"], values["displacement_y"], values["displacement_z"]])
-    return matrix, translation
-
-
-def _hidden_rectangle(geometry: dict, key: str, cwd: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, Any]:
-    """The hidden geometry's (corner, u, v), u x v along its lit normal, in world metres, and an OBJ's
-    outline (``(E, 2, 3)`` directed sides, for :func:`analytic.tal_mesh.indicator_image`; None for a rectangle)."""
-    from .tal_mesh import planar_polygon, read_obj
-
-    mesh = geometry.get("mesh")
-    kind = mesh.get("type") if isinstance(mesh, dict) else None
-    matrix, translation = _transform(geometry, key)
-    if kind == "rectangle":
-        return (matrix @ [-1.0, -1.0, 0.0] + translation, matrix @ [2.0, 0.0, 0.0], matrix @ [0.0, 2.0, 0.0],
-                None)
-    if kind != "obj":
-        raise SceneError(f"{key}.mesh.type", f"{kind!r}: the model holds one planar Lambertian polygon (a "
-                                             f"rectangle, or a planar OBJ whose sides follow a pixel grid); "
-                                             f"refused")
-    filename = mesh.get("filename")
-    if not isinstance(filename, str) or not filename:
-        raise SceneError(f"{key}.mesh.filename", "an OBJ mesh needs its filename")
-    path = Path(cwd) / filename
-    if not path.is_file():
-        raise SceneError(f"{key}.mesh.filename", f"{filename} is not a file in the working directory {cwd} "
-                                                 f"(tal resolves it there, not beside the YAML); run from "
-                                                 f"the folder tal render runs in")
-    vertices, faces, normals = read_obj(path, f"{key}.mesh.filename")
-    world = vertices @ matrix.T + translation
-    if normals is not None:
-        normals = normals @ np.linalg.inv(matrix)             # normals go by the inverse transpose
-    corner, u, v, outline = planar_polygon(world, faces, normals, f"{key}.mesh.filename", filename)
-    # start at the corner whose u runs most nearly along +x (the image's columns), v along -y if it can
-    for _ in range(4):
-        if u[0] >= max(abs(u[1]), abs(v[0])) - 1e-12 * np.linalg.norm(u):
-            break
-        corner, u, v = corner + u, v, -u
-    return corner, u, v, outline
-
-
-def _geometries(config: dict) -> tuple[dict, dict, str]:
-    """The relay wall's and the one hidden geometry's mappings, and the hidden one's key."""
-    geometry = config["geometry"]
-    if not isinstance(geometry, list) or not all(isinstance(g, dict) for g in geometry):
-        raise SceneError("geometry", "expected a list of geometry mappings")
-    names = [g.get("name") for g in geometry]
-    if len(set(map(str, names))) != len(names):
-        raise SceneError("geometry", f"duplicated names {names} (tal refuses them)")
-    wall_name = config["relay_wall"]
-    if wall_name not in names:
-        raise SceneError("relay_wall", f"{wall_name!r} is not a geometry's name ({names})")
-    hidden = [g for g in geometry if g.get("name") != wall_name]
-    if len(hidden) != 1:
-        raise SceneError("geometry", f"{len(hidden)} hidden geometries; the model holds one planar hidden "
-                                     f"polygon")
-    for g in geometry:
-        unknown = sorted(set(g) - _GEOMETRY_KEYS)
-        if unknown:
-            raise SceneError(f"geometry[{g.get('name')}].{unknown[0]}",
-                             f"unknown key (known: {', '.join(sorted(_GEOMETRY_KEYS))})")
-    return geometry[names.index(wall_name)], hidden[0], f"geometry[{hidden[0].get('name')}]"
-
-
-def _wall(wall: dict, key: str) -> tuple[float, float]:
-    """The relay wall's half sides; anything but an unmoved, unrotated rectangle facing +z refused."""
-    kind = wall.get("mesh", {}).get("type") if isinstance(wall.get("mesh"), dict) else None
-    if kind != "rectangle":
-        raise SceneError(f"{key}.mesh.type", f"{kind!r}: the relay wall is a rectangle (tal warns that other "
-                                             f"meshes get a wrong UV mapping)")
-    missing = [name for name in ("displacement_x", "displacement_y", "displacement_z", "scale_x", "scale_y")
-               if name not in wall]
-    if missing:
-        raise SceneError(f"{key}.{missing[0]}", "missing: tal reads the relay wall's displacement_x/y/z and "
-                                                "scale_x/y itself (without a default) and fails without them")
-    for axis in "xyz":
-        if f"rot_degrees_{axis}" in wall:
-            raise SceneError(f"{key}.rot_degrees_{axis}", "tal refuses a relay wall rotation (not yet implemented "
-                                                         "there); rotate the rest of the scene instead")
-        if _or(wall.get(f"displacement_{axis}"), 0.0) != 0.0:
-            raise SceneError(f"{key}.displacement_{axis}", "a moved relay wall is not modelled (the wall is z = 0 "
-                                                           "at the origin); move the rest of the scene instead")
-    if float(_or(wall.get("scale_z"), 1.0)) <= 0:
-        raise SceneError(f"{key}.scale_z", "the relay wall must face +z (scale_z = 1)")
-    halves = []
-    for axis in "xy":
-        halves.append(_number(f"{key}.scale_{axis}", wall[f"scale_{axis}"], positive=True, length=True))
-    return halves[0], halves[1]
-
-
 def _variant_channels(config: dict) -> int:
     variant = config["mitsuba_variant"]
     if not isinstance(variant, str) or not re.fullmatch(r"(llvm|cuda)_(ad_)?(rgb|mono)(_double)?", variant):
@@ -356,7 +247,8 @@ def _variant_channels(config: dict) -> int:
     return 3 if "rgb" in variant else 1
 
 
-def _check_integrator(config: dict) -> None:
+def _check_integrator(config: dict) -> list[str]:
+    """Refuse what the model cannot hold; the notes (:class:`TalConfigWarning`) on what tal renders otherwise."""
     for key in ("integrator_discard_direct_paths", "integrator_nlos_laser_sampling",
                 "integrator_nlos_hidden_geometry_sampling", "integrator_nlos_hidden_geometry_sampling_do_rroulette",
                 "integrator_nlos_hidden_geometry_sampling_includes_relay_wall", "auto_detect_bins"):
@@ -373,17 +265,18 @@ def _check_integrator(config: dict) -> None:
         raise SceneError("integrator_filter_bounces", f"{bounces}: tal renders only the paths of {bounces + 1} "
                                                       f"vertices; the model is the third bounce "
                                                       f"(integrator_filter_bounces: 2)")
-    if bounces == -1:
-        warnings.warn("integrator_filter_bounces: -1 makes tal render every bounce; the model is the third "
-                      "bounce (laser -> l -> x -> s) only, so the interreflections of the hidden rectangle and "
-                      "the wall are missing from it; set integrator_filter_bounces: 2 to render what it models",
-                      TalConfigWarning, stacklevel=4)
-    if config["auto_detect_bins"]:
-        warnings.warn("auto_detect_bins: tal 0.20 leaves it out of the film (commented out of its XML); the bins "
-                      "are num_bins from start_opl", TalConfigWarning, stacklevel=4)
-    if _or(config["histogram_mode"], "time") != "time":
+    if tal_or(config["histogram_mode"], "time") != "time":
         raise SceneError("histogram_mode", f"{config['histogram_mode']!r}: the model writes time histograms "
                                            f"(histogram_mode: time)")
+    notes = []
+    if bounces == -1:
+        notes.append("integrator_filter_bounces: -1 makes tal render every bounce; the model is the third "
+                     "bounce (laser -> l -> x -> s) only, so the interreflections of the hidden rectangle and "
+                     "the wall are missing from it; set integrator_filter_bounces: 2 to render what it models")
+    if config["auto_detect_bins"]:
+        notes.append("auto_detect_bins: tal 0.20 leaves it out of the film (commented out of its XML); the bins "
+                     "are num_bins from start_opl")
+    return notes
 
 
 def _scan(config: dict, halves: tuple[float, float]) -> Scan:
@@ -399,7 +292,7 @@ def _scan(config: dict, halves: tuple[float, float]) -> Scan:
             raw = config[f"laser_lookat_{axis}"]
             if raw is not None:
                 _number(f"laser_lookat_{axis}", raw)
-            pixel = float(_or(raw, size / 2))
+            pixel = float(tal_or(raw, size / 2))
             if not 0.0 <= pixel <= size:
                 raise SceneError(f"laser_lookat_{axis}", f"{raw} lies off the wall's {size} pixels; give a "
                                                          f"pixel coordinate in [0, {size}]")
@@ -407,7 +300,7 @@ def _scan(config: dict, halves: tuple[float, float]) -> Scan:
         point = [halves[0] * (2 * lookat[0] - 1), halves[1] * (2 * lookat[1] - 1), 0.0]
         return Scan(type="single", grid=(width, height), laser_point=point)
     laser = (_integer("laser_width", config["laser_width"]), _integer("laser_height", config["laser_height"]))
-    aperture = [float(_or(config[f"laser_aperture_{end}_{axis}"], default))
+    aperture = [float(tal_or(config[f"laser_aperture_{end}_{axis}"], default))
                 for end, default in (("start", 0), ("end", 1)) for axis in "xy"]
     if aperture != [0.0, 0.0, 1.0, 1.0]:
         raise SceneError("laser_aperture_start_x", f"a partial laser aperture {aperture} is not modelled (and tal "
@@ -423,8 +316,8 @@ def _scan(config: dict, halves: tuple[float, float]) -> Scan:
 
 
 def _emission(config: dict, count: int) -> np.ndarray:
-    mode = _or(config["laser_emission_mode"], "rgb")
-    value = _or(config["laser_emission"], "1.0, 1.0, 1.0")
+    mode = tal_or(config["laser_emission_mode"], "rgb")
+    value = tal_or(config["laser_emission"], "1.0, 1.0, 1.0")
     if mode == "mono":
         if isinstance(value, str) and re.search(r"[,\s:]", value.strip()):
             raise SceneError("laser_emission", f"{value!r}: laser_emission_mode mono takes one value")
@@ -432,6 +325,9 @@ def _emission(config: dict, count: int) -> np.ndarray:
         raise SceneError("laser_emission_mode", f"{mode!r}: the model holds rgb or mono emission (a spectrum "
                                                 f"of wavelengths is refused)")
     emission = _channels("laser_emission", value, count, unit=False)
+    if emission.max() > MAX_INTENSITY:            # before Σ E, π Σ E and the reflectances' weights overflow
+        raise SceneError("laser_emission", f"{value!r}: an irradiance beyond {MAX_INTENSITY:g} (the laser's "
+                                           f"intensity π Σ E is at most {MAX_INTENSITY:g} W/sr)")
     if not emission.sum() > 0:
         raise SceneError("laser_emission", "the laser emits nothing; give an irradiance > 0")
     return emission
@@ -467,10 +363,12 @@ def tal_config_scene(data: dict, *, name: str = "tal", config: str = "",
     for key in data:
         if not isinstance(key, str) or (key not in TAL_DEFAULTS and key not in ("name", _OURS) + _LATER_KEYS):
             raise SceneError(str(key), f"unknown key for tal {TAL_VERSION} (tal would ignore it; a typo?)")
+    # the notes (TalConfigWarning) are said once the whole configuration is accepted: a refusal is one line
+    notes = []
     later = [key for key in _LATER_KEYS if key in data]
     if later:
-        warnings.warn(f"{', '.join(later)}: keys of later tal releases that tal {TAL_VERSION} does not read; "
-                      f"the scene is what {TAL_VERSION} renders", TalConfigWarning, stacklevel=3)
+        notes.append(f"{', '.join(later)}: keys of later tal releases that tal {TAL_VERSION} does not read; "
+                     f"the scene is what {TAL_VERSION} renders")
     merged = {**TAL_DEFAULTS, **data}                                  # tal's shallow merge
     ours = merged.get(_OURS) or {}
     if not isinstance(ours, dict):
@@ -482,21 +380,25 @@ def tal_config_scene(data: dict, *, name: str = "tal", config: str = "",
     if not isinstance(label, str):
         raise SceneError("name", f"expected a string, got {label!r}")
     count = _variant_channels(merged)
-    _check_integrator(merged)
-    wall, hidden, hidden_key = _geometries(merged)
-    halves = _wall(wall, f"geometry[{merged['relay_wall']}]")
+    notes += _check_integrator(merged)
+    wall, hidden, hidden_key = geometries(merged)
+    halves = wall_halves(wall, f"geometry[{merged['relay_wall']}]")
     scan = _scan(merged, halves)
-    corner, u, v, outline = _hidden_rectangle(hidden, hidden_key, Path(os.getcwd() if cwd is None else cwd))
+    try:
+        scan.check_pairs()              # before check_facing builds the grids' points
+    except SceneError as error:
+        raise SceneError(_KEY_NAMES[error.key], error.problem) from None
+    corner, u, v, outline = hidden_rectangle(hidden, hidden_key, Path(os.getcwd() if cwd is None else cwd))
+    check_extent(corner, u, v, hidden_key)
     emission = _emission(merged, count)
     wall_channels = _material(wall, f"geometry[{merged['relay_wall']}]", count)
     hidden_channels = _material(hidden, hidden_key, count)
     rho_w, rho_h = _reflectances(emission, wall_channels, hidden_channels)
     stated = _flag(merged, "account_first_and_last_bounces")
     if stated:
-        warnings.warn("account_first_and_last_bounces: true reaches only tal 0.20's capture meter, which ignores "
-                      "it: the path lengths tal renders never include |o_l - l| + |s - o_s|, while its HDF5 says "
-                      "they do (t_accounts_first_and_last_bounces); the scene is what it renders",
-                      TalConfigWarning, stacklevel=3)
+        notes.append("account_first_and_last_bounces: true reaches only tal 0.20's capture meter, which ignores "
+                     "it: the path lengths tal renders never include |o_l - l| + |s - o_s|, while its HDF5 says "
+                     "they do (t_accounts_first_and_last_bounces); the scene is what it renders")
     position = {what: [merged[f"{what}_{axis}"] for axis in "xyz"] for what in ("laser", "sensor")}
     for what, values in position.items():
         for axis, value in zip("xyz", values):
@@ -505,15 +407,15 @@ def tal_config_scene(data: dict, *, name: str = "tal", config: str = "",
     if noise is not None and not isinstance(noise, dict):
         raise SceneError(f"{_OURS}.noise", "expected a mapping (kind, sigma or photons, seed)")
     pixels = _integer(f"{_OURS}.pixels", ours.get("pixels", 32))
+    require_memory(8 * 8 * pixels**2, f"{_OURS}.pixels = {pixels}", "use fewer pixels")
     if outline is not None:
         from .tal_mesh import indicator_image
 
-        require_memory(8 * 8 * pixels**2, f"{_OURS}.pixels = {pixels}", "use fewer pixels")
         covered = indicator_image(outline, corner, u, v, pixels, f"{hidden_key}.mesh.filename",
                                   hidden["mesh"]["filename"], f"{_OURS}.pixels")
         if covered is not None:
             rho_h = rho_h * covered
-    _facing(corner, u, v, halves, scan, np.array(position["laser"], dtype=float), hidden_key)
+    check_facing(corner, u, v, halves, scan, np.array(position["laser"], dtype=float), hidden_key)
     try:
         scene = TalScene(
             name=label, wall_size=(2 * halves[0], 2 * halves[1]), wall_reflectance=rho_w,
@@ -531,11 +433,8 @@ def tal_config_scene(data: dict, *, name: str = "tal", config: str = "",
         raise SceneError(mapped, error.problem) from None
     except TypeError as error:                        # Noise(**mapping) with a key it does not take
         raise SceneError(f"{_OURS}.noise", f"{error}; its keys are kind, sigma or photons, seed") from None
-    blocked = scene.blocked(scene.laser_position, scene.laser_points)
-    if blocked.any():
-        raise SceneError(hidden_key, f"it blocks the laser's line to the wall point "
-                                     f"{scene.laser_points[int(np.argmax(blocked))].tolist()}: mitransient traces it "
-                                     f"(the light is lost), the model counts it clear; move the laser or the surface")
+    for note in notes:
+        warnings.warn(note, TalConfigWarning, stacklevel=3)
     return scene
 
 
@@ -544,24 +443,3 @@ def _reflectances(emission: np.ndarray, wall: np.ndarray, hidden: np.ndarray) ->
     if np.ptp(wall) == 0.0:
         return float(wall[0]), float(emission @ hidden / emission.sum())
     return 1.0, float(emission @ (wall**2 * hidden) / emission.sum())
-
-
-def _facing(corner, u, v, halves, scan: Scan, laser: np.ndarray, key: str) -> None:
-    """The hidden rectangle in front of the wall, its lit face toward every scanned point, the laser's line clear."""
-    corners = corner + np.array([[0, 0], [1, 0], [0, 1], [1, 1]]) @ np.array([u, v])
-    if not np.all(corners[:, 2] > 0):
-        raise SceneError(key, f"the hidden surface crosses or lies behind the relay wall (a corner at z = "
-                              f"{corners[:, 2].min():.4g} m; tal's wall is z = 0, facing +z): move it to z > 0")
-    normal = np.cross(u, v)
-    size = (2 * halves[0], 2 * halves[1])
-    points = [grid_points(scan.grid, size)]
-    if scan.laser_point is not None:
-        points.append(np.asarray(scan.laser_point)[None, :])
-    elif scan.laser_grid is not None:
-        points.append(grid_points(scan.laser_grid, size))
-    points = np.vstack(points)
-    if not np.all((points[:, None, :] - corners[None, :, :]) @ normal > 0):
-        raise SceneError(key, f"its lit face (normal {np.round(normal / np.linalg.norm(normal), 6).tolist()}) does "
-                              f"not face every scanned point of the wall; Mitsuba's diffuse BSDF is one-sided, so "
-                              f"tal renders its back black: turn it to face the wall (a rectangle faces +z: "
-                              f"rot_degrees_x: 180)")

@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import SceneError
+from .values import MAX_LENGTH, MIN_LENGTH, exact
 
 __all__ = ["read_obj", "planar_polygon", "indicator_image", "MAX_OBJ_BYTES"]
 
@@ -51,13 +52,15 @@ def read_obj(path: Path, key: str) -> tuple[np.ndarray, list[list[int]], np.ndar
     Raises
     ------
     SceneError
-        Under ``key``: unreadable, too large, a malformed record or an index out of range.
+        Under ``key``: unreadable, too large, a malformed record (a coordinate that is not a
+        finite number included) or an index out of range.
     """
     try:
         if path.stat().st_size > MAX_OBJ_BYTES:
             raise SceneError(key, f"{path}: larger than {MAX_OBJ_BYTES >> 20} MiB; a planar hidden polygon "
                                   f"needs a few lines")
-        text = path.read_text(encoding="utf-8", errors="replace")
+        # -sig: a byte-order mark would make the first record "\ufeffv", skipped, and every index off by one
+        text = path.read_text(encoding="utf-8-sig", errors="replace")
     except OSError as error:
         raise SceneError(key, f"cannot read {path} ({error.strerror})") from None
     vertices, normals, faces, face_normals = [], [], [], []
@@ -67,9 +70,10 @@ def read_obj(path: Path, key: str) -> tuple[np.ndarray, list[list[int]], np.ndar
             continue
         try:
             if fields[0] in ("v", "vn"):
-                (vertices if fields[0] == "v" else normals).append([float(x) for x in fields[1:4]])
-                if len(fields) < 4:
+                values = [float(x) for x in fields[1:4]]
+                if len(fields) < 4 or not all(map(math.isfinite, values)):     # "inf", "nan", "1e400"
                     raise ValueError
+                (vertices if fields[0] == "v" else normals).append(values)
                 continue
             corners = [field.split("/") for field in fields[1:]]
             indices = [int(c[0]) for c in corners]
@@ -131,16 +135,24 @@ def planar_polygon(vertices: np.ndarray, faces: list[list[int]], stated_normals:
     Raises
     ------
     SceneError
-        Faces that are not coplanar, that face both ways (a face's fan of
+        Vertices beyond ±``MAX_LENGTH`` (or not finite), an extent below
+        ``MIN_LENGTH``, faces that are not coplanar, that face both ways (a face's fan of
         triangles from its first vertex included), whose stated normals
         contradict their winding, or an outline with a side that is not
         parallel or perpendicular to the others (a triangle, a slanted side).
     """
     used = sorted({i for face in faces for i in face})
     points = vertices[used]
+    far = float(np.max(np.abs(points)))
+    if not far <= MAX_LENGTH:           # inf or NaN too (a transform that overflowed): areas would overflow
+        raise SceneError(key, f"{shown}: a vertex at {exact(far)} m is beyond the ±{MAX_LENGTH:g} m this tool "
+                              f"resolves in float64; scale the mesh down")
     size = float(np.ptp(points, axis=0).max())
     if not size > 0:
         raise SceneError(key, f"{shown}: its faces have no extent")
+    if size < MIN_LENGTH:               # its areas (size^2) would underflow toward 0
+        raise SceneError(key, f"{shown}: its extent, {size!r} m, is below the smallest length supported, "
+                              f"{MIN_LENGTH:g} m; scale the mesh up")
     centre = points.mean(axis=0)
     normal = np.linalg.svd(points - centre, full_matrices=False)[2][-1]
     if np.max(np.abs((points - centre) @ normal)) > _TOLERANCE * size:

@@ -49,6 +49,7 @@ import numpy as np
 from analytic.files import float32_problem
 from analytic.relay_wall import RelayWallScene
 from analytic.scene import Scene, SceneError
+from analytic.values import exact
 
 from .intensity import emitter_intensity
 from .scene_xml import add as _add, add_entries, number as _number, point as _point, scene_text, \
@@ -296,8 +297,8 @@ def export_scene(scene: Scene, out_dir: str | Path, format: str, *, radius: floa
             raise SceneError("illumination.waveform", MITRANSIENT_IMPULSE_ONLY)
         lowest = float(np.min(scene.sensors[:, 2]))
         if not (0.0 < radius < lowest):
-            raise ValueError(f"radius: must lie in (0, {lowest:g}) m (below the lowest sensor's height), "
-                             f"got {radius:g}")
+            raise ValueError(f"radius: must lie in (0, {exact(lowest)}) m (below the lowest sensor's height), "
+                             f"got {exact(radius)}")
         if spp < 1:
             raise ValueError(f"spp: must be >= 1, got {spp}")
     if format == "mitransient" and scene.attenuation != "lambertian":

@@ -176,14 +176,6 @@ def _check_mitransient(scene: RelayWallScene) -> None:
                                       f"scan, or use --format mitsuba (our plugins render every scan)")
     if scene.illumination.waveform != "impulse":
         raise SceneError("illumination.waveform", MITRANSIENT_IMPULSE_ONLY)
-    for key, origin, points in (("laser.position", scene.laser_position, scene.laser_points),
-                                ("sensor.position", scene.sensor_position, scene.read_points)):
-        blocked = scene.blocked(origin, points)
-        if blocked.any():
-            where = points[int(np.argmax(blocked))].tolist()
-            raise SceneError(key, f"the hidden rectangle blocks the line from {origin.tolist()} to the wall point "
-                                  f"{where}: mitransient traces it, the model counts it clear; move the "
-                                  f"{key.split('.')[0]} or the rectangle")
     problem = float32_problem([scene.intensity / math.pi])
     if problem is not None:
         raise SceneError("laser.intensity", f"mitransient reads the projector's irradiance I/π as float32, and "

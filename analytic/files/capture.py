@@ -53,6 +53,7 @@ from typing import Any
 import numpy as np
 
 from analytic.errors import DataError
+from analytic.values import exact
 
 from .atomic import atomic_write
 from .formats import json_default
@@ -309,7 +310,7 @@ def _enum_name(value: np.ndarray | None, name: str, key: str, names: dict[str, i
     code = _number(value, name, key)
     by_value = {number: label for label, number in names.items()}
     if code != int(code) or int(code) not in by_value:
-        raise _refuse(name, key, f"is {code:g}, not one of its values")
+        raise _refuse(name, key, f"is {exact(code)}, not one of its values")
     return by_value[int(code)]
 
 
@@ -318,7 +319,7 @@ def _flag(value: np.ndarray | None, name: str, key: str) -> bool | None:
         return None
     number = _number(value.astype(np.int8) if value.dtype == bool else value, name, key)
     if number not in (0.0, 1.0):
-        raise _refuse(name, key, f"is {number:g}")
+        raise _refuse(name, key, f"is {exact(number)}")
     return bool(number)
 
 
@@ -462,7 +463,7 @@ def read_capture(path: str | Path) -> Capture:
         raise CaptureError(f"{name}: no time axis (t_start and delta_t, one number each, are needed)")
     start, width = _number(start, name, "t_start"), _number(width, name, "delta_t")
     if not width > 0:
-        raise _refuse(name, "delta_t", f"is {width:g}")
+        raise _refuse(name, "delta_t", f"is {exact(width)}")
     laser_axes, read_axes = _axes(H.shape, layout)
     grid_format = _enum_name(values["sensor_grid_format"], name, "sensor_grid_format", GRID_FORMATS)
     read = _points(values["sensor_grid_xyz"], grid_format, read_axes, name, "sensor_grid_xyz")

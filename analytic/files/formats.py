@@ -15,6 +15,7 @@ from typing import Any, Callable
 import numpy as np
 
 from analytic.errors import DataError
+from analytic.values import exact
 
 from .atomic import atomic_write
 
@@ -179,11 +180,11 @@ def float32_problem(values) -> str | None:
         rounded = values.astype(np.float32)
     limits = np.finfo(np.float32)
     if not np.all(np.isfinite(rounded)):
-        return f"its largest |value| {largest:.3g} exceeds float32's largest, {float(limits.max):.3g}"
+        return f"its largest |value| {exact(largest)} exceeds float32's largest, {exact(limits.max)}"
     error = float(np.max(np.abs(rounded.astype(np.float64) - values)))
     if error > _FLOAT32_ROUNDOFF * largest:
-        return (f"its largest |value| {largest:.3g} lies below float32's smallest normal, "
-                f"{float(limits.tiny):.3g}: float32 would keep zeros and subnormals")
+        return (f"its largest |value| {exact(largest)} lies below float32's smallest normal, "
+                f"{exact(limits.tiny)}: float32 would keep zeros and subnormals")
     return None
 
 

@@ -76,6 +76,7 @@ import math
 import numpy as np
 
 from ..errors import SceneError
+from ..values import exact
 from .pieces import EXPONENTIALS, POLYNOMIAL, make_terms
 from .waveform import Waveform
 
@@ -141,19 +142,19 @@ def _butterworth_parameters(illumination, period: float) -> tuple[int, float, fl
     if illumination.cutoff is None:
         cutoff = 0.5 / period
         if not low <= cutoff <= high:
-            raise SceneError("sampling.period", f"{period:g} m sets the default Butterworth cutoff "
-                             f"1/(2 period) = {cutoff:g} cycles/m outside [{low:g}, {high:g}], where "
+            raise SceneError("sampling.period", f"{exact(period)} m sets the default Butterworth cutoff "
+                             f"1/(2 period) = {exact(cutoff)} cycles/m outside [{low:g}, {high:g}], where "
                              f"the pulse's Taylor coefficients fit float64; use a period in "
                              f"[{0.5 / high:g}, {0.5 / low:g}] m")
     else:
         cutoff = illumination.cutoff
         if not low <= cutoff <= high:
             raise SceneError("illumination.cutoff", f"must be in [{low:g}, {high:g}] cycles/m, got "
-                             f"{cutoff:g}: outside it the pulse's Taylor coefficients leave float64's range")
+                             f"{exact(cutoff)}: outside it the pulse's Taylor coefficients leave float64's range")
         low, high = CUTOFF_PERIOD_RANGE
         if not low <= cutoff * period <= high:
             raise SceneError("illumination.cutoff", f"cutoff x period must be in [{low:g}, {high:g}], got "
-                             f"{cutoff * period:g}: a pulse over 1/({low:g} cutoff) long touches too many "
+                             f"{exact(cutoff * period)}: a pulse over 1/({low:g} cutoff) long touches too many "
                              f"bins per path, one under 1/({high:g} cutoff) is blurred by float64 path "
                              f"lengths")
     if illumination.duration is None:
@@ -162,7 +163,7 @@ def _butterworth_parameters(illumination, period: float) -> tuple[int, float, fl
         duration = illumination.duration
         if not cutoff * duration >= MIN_CUTOFF_DURATION:
             raise SceneError("illumination.duration", f"must be >= {MIN_CUTOFF_DURATION:g} / cutoff = "
-                             f"{MIN_CUTOFF_DURATION / cutoff:g} m, got {duration:g}: a shorter truncation "
+                             f"{exact(MIN_CUTOFF_DURATION / cutoff)} m, got {exact(duration)}: a shorter truncation "
                              f"has Taylor coefficients ~duration^(1-order) outside float64's range")
     return order, cutoff, duration
 

@@ -45,6 +45,7 @@ import math
 import numpy as np
 
 from ..errors import SceneError
+from ..values import exact
 from .gaussian import FWHM_PER_SIGMA, TRUNCATION, require
 from .pieces import ERRORFUNCTIONS, POLYNOMIAL, make_terms
 from ..kernels.formulas import erfcx_array
@@ -84,7 +85,7 @@ def build(illumination, period: float) -> Waveform:
     tail = require(illumination, "tail")
     low, high = TAIL_RATIO_RANGE
     if not low <= tail / fwhm <= high:
-        raise SceneError("illumination.tail", f"tail / fwhm must be in [{low:g}, {high:g}], got {tail / fwhm:.3g}: "
+        raise SceneError("illumination.tail", f"tail / fwhm must be in [{low:g}, {high:g}], got {exact(tail / fwhm)}: "
                          f"a shorter tail is a Gaussian moved by the tail (use waveform = \"gaussian\"), a "
                          f"longer one loses the left tail's accuracy in float64")
     shape = _Shape(fwhm / FWHM_PER_SIGMA, tail)

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import SceneError
+from ..values import exact, huge_integer
 
 __all__ = ["read_samples", "histogram_axis", "check_samples", "sample_width_metres", "finite_span", "MAX_SAMPLES",
            "METRES_PER_PICOSECOND", "SUFFIXES"]
@@ -106,7 +107,7 @@ def histogram_axis(path, key: str = "illumination.file") -> tuple[float, float]:
 
 def _read_text(path: Path, key: str) -> np.ndarray:
     values = []
-    with open(path, encoding="utf-8") as stream:
+    with open(path, encoding="utf-8-sig") as stream:        # -sig: a byte-order mark (Excel's CSV) is skipped
         for number, line in enumerate(stream, 1):
             text = line.strip()
             if not text or text.startswith("#"):
@@ -129,6 +130,20 @@ def check_samples(values, key: str = "illumination.samples") -> np.ndarray:
     at most :data:`MAX_SAMPLES`, with a largest sample > 0 (they are divided
     by it).
     """
+    if isinstance(values, np.ndarray):
+        if values.dtype.kind not in "iuf":
+            raise SceneError(key, f"expected numbers, got an array of dtype {values.dtype}")
+    elif isinstance(values, (list, tuple)):
+        # each one a number: np.array(["1"], float) would read the string "1" as 1, and True as 1
+        for index, value in enumerate(values):
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+                raise SceneError(f"{key}[{index}]", f"expected a number, got {value!r}")
+            try:
+                float(value)
+            except OverflowError:       # a whole number past 1.8e308
+                raise SceneError(f"{key}[{index}]", huge_integer(value)) from None
+    else:
+        raise SceneError(key, f"expected a list of numbers, got {values!r}")
     try:
         array = np.array(values, dtype=np.float64)
     except (TypeError, ValueError, OverflowError):
@@ -139,7 +154,7 @@ def check_samples(values, key: str = "illumination.samples") -> np.ndarray:
         raise SceneError(key, f"needs 2 to {MAX_SAMPLES} samples, got {array.size}")
     bad = np.flatnonzero(~np.isfinite(array) | (array < 0))
     if bad.size:
-        raise SceneError(key, f"sample {bad[0]} is {array[bad[0]]:g}; every sample must be finite and >= 0 "
+        raise SceneError(key, f"sample {bad[0]} is {exact(array[bad[0]])}; every sample must be finite and >= 0 "
                               f"(clip a background-subtracted response at 0)")
     if not array.max() > 0:
         raise SceneError(key, "every sample is 0; the response is divided by its largest sample")
@@ -171,9 +186,9 @@ def finite_span(count: int, width: float, start: float, limit: float, resolution
     end = start + (count - 1) * width
     key = "illumination.sample_width"
     if not (math.isfinite(end) and abs(end) <= limit):
-        raise SceneError(key, f"{count} samples of {width:g} m from {start:g} m end at {end:g} m, beyond the "
+        raise SceneError(key, f"{count} samples of {exact(width)} m from {exact(start)} m end at {exact(end)} m, beyond the "
                               f"±{limit:g} m this tool resolves")
     if width < resolution * max(abs(start), abs(end)):
-        raise SceneError(key, f"samples {width:g} m apart cannot be told apart at path lengths of "
-                              f"{max(abs(start), abs(end)):g} m in float64 (need sample_width >= {resolution:g} x "
+        raise SceneError(key, f"samples {exact(width)} m apart cannot be told apart at path lengths of "
+                              f"{exact(max(abs(start), abs(end)))} m in float64 (need sample_width >= {resolution:g} x "
                               f"the largest |path length|)")

@@ -9,11 +9,13 @@ the pile-up (or the background) must fail them.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
 from analytic.detector import Detector, coates_estimate, detection_probabilities, draw_counts, expected_counts
-from analytic.errors import SceneError
+from analytic.errors import DataError, SceneError
 from analytic.scene_file import scene_from_dict, scene_to_tables
 
 # a pulse over 12 bins, high enough that pile-up matters (Σλ ≈ 1.4 photons per cycle)
@@ -122,3 +124,79 @@ def test_negative_y_brings_no_photons_and_huge_means_are_refused():
     assert expected_counts(np.array([-5.0]), detector)[0] == 0.0
     with pytest.raises(SceneError, match="detector.photons"):
         draw_counts(np.array([1e20]), detector)
+
+
+def _first_photon_reference(lam):
+    """p_n with Λ_n summed by ``math.fsum`` (correctly rounded, from the start), in plain Python floats."""
+    p = []
+    for n, rate in enumerate(lam):
+        before = math.fsum(lam[:n])
+        p.append(0.0 if before == math.inf else math.exp(-before) * -math.expm1(-rate))
+    return np.array(p)
+
+
+@pytest.mark.parametrize("lam", [
+    [1.0, 1.0, 1e300, 1.0, 1.0],                 # one bin of extreme pile-up after a background
+    [1e-3, 1e-3, 1e300, 1e300, 1e-3],            # Λ beyond float64 after it
+    [0.5, 3e16, 0.25, 1e-12, 2.0],               # a rate that swallows the ones before it in a running sum
+    [1e-300, 1e-300, 1e-300, 2.0, 1e-300],
+])
+def test_first_photon_probabilities_keep_the_photons_before_each_bin(lam):
+    p, none = detection_probabilities(np.array(lam))
+    reference = _first_photon_reference(lam)
+    np.testing.assert_allclose(p, reference, rtol=1e-14, atol=0)
+    assert math.fsum(p) <= 1.0 and 0.0 <= none <= 1.0
+
+
+def test_extreme_pile_up_never_counts_more_than_the_cycles():
+    # issue 38: photons 1e300 made the first lit bin take every cycle again
+    rng = np.random.default_rng(5)
+    y = np.concatenate([np.zeros((3, 4)), rng.uniform(0.0, 1.0, (3, 6)), np.zeros((3, 2))], axis=1)
+    for photons in (1e300, 1e200, 1e20, 3.0):
+        for background in (0.0, 1.0, 1e-6):
+            detector = Detector(photons=photons, background=background, cycles=1e5, dead_time="cycle")
+            expected = expected_counts(y, detector)
+            assert np.all(np.isfinite(expected)) and np.all(expected >= 0)
+            assert np.all(expected.sum(axis=1) <= detector.cycles)
+            assert all(math.fsum(row) <= detector.cycles for row in expected)
+            np.testing.assert_allclose(expected[0], 1e5 * _first_photon_reference(list(
+                detector.photons * y[0] + background)), rtol=1e-13)
+            drawn = draw_counts(y, detector)
+            assert np.all(drawn.sum(axis=1) <= detector.cycles)
+    # the first lit bin after 4 bins of background 1: e^-4 (1 - 0) of the cycles reach it
+    detector = Detector(photons=1e300, background=1.0, cycles=1e5, dead_time="cycle")
+    assert expected_counts(y, detector)[0, 4] == pytest.approx(1e5 * math.exp(-4.0), rel=1e-14)
+
+
+def test_counts_beyond_float64_without_dead_time_are_refused():
+    detector = Detector(photons=1e306, cycles=1e5)
+    with pytest.raises(SceneError, match="detector.photons: an expected count is beyond"):
+        expected_counts(np.array([[0.0, 0.5]]), detector)
+    with pytest.raises(SceneError, match="detector.photons"):
+        draw_counts(np.array([[0.0, 0.5]]), detector)
+
+
+def test_coates_inversion_keeps_the_cycles_armed_with_huge_counts():
+    # a running sum minus the bin cancels when one count dwarfs the ones before it
+    counts = np.array([3.0, 2.0**60, 5.0])
+    cycles = 2.0**61
+    estimate, variance = coates_estimate(counts, cycles)
+    armed = [cycles, cycles - 3.0, cycles - 3.0 - 2.0**60]
+    reference = [-math.log1p(-c / r) for c, r in zip(counts, armed)]
+    np.testing.assert_allclose(estimate, reference, rtol=1e-14)
+    assert np.all(np.isfinite(variance)) and np.all(variance > 0)
+    huge, huge_variance = coates_estimate(np.array([1e300, 1e299]), 1e301)
+    assert np.all(np.isfinite(huge)) and np.all(np.isfinite(huge_variance))
+    with pytest.raises(DataError, match="cycles must be finite"):
+        coates_estimate(counts, float("nan"))
+
+
+def test_counts_past_the_limit_name_the_background_when_it_alone_is_the_cause():
+    detector = Detector(photons=1e-300, background=1e305, cycles=1e5)        # 1e310 expected per bin
+    for count in (expected_counts, draw_counts):
+        with pytest.raises(SceneError) as caught:
+            count(np.array([[0.0, 0.5]]), detector)
+        assert caught.value.key == "detector.background" and "lower background or cycles" in str(caught.value)
+    with pytest.raises(SceneError) as caught:
+        draw_counts(np.array([[0.0, 0.5]]), Detector(photons=1e30, background=1.0, cycles=1e5))
+    assert caught.value.key == "detector.photons"

@@ -271,3 +271,33 @@ def h5py_file(path):
     import h5py
 
     return h5py.File(path, "r+")
+
+
+@pytest.mark.parametrize("ratio", [9.999999999999999e-05, 10000.000000000002])
+def test_a_tail_ratio_just_outside_its_bounds_is_shown_with_every_digit(ratio):
+    # "got 0.0001" would not say why 9.999999999999999e-05 is refused
+    fwhm = 1e-3
+    tail = ratio * fwhm
+    with pytest.raises(SceneError) as caught:
+        make_waveform(Illumination(waveform="emg", fwhm=fwhm, tail=tail), 0.01)
+    assert f"got {tail / fwhm!r}" in str(caught.value) and float(repr(tail / fwhm)) == tail / fwhm
+
+
+@pytest.mark.parametrize("samples, index, shown", [
+    ([0, "1", 0], 1, "'1'"), ([0, 1, True], 2, "True"), ([None, 1, 0], 0, "None"), ([0, [1.0], 0], 1, "[1.0]"),
+    ([0, 10**400, 0], 1, "about 401 digits"),
+])
+def test_inline_samples_that_are_not_numbers_are_refused_naming_the_sample(samples, index, shown):
+    with pytest.raises(SceneError) as caught:
+        Illumination(waveform="sampled", samples=samples, sample_width=1e-3)
+    assert caught.value.key == f"illumination.samples[{index}]" and shown in str(caught.value)
+    with pytest.raises(SceneError, match="expected numbers, got an array of dtype <U"):
+        Illumination(waveform="sampled", samples=np.array(["0", "1", "0"]), sample_width=1e-3)
+
+
+def test_a_csv_with_a_byte_order_mark_is_read(tmp_path):
+    # Excel and Windows Notepad start a UTF-8 CSV with U+FEFF
+    (tmp_path / "irf.csv").write_text("\ufeff0\n0.5\n1.0\n0.25\n0\n", encoding="utf-8")
+    assert read_samples(tmp_path / "irf.csv").tolist() == [0, 0.5, 1.0, 0.25, 0]
+    (tmp_path / "commented.csv").write_bytes(b"\xef\xbb\xbf# IRF\n0\n1\n0\n")
+    assert read_samples(tmp_path / "commented.csv").tolist() == [0, 1, 0]

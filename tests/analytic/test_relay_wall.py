@@ -116,3 +116,58 @@ def test_scan_options_of_another_type_are_refused():
         Scan(type="single", laser_grid=(2, 2))
     with pytest.raises(SceneError, match="scan.laser_point"):
         Scan(type="confocal", laser_point=(0.0, 0.0, 0.0))
+
+
+def _crosses(start, end, rectangle):
+    """Does the segment start -> end meet the rectangle? Solved as corner + a u + b v = start + t (end - start)."""
+    matrix = np.column_stack([rectangle.u, rectangle.v, start - end])
+    if abs(np.linalg.det(matrix)) < 1e-12:
+        return False
+    a, b, t = np.linalg.solve(matrix, start - rectangle.corner)
+    return 0 < t < 1 and 0 <= a <= 1 and 0 <= b <= 1
+
+
+def test_blocked_lines_agree_with_a_linear_solve(rng):
+    scene = RelayWallScene(center=(0.1, -0.2, 1.0), u=(0.9, 0.0, 0.3), v=(0.0, -0.7, 0.0))
+    rectangle = scene.rectangle()
+    for _ in range(200):
+        start = rng.uniform([-1.5, -1.5, 0.05], [1.5, 1.5, 2.5])
+        ends = np.column_stack([rng.uniform(-1, 1, (8, 2)), np.zeros(8)])
+        expected = [_crosses(start, end, rectangle) for end in ends]
+        assert scene.blocked(start, ends).tolist() == expected
+
+
+BLOCKING = [   # (changes, whose line): the default 1 m square at z = 1 between the wall and the laser or sensor
+    (dict(laser_position=(0.0, 0.0, 2.0)), "laser"),
+    (dict(sensor_position=(0.1, 0.1, 1.5)), "sensor"),
+    (dict(laser_position=(0.0, 0.0, 2.0), scan=Scan(type="confocal", grid=(4, 4))), "laser"),
+    (dict(sensor_position=(0.0, 0.0, 2.0), scan=Scan(type="confocal", grid=(4, 4))), "sensor"),
+    # partly blocked: only the lit points near the wall's corner (-1, -1) hide behind a small square
+    (dict(center=(-0.7, -0.7, 0.3), u=(0.2, 0.0, 0.0), v=(0.0, -0.2, 0.0), laser_position=(-1.4, -1.4, 0.9),
+          scan=Scan(type="exhaustive", grid=(2, 2), laser_grid=(4, 4))), "laser"),
+    (dict(center=(-0.7, -0.7, 0.3), u=(0.2, 0.0, 0.0), v=(0.0, -0.2, 0.0), sensor_position=(-1.4, -1.4, 0.9),
+          scan=Scan(type="exhaustive", grid=(4, 4), laser_grid=(2, 2))), "sensor"),
+]
+
+
+@pytest.mark.parametrize("changes, who", BLOCKING)
+def test_a_line_the_hidden_rectangle_blocks_is_refused_in_one_line(changes, who):
+    # the model counts only the third bounce through clear lines: a blocked pair has no light in any renderer
+    with pytest.raises(SceneError) as caught:
+        RelayWallScene(**changes)
+    assert caught.value.key == "hidden.center" and f"blocks the {who}'s line" in str(caught.value)
+    assert "\n" not in str(caught.value)
+    moved = dict(changes, **{f"{who}_position": (-1.9, 1.9, 0.2)})      # beside it, the same scan is accepted
+    RelayWallScene(**moved)
+
+
+@pytest.mark.parametrize("changes, key, shown", [
+    (dict(u=(1e-300, 0.0, 0.0)), "hidden.u", "1e-300 m"),                 # not "must be non-zero": |u| underflowed
+    (dict(v=(0.0, -1e-170, 0.0)), "hidden.v", "1e-170 m"),
+    (dict(u=(3e-10, 4e-10, 0.0), v=(-4e-10, 3e-10, 0.0)), "hidden.u", "5e-10 m"),
+    (dict(u=(0.0, 0.0, 0.0)), "hidden.u", "0 (the edge vector must be non-zero)"),
+])
+def test_a_side_below_the_smallest_length_is_refused_with_its_length(changes, key, shown):
+    with pytest.raises(SceneError) as caught:
+        RelayWallScene(**changes)
+    assert caught.value.key == key and shown in str(caught.value) and "smallest length supported" in str(caught.value)

@@ -3,8 +3,11 @@
 import numpy as np
 import pytest
 
+from analytic.detector import Detector
 from analytic.errors import ResourceError, SceneError
-from analytic.scene import MAX_SENSORS, Noise, Sampling, Scene, default_scene, sensor_grid
+from analytic.relay_wall import RelayWallScene, Scan
+from analytic.scene import (MAX_SENSORS, MIN_TOLERANCE, Noise, Sampling, Scene, check_tolerance, default_scene,
+                            sensor_grid)
 from analytic.window import response_range, window_share
 
 
@@ -51,3 +54,24 @@ def test_seeds_are_32_bit():
     with pytest.raises(SceneError, match="noise.seed"):
         Noise(seed=-1)
     assert Noise(seed=2**32 - 1).seed == 2**32 - 1
+
+
+def _refusal(make):
+    with pytest.raises(SceneError) as caught:
+        make()
+    return str(caught.value)
+
+
+@pytest.mark.parametrize("make, value", [
+    (lambda: Sampling(bin_width_opl=1e11, start_opl=1e-4, count=10), 1e-4 + 1e12),     # "ends at 1e+12" hid why
+    (lambda: Sampling(bin_width_opl=1e-9, start_opl=1000.0000000000001, count=1), 1000.0000000000001 + 1e-9),
+    (lambda: check_tolerance(MIN_TOLERANCE * (1 - 2**-52)), MIN_TOLERANCE * (1 - 2**-52)),
+    (lambda: Noise(sigma=1e150 * (1 + 2**-52)), 1e150 * (1 + 2**-52)),
+    (lambda: Scene(intensity=1e30 * (1 + 2**-52)), 1e30 * (1 + 2**-52)),
+    (lambda: Detector(photons=1.0, cycles=2.0**53 + 2), 2.0**53 + 2),
+    (lambda: RelayWallScene(scan=Scan(laser_point=(1 + 2**-52, 0.0, 0.0))), 1 + 2**-52),
+    (lambda: RelayWallScene(intensity=1e30 * (1 + 2**-52)), 1e30 * (1 + 2**-52)),
+])
+def test_a_value_just_past_its_bound_is_shown_with_every_digit(make, value):
+    # the value as Python's repr writes it (the shortest text that reads back as the same float64; whole)
+    assert repr(value).removesuffix(".0") in _refusal(make)

@@ -230,3 +230,21 @@ def test_a_scene_path_that_is_not_a_scene_file_names_its_cause(tmp_path, case, m
     worker.join(timeout=20)
     assert not worker.is_alive(), "load_scene blocked"
     assert re.search(match, outcome["message"]) and "\n" not in outcome["message"]
+
+
+def test_a_whole_number_past_pythons_digit_limit_is_one_line(tmp_path):
+    path = tmp_path / "big.toml"
+    path.write_text(GOOD.replace("pixels = 8", "pixels = 1" + "0" * 5000))
+    with pytest.raises(SceneError, match="whole number of more than 4300 digits"):
+        load_scene(path)
+
+
+@pytest.mark.parametrize("image", [np.full((8, 8), "0.5"), np.full((8, 8), True), np.full((8, 8), None)])
+def test_a_reflectance_array_of_anything_but_numbers_is_refused(image):
+    from analytic.relay_wall import RelayWallScene
+    from analytic.scene import Scene
+
+    with pytest.raises(SceneError, match="plane.reflectance: expected an image of numbers"):
+        Scene(pixels=8, reflectance=image)
+    with pytest.raises(SceneError, match="hidden.reflectance: expected an image of numbers"):
+        RelayWallScene(pixels=8, reflectance=image)

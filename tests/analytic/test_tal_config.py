@@ -276,3 +276,61 @@ def test_yaml_file_errors(tmp_path):
     listed.write_text("- 1\n- 2\n")
     with pytest.raises(SceneError, match="mapping of keys"):
         load_scene(listed)
+
+
+@pytest.mark.parametrize("keys", [
+    dict(sensor_width=100_000, sensor_height=100_000),                 # 74.5 GiB of grid before the pair check
+    dict(sensor_width=10**30, sensor_height=2),
+    dict(scan_type="confocal", sensor_width=100_000, sensor_height=100_000, laser_width=100_000,
+         laser_height=100_000),
+    dict(scan_type="exhaustive", laser_width=100_000, laser_height=100_000),
+])
+def test_huge_scan_grids_are_refused_before_any_point_is_built(keys):
+    assert "(laser point, read point) pairs; at most 1,048,576" in refusal(config(**keys), "sensor_width")
+
+
+def test_huge_and_tiny_hidden_geometry_is_refused_naming_it(tmp_path):
+    square = "v -{s} -{s} 0\nv {s} -{s} 0\nv {s} {s} 0\nv -{s} {s} 0\nf 1 2 3 4\n"
+    obj = {"name": "m", "mesh": {"type": "obj", "filename": "m.obj"}, "rot_degrees_x": 180.0,
+           "displacement_z": 1.0, "material": {"id": "white"}}
+    for size, scale, message in (("1e300", 1, "beyond the ±1e+12 m"), ("1e160", 1, "beyond the ±1e+12 m"),
+                                 ("1", 1e300, "beyond the ±1e+12 m"), ("1", 1e-300, "smallest length")):
+        (tmp_path / "m.obj").write_text(square.format(s=size))
+        assert message in refusal(config({**obj, "scale_x": scale, "scale_y": scale}), "geometry[m].mesh.filename",
+                                  tmp_path)
+    hidden = config()["geometry"][0]
+    for scales, message in (({"scale_x": 1e-300}, "its sides are 2e-300 m and 1.0 m; the smallest length"),
+                            ({"scale_x": 1e-170, "scale_y": 1e-170}, "its sides are 2e-170 m and 2e-170 m"),
+                            ({"scale_x": 1e200, "scale_y": 1e200, "rot_degrees_x": 0.0}, "beyond the ±1e+12 m")):
+        assert message in refusal(config({**hidden, **scales}), "geometry[plane]")
+
+
+@pytest.mark.parametrize("emission", [1e308, "1e300, 1e300, 1e300", "1, 1e308, 1"])
+def test_an_irradiance_beyond_float64s_sums_is_refused_naming_it(emission):
+    assert "an irradiance beyond 1e+30" in refusal(config(laser_emission=emission), "laser_emission")
+
+
+@pytest.mark.parametrize("refused, key", [({"num_bins": 0}, "num_bins"), ({"laser_z": -1.0}, "laser_z"),
+                                          ({"sensor_width": 10**6, "sensor_height": 10**6}, "sensor_width")])
+def test_a_refused_configuration_warns_of_nothing_first(refused, key):
+    # tal's default integrator_filter_bounces (-1), the legs flag and a later key each warn, but only once
+    # the whole configuration is accepted: a refusal is its one line
+    noisy = {k: v for k, v in config(account_first_and_last_bounces=True, simultaneous_scan=False).items()
+             if k != "integrator_filter_bounces"}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", TalConfigWarning)
+        with pytest.raises(SceneError) as caught:
+            tal_config_scene({**noisy, **refused})
+    assert caught.value.key == key
+    with pytest.warns(TalConfigWarning) as said:
+        tal_config_scene(noisy)
+    assert len(said) == 3 and all(str(w.message).split(":")[0] in ("integrator_filter_bounces",
+                                                                   "account_first_and_last_bounces",
+                                                                   "simultaneous_scan") for w in said)
+
+
+def test_a_whole_number_past_pythons_digit_limit_is_one_line(tmp_path):
+    path = tmp_path / "big.yaml"
+    path.write_text("sensor_width: 1" + "0" * 5000 + "\n")
+    with pytest.raises(SceneError, match="whole number of more than 4300 digits"):
+        load_tal_config(path)

@@ -292,3 +292,44 @@ def test_validate_names_the_scene_it_cannot_judge(tmp_path, capsys):
     assert line.startswith("diffuse-imaging: error: scene 'spread'") and str(spread) in line
     assert "4,096 samples" in line and "render more samples" in line
     assert not out.exists()
+
+
+SAMPLED = GOOD.replace('waveform = "impulse"', 'waveform = "sampled"\nsamples = [0.0, 1.0, 0.5, 0.0]\n'
+                                               'sample_width = 0.05')
+WALL = """
+[relay_wall]
+size = [2.0, 2.0]
+[hidden]
+u = [1.0, 0.0, 0.0]
+[scan]
+type = "confocal"
+grid = [2, 2]
+"""
+
+
+@pytest.mark.parametrize("text, old, new, key", [
+    (SAMPLED, "samples = [0.0, 1.0, 0.5, 0.0]", 'samples = [0, "1", 0]', "illumination.samples[1]"),
+    (SAMPLED, "samples = [0.0, 1.0, 0.5, 0.0]", "samples = [0, true, 0]", "illumination.samples[1]"),
+    (GOOD, "positions = [[0.2, 0.7, 1.0]]", 'positions = [[0.2, "0.7", 1.0]]', "sensors.positions[0][1]"),
+    (GOOD, "position = [0.5, 0.5, 1.0]", 'position = ["0.5", 0.5, 1.0]', "source.position[0]"),
+    (WALL, "u = [1.0, 0.0, 0.0]", 'u = [1.0, "0", 0.0]', "hidden.u[1]"),
+    (WALL, "size = [2.0, 2.0]", 'size = [2.0, "2"]', "relay_wall.size[1]"),
+    (WALL, "grid = [2, 2]", 'grid = ["2", 2]', "scan.grid[0]"),
+], ids=["samples-text", "samples-bool", "sensor", "source", "hidden.u", "wall-size", "scan-grid"])
+def test_a_string_in_a_list_of_numbers_is_refused_naming_its_place(tmp_path, capsys, text, old, new, key):
+    assert old in text
+    path = write_scene(tmp_path, text.replace(old, new))
+    assert main(["forward", str(path), "--out", str(tmp_path / "out"), "--quiet"]) == 2
+    error = capsys.readouterr().err.strip().splitlines()
+    assert len(error) == 1 and error[0].startswith(f"diffuse-imaging: error: {key}: expected "), error
+
+
+@pytest.mark.filterwarnings("ignore::analytic.window.WindowWarning")
+def test_a_response_csv_with_a_byte_order_mark_is_read(tmp_path):
+    (tmp_path / "irf.csv").write_bytes(b"\xef\xbb\xbf0\n1\n0.5\n0\n")
+    text = SAMPLED.replace("samples = [0.0, 1.0, 0.5, 0.0]", 'file = "irf.csv"')
+    for name, scene in (("file", text), ("inline", SAMPLED)):
+        path = write_scene(tmp_path, scene, name=f"{name}.toml")
+        assert main(["forward", str(path), "--out", str(tmp_path / name), "--quiet"]) == 0
+    np.testing.assert_array_equal(np.load(tmp_path / "file" / "transient.npy"),
+                                  np.load(tmp_path / "inline" / "transient.npy"))

@@ -95,3 +95,15 @@ def test_main_installs_the_policy(tmp_path, capsys):
                      "--quiet"]) == 0
         assert isinstance(warnings.showwarning, _OneLineWarnings)
     assert capsys.readouterr().err == ""
+
+
+def test_held_warnings_are_printed_once_released_and_forgotten_when_dropped():
+    stream = io.StringIO()
+    show = _OneLineWarnings(hold=True)
+    show(WindowWarning("first"), WindowWarning, "/x/analytic/window.py", 1, file=stream)
+    assert stream.getvalue() == ""                                  # held while the inputs are checked
+    show.drop()                                                     # refused: the error line alone
+    show(WindowWarning("second"), WindowWarning, "/x/analytic/window.py", 1, file=stream)
+    show.release()
+    show(WindowWarning("third"), WindowWarning, "/x/analytic/window.py", 1, file=stream)
+    assert stream.getvalue().splitlines() == ["diffuse-imaging: warning: second", "diffuse-imaging: warning: third"]

@@ -248,3 +248,35 @@ def test_a_relay_wall_capture_gets_counts_in_tal_nlos_layout(tmp_path):
     assert counts.shape == (6, 30) and counts.sum() > 0
     np.testing.assert_array_equal(read_transient(out / "counts.h5"), counts)    # tal's NLOS layout, our pair order
     assert json.loads((out / "meta.json").read_text())["detector"]["dead_time"] == "none"
+
+
+@pytest.mark.parametrize("photons", ["1e300", "1e200", "1e20"])
+def test_extreme_pile_up_counts_at_most_the_cycles(tmp_path, photons):
+    # issue 38: photons = 1e300 with a background of 1 per bin wrote twice the cycles
+    # the impulse: 2 bins of background alone before the first arrival (2.03 m), then light
+    text = (GOOD + DETECTOR).replace("photons = 35.0", f"photons = {photons}").replace(
+        "background = 1e-4", "background = 1").replace("start = 0.0", "start = 1.8").replace("count = 40", "count = 10")
+    path = write_scene(tmp_path, text)
+    assert main(["forward", str(path), "--out", str(tmp_path / "out"), "--quiet"]) == 0
+    y = np.load(tmp_path / "out" / "transient.npy")
+    expected = np.load(tmp_path / "out" / "counts_expected.npy")
+    assert np.all(expected.sum(axis=1) <= CYCLES)
+    np.testing.assert_allclose(expected, _coates(y, photons=float(photons), background=1.0), rtol=1e-12, atol=0)
+    # the first bin lit past saturation takes every cycle still armed there: e^{-n} of them, n bins of background
+    rows = np.arange(len(y))
+    first = np.argmax(float(photons) * y > 50, axis=1)
+    saturated = float(photons) * y[rows, first] > 50
+    assert expected[rows, first][saturated] == pytest.approx(
+        CYCLES * np.exp(-first[saturated] - float(photons) * np.sum(np.where(
+            np.arange(y.shape[1]) < first[:, None], y, 0.0), axis=1)[saturated]), rel=1e-12)
+
+
+@pytest.mark.parametrize("command", [["forward"], ["render", "--spp", "65536"]])
+def test_counts_beyond_float64_are_refused_in_one_line_before_the_windows_warning(tmp_path, capsys, command):
+    text = (GAUSSIAN + DETECTOR).replace('dead_time = "cycle"', 'dead_time = "none"').replace(
+        "photons = 35.0", "photons = 1e306").replace("count = 19", "count = 60")     # a mostly empty window
+    path = write_scene(tmp_path, text)
+    assert main([command[0], str(path), *command[1:], "--out", str(tmp_path / "out")]) == 2
+    error = capsys.readouterr().err.strip().splitlines()
+    assert len(error) == 1 and "detector.photons" in error[0], error
+    assert not (tmp_path / "out").exists()

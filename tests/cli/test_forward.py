@@ -125,3 +125,40 @@ def test_a_scene_name_is_drawn_as_it_is(tmp_path):
     path = write_scene(tmp_path, "name = 'a$\\frac$b 日本'\n" + FITTED)      # a TOML literal string
     assert main(["forward", str(path), "--out", str(tmp_path / "out"), "--quiet"]) == 0
     assert (tmp_path / "out" / "transient.png").stat().st_size > 0
+
+
+# issue 38: instrument responses whose exact model takes hours are refused up front, in one line, with the
+# estimate (time, memory) and what to change, before any file is written
+RESPONSES = {
+    "dense-samples": ('waveform = "sampled"\nfile = "irf.npy"\nsample_width = 1e-6', "scene"),
+    "wide-gaussian": ('waveform = "gaussian"\nfwhm = 1000', "auto"),
+    "long-emg": ('waveform = "emg"\nfwhm = 10\ntail = 100', "auto"),
+    "sharp-emg-long-tail": ('waveform = "emg"\nfwhm = 0.001\ntail = 10', "auto"),
+}
+
+
+def _response_scene(folder, illumination):
+    np.save(folder / "irf.npy", np.hanning(100_000))
+    text = (GOOD.replace('waveform = "impulse"', illumination).replace("period = 0.1", "period = 0.01")
+            .replace("start = 0.0", "start = 2.0").replace("count = 40", "count = 120"))
+    return write_scene(folder, text)
+
+
+@pytest.mark.parametrize("name", sorted(RESPONSES))
+def test_a_response_the_model_cannot_cover_in_reasonable_time_is_refused_in_one_line(tmp_path, capsys, name):
+    illumination, window = RESPONSES[name]
+    path = _response_scene(tmp_path, illumination)
+    commands = [["forward", "--window", window]]
+    if window == "auto":
+        commands.append(["render", "--spp", "64", "--window", "auto"])
+    else:
+        data = tmp_path / "y.npy"
+        np.save(data, np.zeros((1, 120)))
+        commands += [["run", "--spp", "4096"], ["validate", "--spp", "4096"], ["check", "--data", str(data)],
+                     ["reconstruct", "--data", str(data)]]
+    for command in commands:
+        out = tmp_path / command[0]
+        assert main([command[0], str(path), *command[1:], "--out", str(out)]) == 2, command
+        error = capsys.readouterr().err.strip().splitlines()
+        assert len(error) == 1 and "the exact model would take about" in error[0], (command, error)
+        assert ("sampling.period of at least" in error[0] or "more coarsely" in error[0]) and not out.exists()

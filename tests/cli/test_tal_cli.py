@@ -71,5 +71,29 @@ def test_a_refused_configuration_is_one_line_and_writes_nothing(tmp_path, capsys
     out = tmp_path / "out"
     assert main(["forward", str(scene_file), "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err[-1].startswith("diffuse-imaging: error: geometry[plane].material.id: 'copper' is not Lambertian")
+    # the legs flag's warning is not said first: a refusal is one line
+    assert len(err) == 1, err
+    assert err[0].startswith("diffuse-imaging: error: geometry[plane].material.id: 'copper' is not Lambertian")
     assert not out.exists()
+
+
+@pytest.mark.filterwarnings("default::analytic.tal_config.TalConfigWarning")   # shown as the CLI shows it
+@pytest.mark.parametrize("command", [
+    ["forward", "--window", "auto"],                          # refused by its window, after the scene's checks
+    ["check", "--data", "missing.npy"],                       # refused by its data
+    ["render", "--spp", "64", "--window", "auto"],
+    ["export", "--format", "mitsuba", "--spp", "0"],
+])
+def test_a_tal_configuration_with_tals_default_bounces_is_refused_in_one_line(tmp_path, capsys, command):
+    # integrator_filter_bounces left at tal's -1 warns, but not before a refusal of what follows the scene
+    config = {key: value for key, value in CONFIG.items() if key != "integrator_filter_bounces"}
+    if "auto" in command:       # bins of 1 nm: the window that holds all the light does not fit in memory
+        config["bin_width_opl"] = 1e-9
+    scene_file = tmp_path / "tiny.yaml"
+    scene_file.write_text(yaml.safe_dump(config))
+    out = tmp_path / "out"
+    args = [command[0], str(scene_file), *[str(tmp_path / a) if a.endswith(".npy") else a for a in command[1:]],
+            "--out", str(out)]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("diffuse-imaging: error: "), err

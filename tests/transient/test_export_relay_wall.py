@@ -103,8 +103,8 @@ def test_a_confocal_capture_is_one_render_per_point(tmp_path):
 @pytest.mark.parametrize("changes, key", [
     (dict(scan=Scan(type="exhaustive", grid=(2, 2))), "scan.type"),
     (dict(illumination=Illumination(waveform="square")), "illumination.waveform"),
-    (dict(laser_position=(0.1, 0.0, 1.0)), "laser.position"),                  # behind the hidden rectangle
-    (dict(sensor_position=(0.1, 0.0, 1.0)), "sensor.position"),
+    (dict(laser_position=(0.1, 0.0, 1.0)), "hidden.center"),   # behind the hidden rectangle: the scene refuses it
+    (dict(sensor_position=(0.1, 0.0, 1.0)), "hidden.center"),
     (dict(reflectance=np.full((4, 4), 1e-39)), "hidden.reflectance"),
 ])
 def test_what_mitransient_cannot_render_is_refused(tmp_path, changes, key):

@@ -49,10 +49,12 @@ def _agrees(replicas, reference):
 
 
 def _near_wall_single(distance):
-    """A 0.6 x 0.5 m rectangle ``distance`` in front of a 1 m wall, lit right below it, read on a 3 x 3 grid."""
+    """A 0.6 x 0.5 m rectangle ``distance`` in front of a 1 m wall, lit right below it, read on a 3 x 3 grid;
+    the laser and the sensor below the rectangle's plane, so that it blocks neither's line to the wall."""
+    below = (-0.5, 0.0, 0.5 * distance)
     return RelayWallScene(pixels=4, reflectance=np.linspace(0.2, 1.0, 16).reshape(4, 4), center=(0.05, 0.0, distance),
-                          u=(0.6, 0.0, 0.0), v=(0.0, -0.5, 0.0), wall_size=(1.0, 1.0),
-                          scan=Scan(type="single", grid=(3, 3), laser_point=(0.1, 0.05, 0.0)))
+                          u=(0.6, 0.0, 0.0), v=(0.0, -0.5, 0.0), wall_size=(1.0, 1.0), laser_position=below,
+                          sensor_position=below, scan=Scan(type="single", grid=(3, 3), laser_point=(0.1, 0.05, 0.0)))
 
 
 # 2 cm from the wall: l's g_l varies 1e3-fold (its solid angle), and a read point's weight would peak 1.3e3 x

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from .common import add_quiet
+from .common import add_quiet, release_warnings
 
 __all__ = ["add_commands", "command_bench"]
 
@@ -12,6 +12,7 @@ def command_bench(args) -> int:
     from analytic.files import output_folder
     from validation.bench import speed_against_error
 
+    release_warnings()
     with output_folder(args.out) as out:
         result = speed_against_error(out, variant=args.variant)
     if not args.quiet:

@@ -11,12 +11,14 @@ import argparse
 import math
 import re
 import sys
+import warnings
 
 from analytic.errors import UserError
 
 __all__ = ["UsageError", "OneLineParser", "seed_type", "samples_type", "positive_float_type",
            "load_scene_argument", "show_progress", "MAX_SAMPLES", "add_quiet",
-           "check_samples_type", "add_window_option", "apply_window", "announce_window", "rows_text"]
+           "check_samples_type", "add_window_option", "apply_window", "announce_window", "release_warnings",
+           "rows_text"]
 
 #: Most samples a render may be asked for: 2^44, about two days at 1e8 samples/s.
 MAX_SAMPLES = 2**44
@@ -89,6 +91,14 @@ def positive_float_type(option: str):
     return parse
 
 
+def release_warnings() -> None:
+    """A command has accepted its inputs: print the warnings held while it checked them (program.main holds
+    them, so that a refused command's stderr is its one error line)."""
+    release = getattr(warnings.showwarning, "release", None)
+    if release is not None:
+        release()
+
+
 def load_scene_argument(path: str | None):
     """The scene a command was given: a TOML file (a plane or a relay-wall capture), or the built-in
     default scene (a plane scene)."""
@@ -127,15 +137,25 @@ def add_window_option(parser) -> None:
 
 def apply_window(args, scene):
     """The scene with the window ``--window`` asks for: ``scene`` itself for ``scene``, for ``auto`` its copy
-    with :func:`analytic.window.auto_sampling` (a SceneError when no window of its period covers the light).
+    with :func:`analytic.window.auto_sampling` (a SceneError when no window of its period covers the light,
+    a UsageError with the estimate when the pulse is too long for the model over those bins:
+    :func:`analytic.cost.impractical_illumination`).
 
     Nothing is printed: :func:`announce_window` states it once the command's inputs are all accepted.
     """
     if getattr(args, "window", "scene") != "auto":
         return scene
+    from analytic.cost import impractical_illumination
     from analytic.window import auto_sampling
 
-    return scene.replace(sampling=auto_sampling(scene))
+    chosen = scene.replace(sampling=auto_sampling(scene))
+    problem = impractical_illumination(chosen)
+    if problem is not None:
+        sampling = chosen.sampling
+        raise UsageError(f"--window auto: the {sampling.count:,} bins of {sampling.bin_width_opl:g} m that hold "
+                         f"all the light are more than this pulse can be modelled over: {problem}; or set "
+                         f"[sampling] start and count to the bins you need")
+    return chosen
 
 
 def announce_window(args, scene, share: float | None = None) -> float:
@@ -156,6 +176,7 @@ def announce_window(args, scene, share: float | None = None) -> float:
     """
     from analytic.window import response_range, warn_if_cut, warn_if_mostly_empty, window_share
 
+    release_warnings()          # the inputs are accepted: the scene's own warnings first
     if getattr(args, "window", "scene") == "auto":
         sampling = scene.sampling
         low, high = response_range(scene)

@@ -63,7 +63,7 @@ def draw_scene_counts(scene, y, *, stream: int = 0) -> tuple[np.ndarray, np.ndar
 
 
 def refuse_unreachable_counts(scene, *, margin: float = 2.0) -> None:
-    """Before a render: refuse a ``[detector]`` whose expected counts would pass what a Poisson draw takes.
+    """Before a render (``margin`` 2) or a model (1): refuse a ``[detector]`` whose expected counts would pass what a Poisson draw takes.
 
     A render's y is known only at its end, after its files; its counts are drawn then. A cheap
     bound comes first: :func:`analytic.window.impulse_totals` x (1 for the impulse, else the period
@@ -74,9 +74,10 @@ def refuse_unreachable_counts(scene, *, margin: float = 2.0) -> None:
     """
     import numpy as np
 
-    from analytic.detector import MAX_MEAN
+    from analytic.detector import MAX_MEAN, excess_key
     from analytic.errors import SceneError
     from analytic.system import forward
+    from analytic.values import exact
     from analytic.window import impulse_totals
 
     detector = scene.detector
@@ -91,9 +92,10 @@ def refuse_unreachable_counts(scene, *, margin: float = 2.0) -> None:
         return
     expected = largest(float(np.max(forward(scene), initial=0.0)))
     if not expected <= MAX_MEAN:
-        raise SceneError("detector.photons", f"the largest expected count, {expected / margin:.6g} (x {margin:g} "
-                                             f"for a render's noise), is beyond the {MAX_MEAN:g} a Poisson draw "
-                                             f"supports; lower photons or cycles")
+        noise = f" (x {margin:g} for a render's noise)" if margin != 1.0 else ""
+        key = excess_key(detector, MAX_MEAN)
+        raise SceneError(key, f"the largest expected count, {exact(expected / margin)}{noise}, is beyond the "
+                              f"{MAX_MEAN:g} a Poisson draw supports; lower {key.split('.')[1]} or cycles")
 
 
 def write_counts(out: str | Path, scene, counts: tuple[np.ndarray, np.ndarray] | None, *, label: str = "model"
@@ -308,7 +310,7 @@ def _read_counts(path: str, scene) -> np.ndarray:
         raise DataError(f"{file}: every count must be a finite whole number >= 0")
     detector = scene.detector
     if detector.dead_time == "cycle" and np.any(values.sum(axis=1) > detector.cycles):
-        raise DataError(f"{file}: a row holds more counts than the {detector.cycles:g} cycles a first-photon "
+        raise DataError(f"{file}: a row holds more counts than the {detector.cycles:.0f} cycles a first-photon "
                         f"detector records (the scene's dead_time = 'cycle'); is it a dead-time-free histogram?")
     return values
 
@@ -321,6 +323,7 @@ def command_check_counts(args, scene) -> int:
     """
     import numpy as np
 
+    from analytic.cost import refuse_impractical_illumination
     from analytic.detector import expected_counts
     from analytic.files import json_ready, output_folder, save_json, staged_writes
     from analytic.system import forward
@@ -331,6 +334,7 @@ def command_check_counts(args, scene) -> int:
     from .common import announce_window
 
     names = check_counts_options(args, scene)
+    refuse_impractical_illumination(scene)
     counts = _read_counts(args.data[0], scene)
     detector = scene.detector
     alpha = DEFAULT_FALSE_ALARM if args.false_alarm is None else args.false_alarm

@@ -94,6 +94,7 @@ def command_check(args) -> int:
     convention stated by ``--expect``/``--expect-scale``/``--expect-offset``
     when one is; 1 when not.
     """
+    from analytic.cost import refuse_impractical_illumination
     from analytic.files import output_folder
     from validation.check import check_transient, write_check_report
 
@@ -107,6 +108,7 @@ def command_check(args) -> int:
     if args.shape_only and (args.stderr is not None or len(args.data) > 1):
         raise UsageError("--shape-only: only for one --data file without --stderr")
     _check_expect(args, scene)
+    refuse_impractical_illumination(scene)      # before the data are read: the model is what takes long
     data, stderr, dof = _read_inputs(args, scene)
     expect = _convention(args, scene)    # after the data are read: transient_nlos_path's emulation takes a while
     result = check_transient(scene, data, stderr=stderr, dof=dof, shape_only=args.shape_only, expect=expect)

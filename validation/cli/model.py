@@ -7,7 +7,7 @@ from pathlib import Path
 
 from .common import (add_quiet, add_window_option, announce_window, apply_window, load_scene_argument,
                      positive_float_type, rows_text, show_progress)
-from .counts import draw_scene_counts, write_counts
+from .counts import draw_scene_counts, refuse_unreachable_counts, write_counts
 
 __all__ = ["add_commands", "command_forward", "model_title"]
 
@@ -30,6 +30,7 @@ def command_forward(args) -> int:
 
 
 def _forward(args, scene, drawer) -> int:
+    from analytic.cost import refuse_impractical_illumination
     from analytic.files import build_meta, output_folder, staged_writes, write_transient
     from analytic.noise import add_noise
     from analytic.system import forward, system_matrix
@@ -38,6 +39,8 @@ def _forward(args, scene, drawer) -> int:
     scene = apply_window(args, scene)
     if args.tolerance is not None:
         scene = scene.replace(tolerance=args.tolerance)
+    refuse_impractical_illumination(scene)           # a response the model cannot cover in reasonable time
+    refuse_unreachable_counts(scene, margin=1.0)     # before the window's warning: a refusal is one line
     with output_folder(args.out) as out:
         share = announce_window(args, scene)
         started = time.perf_counter()

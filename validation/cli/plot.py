@@ -95,7 +95,7 @@ def _meta_beside(path: Path) -> dict | None:
     if not meta_path.is_file():
         return None
     try:
-        meta = json.loads(meta_path.read_text(encoding="utf-8"))
+        meta = json.loads(meta_path.read_text(encoding="utf-8-sig"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as error:
         raise DataError(f"{meta_path}: not readable JSON ({error}); remove it or give --scene SCENE.toml") \
             from None

@@ -10,7 +10,9 @@ Warnings: this project's own (their classes are defined in ``analytic``,
 ``diffuse-imaging: warning: ...``; another library's warning is one line
 too when it may have changed a number (a ``RuntimeWarning``: NumPy's
 overflow, a singular matrix), and is not shown otherwise (deprecations,
-drawing notices). Each distinct line is shown once per command.
+drawing notices). Each distinct line is shown once per command. They are held
+while the command checks its inputs and shown once it accepts them (or
+ends), so that a refused command prints its error line alone.
 
 The command's own output (:func:`console`): a character the terminal's
 encoding cannot show is written as a backslash escape (``\\u03c7`` for χ),
@@ -58,10 +60,18 @@ def _is_own(category: type) -> bool:
 
 
 class _OneLineWarnings:
-    """``warnings.showwarning`` for a command: the policy of the module docstring."""
+    """``warnings.showwarning`` for a command: the policy of the module docstring.
 
-    def __init__(self):
+    Parameters
+    ----------
+    hold : bool
+        Keep the lines until :meth:`release` (a command holds them while it checks its inputs, so that a
+        refused command's stderr is its one error line: :meth:`drop` forgets them).
+    """
+
+    def __init__(self, *, hold: bool = False):
         self.shown = set()
+        self.held: list[tuple[str, object]] | None = [] if hold else None
 
     def __call__(self, message, category, filename, lineno, file=None, line=None):
         own = _is_own(category)
@@ -73,10 +83,28 @@ class _OneLineWarnings:
         if text in self.shown:
             return
         self.shown.add(text)
+        if self.held is not None:
+            self.held.append((text, file))
+            return
+        self._print(text, file)
+
+    @staticmethod
+    def _print(text: str, file) -> None:
         try:
             print(f"diffuse-imaging: warning: {text}", file=sys.stderr if file is None else file)
         except (OSError, ValueError):
             pass       # stderr is gone: a warning is not worth failing the command for
+
+    def release(self) -> None:
+        """Print the lines held so far, and every later one at once."""
+        held, self.held = self.held or [], None
+        for text, file in held:
+            self._print(text, file)
+
+    def drop(self) -> None:
+        """Forget the lines held (the command was refused: its error is its one line)."""
+        if self.held is not None:
+            self.held.clear()
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -90,16 +118,25 @@ def main(argv: list[str] | None = None) -> int:
     from analytic.errors import UserError
 
     args = build_parser().parse_args(argv)
-    warnings.showwarning = _OneLineWarnings()
+    # warnings are held until the command has accepted its inputs (common.release_warnings, called by
+    # common.announce_window) or ends; a refusal drops them, so that its stderr is one line
+    shower = warnings.showwarning = _OneLineWarnings(hold=True)
     try:
-        return args.run(args)
+        status = args.run(args)
     except KeyboardInterrupt:
+        shower.release()
         print("diffuse-imaging: interrupted", file=sys.stderr)
         return 130
     except UserError as error:
+        shower.drop()
         text = " ".join(str(error).split())
         print(f"diffuse-imaging: error: {text}", file=sys.stderr)
         return 2
+    except BaseException:
+        shower.release()            # a bug's traceback, after what it warned of
+        raise
+    shower.release()
+    return status
 
 
 class _GuardedStream:

@@ -8,7 +8,7 @@ import warnings
 
 import numpy as np
 
-from .common import (UsageError, add_quiet, load_scene_argument, positive_float_type,
+from .common import (UsageError, add_quiet, load_scene_argument, positive_float_type, release_warnings,
                      rows_text, show_progress)
 
 __all__ = ["add_commands", "command_reconstruct", "command_reproduce", "lambda_argument", "lambda_grid_of",
@@ -63,6 +63,7 @@ def add_lambda_options(parser, *, default: str) -> None:
 
 def command_reconstruct(args) -> int:
     """Reconstruct the scene's image from a transient; write images, metrics, figures, report."""
+    from analytic.cost import refuse_impractical_illumination
     from analytic.errors import SceneError
     from analytic.files import (PrecisionWarning, discard, float32_problem, output_folder, reading_folder,
                              save_exr, save_json, save_npy, save_png_image, staged_writes)
@@ -73,6 +74,7 @@ def command_reconstruct(args) -> int:
     from validation.report import write_markdown
 
     scene = load_scene_argument(args.scene)
+    refuse_impractical_illumination(scene)
     rule, sigma = data_driven_rule(scene, args.rule)
     known_sigma = noise_sigma(scene)       # counts what the data fix at their noise, whatever the rule
     if args.regularizer == "tv":
@@ -87,6 +89,7 @@ def command_reconstruct(args) -> int:
     grid = lambda_grid_of(args)
     with reading_folder(args.data, option="--data"):    # no command writes the data while they are read
         data = _read_data(args.data, scene)
+    release_warnings()                                   # the inputs are accepted: what they warned of first
     with output_folder(args.out) as out:
         assembly_started = time.perf_counter()
         matrix = system_matrix(scene, progress=show_progress(args))
@@ -245,6 +248,7 @@ def command_reproduce(args) -> int:
     from analytic.files import output_folder
     from validation.paper import reproduce
 
+    release_warnings()
     with output_folder(args.out) as out:
         summary = reproduce(out, quick=args.quick, progress=show_progress(args))
     if not args.quiet:

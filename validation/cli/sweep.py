@@ -13,7 +13,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from .common import UsageError, add_quiet, show_progress
+from .common import UsageError, add_quiet, release_warnings, show_progress
 
 __all__ = ["add_commands", "command_sweep"]
 
@@ -29,6 +29,7 @@ def command_sweep(args) -> int:
     sweep = load_sweep(args.sweep)   # SceneError (exit 2) before any output is written
     if args.scheduler is None:
         check_variant(sweep.variant)  # a variant this machine cannot run: one line, before any file or cluster
+    release_warnings()               # the sweep is accepted: what it warned of, before its long work
     with output_folder(args.out) as out:
         result = run_sweep(sweep, out, scheduler=args.scheduler, workers=args.workers,
                            progress=show_progress(args))

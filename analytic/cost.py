@@ -26,7 +26,7 @@ cost that many pixels and pairs ask for is not refused here (it is the
 scene's size, not its response).
 
 The kernels could follow what the scene needs more closely (the fix is
-theirs, :mod:`analytic.system`): list only the kinks whose shift falls in a
+theirs, :mod:`analytic.kernels`): list only the kinks whose shift falls in a
 pixel's range (binary search, as :func:`_breakpoints` counts them), judge a
 pixel smooth or cut per bin rather than for all its bins at once (an EMG's
 lead, cut at 8.77 σ, makes every bin of a pixel take the slow cut route
@@ -130,7 +130,8 @@ def _family_cost(terms) -> float:
 def _ranges(rectangle, pairs, pixels: int) -> np.ndarray:
     """``(S, 2)`` [d_lo, d_hi] + the pair's offset of a sample of (pixel, pair), metres."""
     from .geometry import pair_table
-    from .isochrone import LAMBERTIAN, PixelBox, pair_frame, rectangle_range
+    from .kernels.formulas import LAMBERTIAN
+    from .kernels.isochrone import PixelBox, pair_frame, rectangle_range
 
     count = len(pairs)
     chosen = np.unique(np.linspace(0, count - 1, min(count, _SAMPLED_PAIRS)).round().astype(int))
@@ -196,8 +197,7 @@ def model_cost(scene) -> ModelCost:
     c_smooth over the others + Σ L log2 L c_list over the lists L + c_pixel per range,
     scaled to every (pixel, pair) and divided among the threads.
     """
-    from numba import get_num_threads
-
+    from .blocks import thread_count
     from .waveforms import make_waveform
 
     sampling = scene.sampling
@@ -229,7 +229,7 @@ def model_cost(scene) -> ModelCost:
         pieces_total += cuts + 1
         largest_list = max(largest_list, listed)
     thread_seconds += listing_seconds
-    threads = max(1, int(get_num_threads()))
+    threads = thread_count()
     samples = len(ranges)
     combinations = len(pairs) * pixels * pixels
     entries = combinations * bins_total / samples
@@ -297,6 +297,18 @@ def _sample_spacing(illumination) -> float:
     from .waveforms.measured import sample_width_metres
 
     return sample_width_metres(illumination.sample_width, illumination.sample_width_ps)
+
+
+#: Below these, an illumination cannot make A impractical (:func:`may_be_impractical` skips the estimate).
+_FEW_KINKS, _FEW_BINS = 256, 256
+
+
+def may_be_impractical(waveform, sampling) -> bool:
+    """Whether a waveform's kinks or span over the period are many enough for :func:`impractical_illumination`
+    to be worth its estimate (a few tens of milliseconds): the model's every call pays this test instead."""
+    kinks = int(np.count_nonzero(np.asarray(waveform.terms.kinks)))
+    span = float(waveform.duration - waveform.lead)
+    return kinks > _FEW_KINKS or not span <= _FEW_BINS * sampling.bin_width_opl
 
 
 def refuse_impractical_illumination(scene) -> ModelCost:

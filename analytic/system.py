@@ -89,6 +89,7 @@ from .kernels.quadrature import nested_integral_arguments, pixel_isochrone_integ
 from .kernels import routes
 from .kernels.routes import SAFETY, Route, TimeAxis, make_scratch, pixel_bins
 from .blocks import run_blocks, thread_count
+from .cost import may_be_impractical, refuse_impractical_illumination
 from .resources import available_memory
 from .scene import MAX_TOLERANCE, MIN_TOLERANCE, Sampling, Scene, check_heights, check_tolerance
 from .waveforms import Waveform, make_waveform
@@ -288,9 +289,11 @@ def system_matrix(scene: Scene, *, tolerance: float | None = None, memory_limit:
     Raises
     ------
     SceneError
-        A tolerance outside the supported range (``model.tolerance``), or a
+        A tolerance outside the supported range (``model.tolerance``), a
         source or sensor too low to resolve (see
-        :func:`analytic.scene.check_heights`).
+        :func:`analytic.scene.check_heights`), or an illumination that would
+        make A take impractically long (:func:`analytic.cost.impractical_illumination`:
+        the estimate and what to change), as every command refuses it.
     ResourceError
         An A that does not fit in memory (the need and the limit named).
 
@@ -305,10 +308,12 @@ def system_matrix(scene: Scene, *, tolerance: float | None = None, memory_limit:
     bin n, with g_k(t) = ∫ f a_k δ(t - d_k) dx (docs/design.md section 2).
     """
     tolerance = check_tolerance(scene.tolerance if tolerance is None else tolerance)
+    waveform = make_waveform(scene.illumination, scene.sampling.bin_width_opl)
+    if may_be_impractical(waveform, scene.sampling):
+        refuse_impractical_illumination(scene)      # as every command does, before any work
     rectangle, pairs = scene.geometry()
-    return rectangle_matrix(rectangle, pairs, scene.sampling,
-                            make_waveform(scene.illumination, scene.sampling.bin_width_opl), statistics=statistics,
-                            tolerance=tolerance, memory_limit=memory_limit, progress=progress)
+    return rectangle_matrix(rectangle, pairs, scene.sampling, waveform, statistics=statistics, tolerance=tolerance,
+                            memory_limit=memory_limit, progress=progress)
 
 
 def rectangle_matrix(rectangle: Rectangle, pairs: PointPairs, sampling: Sampling, waveform: Waveform, *,

@@ -100,3 +100,15 @@ def test_a_response_beyond_the_windows_reach_names_the_span_that_reaches_it():
     assert model_cost(scene).reach == pytest.approx((2.0 - highest, 2.12 - lowest), rel=1e-12)
     problem = impractical_illumination(scene.replace(pixels=64, reflectance=0.5))
     assert problem is not None and "keep only the samples in that span" in problem
+
+
+def test_the_python_api_refuses_what_the_commands_refuse():
+    """analytic.forward (system_matrix) refuses an impractical illumination up front, in the commands' words."""
+    import analytic
+
+    scene = _plane(Illumination(waveform="sampled", samples=list(np.hanning(100_000)), sample_width=1e-6))
+    with pytest.raises(SceneError) as expected:
+        refuse_impractical_illumination(scene)
+    with pytest.raises(SceneError) as caught:
+        analytic.forward(scene)
+    assert str(caught.value) == str(expected.value)

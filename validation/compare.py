@@ -202,8 +202,9 @@ def judged_bins(rendered, stderr, max_relative_stderr: float, replicas=None) -> 
     4.7e-12 against a true 3.9e-10, z = 7.04), while a count that differs
     moves a replica by about one weight. For data with a smooth noise (a
     measurement, or many samples per bin) the range spans several standard
-    errors, far above w, and the count rule keeps the bins the standard
-    error rule kept, to within the spread of their estimates.
+    errors, far above w. Where the weight of a sample varies along a row
+    (a sensor 1 mm above the plane), bins of light samples count fewer
+    than they hold and may be left out: power lost, never a false alarm.
     """
     sampled = stderr > 0
     precise = sampled & (stderr < max_relative_stderr * np.abs(rendered))

@@ -33,11 +33,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from analytic.errors import OptionError, SceneError
+from analytic.errors import SceneError
 from analytic.response import impulse_response
 from analytic.scene import Scene
 from analytic.system import QuadratureWarning, forward, system_matrix
-from validation.arrays import whole_number
 from validation.check.fit import ShiftedModel
 from validation.check.readers import scene_of
 from validation.check.verdict import DERIVATIVE_STEP
@@ -310,17 +309,11 @@ def check_scene(scene: Scene, *, spp: int, seed: int = 0, convergence: bool = Tr
         The window's share of the light, when the caller has it
         (:func:`analytic.window.window_share`, computed here otherwise).
     """
-    from transient.render import MAX_SAMPLES, render
+    from transient.render import render
 
     from analytic.window import warn_if_cut, window_share
 
-    scene = scene_of(scene)
-    spp = whole_number("spp", spp, smallest=2)
-    if spp > MAX_SAMPLES:
-        raise OptionError(f"spp: at most 2^48 samples (about 108 days on 2 CPU cores), got {spp}")
-    seed = whole_number("seed", seed, smallest=0)
-    if seed >= 2**32:
-        raise OptionError(f"seed: must be below 2^32, got {seed}")
+    scene = scene_of(scene)          # spp and seed: the renderer refuses them (OptionError) before any work
     timings = {}
     share = window_share(scene) if share is None else share
     refuse_dark(scene, share)

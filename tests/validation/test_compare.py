@@ -361,3 +361,38 @@ def test_a_bin_whose_replicas_hold_one_sample_each_is_not_judged(rng):
     with pytest.warns(CorrelationWarning):
         result = compare_transients(data.mean(axis=0), data.std(axis=0, ddof=1) / 2, model, replicas=data)
     assert np.isnan(result.z[0, 5]) and result.agrees and result.skipped >= 1
+
+
+# -- a user's mistake: the library's own exceptions, one line each ---------------------------------------------
+
+
+@pytest.mark.parametrize("change, error, words", [
+    ({"false_alarm": 0}, "OptionError", "false_alarm: must be in"),       # was: every verdict "agree"
+    ({"false_alarm": 2}, "OptionError", "false_alarm: must be in"),       # was: an empty accept interval
+    ({"model": "nan"}, "DataError", "model: 100 value(s) are NaN"),      # was: χ²/dof = nan
+    ({"rendered": "short"}, "DataError", "shapes: rendered (2, 49)"),    # was: a bare ValueError
+    ({"rendered": "complex"}, "DataError", "rendered: complex numbers"),
+    ({"rendered": "text"}, "DataError", "rendered: text, not numbers"),
+    ({"replicas": "flat"}, "DataError", "replicas: shape (2, 50)"),
+    ({"dof": 0}, "OptionError", "dof: degrees of freedom must be > 0"),
+    ({"worst": -1}, "OptionError", "worst: must be a whole number"),
+    ({"max_relative_stderr": 0}, "OptionError", "max_relative_stderr"),
+    ({"directions": "short"}, "DataError", "directions: shape (1, 2, 50)"),
+])
+def test_compare_transients_refuses_a_users_mistake_in_one_line(rng, change, error, words):
+    import re
+
+    from analytic import errors
+
+    model, stderr = _synthetic(rng, (2, 50))
+    arguments = {"rendered": model.copy(), "stderr": stderr, "model": model.copy()}
+    special = {"nan": model * np.nan, "short": model[:, :-1], "complex": model.astype(complex), "text": "data.npy",
+               "flat": model}
+    for key, value in change.items():
+        if key == "directions":
+            arguments[key] = np.stack([model])
+        else:
+            arguments[key] = special.get(value, value) if isinstance(value, str) else value
+    with pytest.raises(getattr(errors, error), match=re.escape(words)) as raised:
+        compare_transients(**arguments)
+    assert "\n" not in str(raised.value)

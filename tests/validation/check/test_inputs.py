@@ -12,7 +12,7 @@ import pytest
 
 from analytic.errors import DataError, OptionError, SceneError, UserError
 from analytic.scene_file import load_scene
-from check_cases import noisy_replicas, render_folder, run_check, small_scene
+from check_cases import noisy_replicas, render_folder, run_check
 import validation
 from validation.check import check_transient
 

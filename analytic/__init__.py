@@ -18,7 +18,7 @@ live in :mod:`analytic.files`, which the model itself never imports.
 import lazy_loader
 
 __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
-    "errors": ["UserError", "SceneError", "ImageError", "DataError", "ResourceError"],
+    "errors": ["UserError", "SceneError", "ImageError", "DataError", "OptionError", "ResourceError"],
     "scene": ["Scene", "Illumination", "Sampling", "Noise", "default_scene", "sensor_grid"],
     "relay_wall": ["RelayWallScene", "Scan", "default_relay_wall_scene"],
     "tal_config": ["TalScene", "TalConfigWarning", "load_tal_config"],

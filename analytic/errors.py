@@ -10,16 +10,17 @@ command is a bug of ours and keeps its traceback.
 | :class:`SceneError` | scene or sweep file: a key and what is wrong with its value |
 | :class:`ImageError` | reflectance image (unreadable, wrong size, colour, out of [0, 1]) |
 | :class:`DataError` | transient data file given to ``reconstruct`` or ``check`` |
+| :class:`OptionError` | option of a command or argument of a Python call (a false-alarm rate, a convention's name) |
 | :class:`ResourceError` | request this machine cannot serve: memory, disk, time, output folder, GPU |
 
-The command line adds its own ``UsageError`` for flags
-(:mod:`validation.cli`); the renderer's ``BackendError`` (no usable LLVM,
+The command line's ``UsageError`` for flags (:mod:`validation.cli`) is an
+:class:`OptionError`; the renderer's ``BackendError`` (no usable LLVM,
 no GPU) is a :class:`ResourceError`.
 """
 
 from __future__ import annotations
 
-__all__ = ["UserError", "SceneError", "ImageError", "DataError", "ResourceError"]
+__all__ = ["UserError", "SceneError", "ImageError", "DataError", "OptionError", "ResourceError"]
 
 
 class UserError(Exception):
@@ -49,6 +50,10 @@ class ImageError(UserError, ValueError):
 
 class DataError(UserError, ValueError):
     """A transient data file that cannot be used (unreadable, wrong shape or time axis, NaN, ...)."""
+
+
+class OptionError(UserError, ValueError):
+    """An option or argument out of its range or of the wrong kind (``false_alarm=2``, ``expect="typo"``)."""
 
 
 class ResourceError(UserError, RuntimeError):

@@ -106,6 +106,12 @@ def cross_check(scene, y, result) -> None:
           f"{checked.fit.scale:.4f} ± {checked.fit.scale_stderr:.4f}, offset "
           f"{checked.fit.offset_opl:+.1e} ± {checked.fit.offset_stderr:.0e} m; agrees after the fit: "
           f"{checked.agrees_after_fit}")
+    # check as a test (a renderer's regression test, docs/testing-your-renderer.md): stated 1/4, it agrees
+    stated = validation.assert_agrees(scene, quarter, expect=validation.Convention(0.25, 0.0, "a quarter"),
+                                      model=y)
+    print(f"   stated as a quarter: agrees; these replicas would flag a scale error of "
+          f"{100 * stated.detectable['scale']:.2g} % or a shift of {stated.detectable['shift_opl']:.1e} m "
+          f"half the time")
     done(started)
 
 

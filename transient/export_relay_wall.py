@@ -209,7 +209,8 @@ y = replicas.mean(axis=0)                        # (P, N) in the pair order of d
 laser -> l -> x -> s only), the relay wall with an `nlos_capture_meter` at o_s, the hidden
 rectangle, and a `projector` laser of irradiance I/π (its on-axis intensity is π E k = I =
 {intensity!r} W/sr). The film is the {grid_w} x {grid_h} scan grid, {bins} bins of {width} m from
-start_opl = {start} m. Render it (one file per seed: independent replicas) in a mono variant:
+start_opl = {start} m. Render it with 16 seeds (one file per seed: independent replicas, whose
+sign flips, 16 or more, give the check's limits whatever the correlation between bins) in a mono variant:
 
 ```python
 import numpy as np, mitsuba as mi
@@ -229,27 +230,30 @@ fitted parameter, it agrees:
 
     diffuse-imaging check SCENE.toml --data render_*.npy --expect transient_nlos_path --out stated
 
-(docs/interop.md, "What mitransient does differently, and by how much").
+or, in a test, `validation.assert_agrees("SCENE.toml", sorted(glob.glob("render_*.npy")),
+expect="transient_nlos_path")` (docs/testing-your-renderer.md); `detectable` says the smallest scale
+error and time shift the renders would flag half the time (docs/interop.md, "What mitransient does
+differently, and by how much").
 """,
 }
 
-_SINGLE = """for seed in range(8):
+_SINGLE = """for seed in range(16):
     film = np.array(mi.render(scene, seed=seed)[1])          # (H, W, T, C): row j, column i reads cell (i, j)
-    np.save(f"render_{seed}.npy", film)"""
+    np.save(f"render_{seed:02d}.npy", film)"""
 
 # mitransient's confocal capture: a 1 x 1 film per lit point, the laser moved between renders. Aim at the
 # cell's centre (pixel + 0.5): focus_emitter_at_relay_wall_pixel takes uv = pixel / size, a corner for whole pixels.
 _CONFOCAL = """wall = next(shape for shape in scene.shapes() if shape.id() == "relay_wall")
 laser = scene.emitters()[0]
 width, height = {grid_w}, {grid_h}
-for seed in range(8):
+for seed in range(16):
     film = np.zeros((height, width, {bins}, 1))
     for j in range(height):
         for i in range(width):
             mitransient.nlos.focus_emitter_at_relay_wall_pixel(mi.Point2f(i + 0.5, j + 0.5), wall, laser)
             image = np.array(mi.render(scene, seed=(seed * height + j) * width + i)[1])   # (1, 1, T, C)
             film[j, i] = image[0, 0, :, :1]
-    np.save(f"render_{{seed}}.npy", film)                   # (H, W, T, 1), as a single scan's film"""
+    np.save(f"render_{{seed:02d}}.npy", film)               # (H, W, T, 1), as a single scan's film"""
 
 
 def export_relay_wall(scene: RelayWallScene, out_dir: str | Path, format: str, *, spp: int,

@@ -53,6 +53,7 @@ from typing import Callable
 
 import numpy as np
 
+from analytic.errors import OptionError
 from analytic.files import build_meta, discard, save_npy, staged_writes, write_transient
 from analytic.resources import require_memory
 from analytic.scene import Scene
@@ -260,18 +261,18 @@ def render_loaded(loaded, *, spp: int, seed: int = 0, replicas: int | None = Non
 
 def _check_arguments(spp, seed, chunk_size, replicas):
     if isinstance(spp, bool) or not isinstance(spp, (int, np.integer)):
-        raise ValueError(f"spp: must be an integer, got {spp!r}")
+        raise OptionError(f"spp: must be an integer, got {spp!r}")
     if not 2 <= spp <= MAX_SAMPLES:
-        raise ValueError(f"spp: must be in [2, 2^48] (2^48 samples take about 108 days at 3e7 samples/s on "
-                         f"2 CPU cores, 4 hours at 2e10 samples/s on a GPU), got {spp}")
+        raise OptionError(f"spp: must be in [2, 2^48] (2^48 samples take about 108 days at 3e7 samples/s on "
+                          f"2 CPU cores, 4 hours at 2e10 samples/s on a GPU), got {spp}")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2**32:
-        raise ValueError(f"seed: must be an integer in [0, 2^32), got {seed!r}")
+        raise OptionError(f"seed: must be an integer in [0, 2^32), got {seed!r}")
     if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) \
             or not 1 <= chunk_size <= 2**31:
-        raise ValueError(f"chunk_size: must be an integer in [1, 2^31], got {chunk_size!r}")
+        raise OptionError(f"chunk_size: must be an integer in [1, 2^31], got {chunk_size!r}")
     if replicas is not None and (isinstance(replicas, bool) or not isinstance(replicas, (int, np.integer))
                                  or not 2 <= replicas <= spp):
-        raise ValueError(f"replicas: must be an integer in [2, spp = {spp}], got {replicas!r}")
+        raise OptionError(f"replicas: must be an integer in [2, spp = {spp}], got {replicas!r}")
 
 
 def _remove_partial(folder: Path) -> None:
@@ -387,8 +388,8 @@ def render(scene: Scene, *, spp: int, seed: int = 0, out_dir: str | Path | None 
 
     Raises
     ------
-    ValueError
-        A bad argument, before any work.
+    analytic.errors.OptionError
+        A bad argument, before any work (a ValueError too).
     RenderStateError
         ``resume`` and a state that cannot be resumed.
     analytic.errors.ResourceError
@@ -405,7 +406,7 @@ def render(scene: Scene, *, spp: int, seed: int = 0, out_dir: str | Path | None 
     _check_arguments(spp, seed, chunk_size, replicas)
     spp, seed, chunk_size = int(spp), int(seed), int(chunk_size)
     if resume and out_dir is None:
-        raise ValueError("resume: needs out_dir")
+        raise OptionError("resume: needs out_dir")
     layout = ReplicaLayout.for_samples(spp, replicas)
     estimator = dict(estimator or {})
     shape = (scene.sensor_count, scene.sampling.count)

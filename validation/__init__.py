@@ -5,7 +5,13 @@ A user writes, for example::
     import analytic, transient, validation
     result = transient.render(scene, spp=2**22, seed=1)
     agreement = validation.compare_transients(result.mean, result.stderr, analytic.forward(scene))
-    validation.assert_transients_agree(result.mean, result.stderr, analytic.forward(scene))
+    validation.assert_agrees(scene, result.replica_means)                   # check, as a test
+    validation.assert_agrees("scene.toml", films, expect="irradiancemeter")  # mitransient's renders
+
+Every public call refuses a user's mistake with the library's own
+exceptions, subclasses of :class:`analytic.errors.UserError`
+(``DataError``, ``OptionError``, ``SceneError``), with the command line's
+messages in Python's words.
 
 Names are loaded on first use (``lazy_loader``, as in every package of this
 project: the command line starts fast); ``__all__`` lists the public API.
@@ -16,11 +22,11 @@ and the figures (:mod:`validation.plots`) are packages of their own.
 import lazy_loader
 
 __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
-    "compare": ["Agreement", "compare_transients", "assert_transients_agree"],
+    "compare": ["Agreement", "compare_transients"],
     "harness": ["SceneCheck", "check_scene", "data_driven_rule", "reconstruct_from_noisy_data"],
     "suite": ["hard_cases", "validation_suite"],
     "corner": ["check_corner"],
-    "check": ["check_transient", "CheckResult", "read_data"],
+    "check": ["check_transient", "assert_agrees", "CheckResult", "Convention", "irradiancemeter", "read_data"],
     "report": ["write_report"],
     "paper": ["reproduce"],
     "sweep": ["load_sweep", "run_sweep"],

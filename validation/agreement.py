@@ -2,7 +2,8 @@
 
 :class:`Agreement` holds the verdict and every figure behind it: the
 normal scores, the two statistics and their acceptance limits, the null
-distribution the limits came from, the worst bins; it writes them as one
+distribution the limits came from, the worst bins, the directed tests of
+the scale and offset and the errors they can detect; it writes them as one
 paragraph (:meth:`Agreement.summary`) or as JSON-ready numbers
 (:meth:`Agreement.as_dict`).
 """
@@ -13,7 +14,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["Agreement", "SIGN_FLIP", "INDEPENDENT", "null_note"]
+from validation.directed import DirectedTests
+
+__all__ = ["Agreement", "SIGN_FLIP", "INDEPENDENT", "null_note", "detectable_text"]
 
 #: Names of the null distributions (Agreement.null).
 SIGN_FLIP, INDEPENDENT = "sign-flip", "independent"
@@ -60,6 +63,10 @@ class Agreement:
         One sentence saying so, for reports.
     flips : int
         Sign patterns drawn (0 for the independent-bins null).
+    directed : DirectedTests or None
+        The data's scale and offset tested against the model's
+        (:mod:`validation.directed`); None where the caller gave no
+        directions or too few bins are judged.
     """
 
     agrees: bool
@@ -79,6 +86,14 @@ class Agreement:
     null: str = INDEPENDENT
     null_note: str = ""
     flips: int = 0
+    directed: DirectedTests | None = None
+
+    @property
+    def detectable(self) -> dict | None:
+        """{"scale": s, "shift_opl": d}: the smallest relative scale error and time shift (metres of path)
+        these data flag with probability 1/2 at the false-alarm rate (docs/design.md section 6); None
+        without directed tests (``shift_opl`` None where the offset is not tested)."""
+        return None if self.directed is None else self.directed.detectable
 
     def summary(self) -> str:
         """One paragraph: verdict, χ²/dof, max |z|, thresholds and their null, worst bins."""
@@ -94,6 +109,8 @@ class Agreement:
                 f"relative L2 = {self.relative_l2:.3e}. Worst bins: {worst}")
         if self.unsampled_light:
             text += f". Unsampled bins with model light: {self.unsampled_light[:5]}"
+        if self.directed is not None:
+            text += f". {self.directed.text()}; {detectable_text(self.detectable)}"
         return text
 
     def as_dict(self) -> dict:
@@ -104,7 +121,9 @@ class Agreement:
                 "false_alarm": self.false_alarm, "null": self.null, "null_note": self.null_note,
                 "flips": self.flips, "relative_l2": self.relative_l2,
                 "worst": [list(map(float, w)) for w in self.worst],
-                "unsampled_light": [list(map(float, w)) for w in self.unsampled_light]}
+                "unsampled_light": [list(map(float, w)) for w in self.unsampled_light],
+                "directed": None if self.directed is None else self.directed.as_dict(),
+                "detectable": self.detectable}
 
 
 def null_note(null: str, replicas: int | None, flips: int, false_alarm: float) -> str:
@@ -116,3 +135,12 @@ def null_note(null: str, replicas: int | None, flips: int, false_alarm: float) -
         return "limits χ²(D) and Šidák, which assume independent bins (no replicas given)"
     return (f"limits χ²(D) and Šidák, which assume independent bins ({replicas} replicas are too few for "
             f"sign flips at α = {false_alarm:g})")
+
+
+def detectable_text(detectable: dict | None) -> str:
+    """'detectable: a scale error of 0.42 %, a shift of 3.1e-04 m' (with probability 1/2), for reports."""
+    if detectable is None:
+        return "detectable: not stated (too few bins judged for the directed tests)"
+    shift = ("no shift (the offset cannot be told from the scale)" if detectable["shift_opl"] is None
+             else f"a shift of {detectable['shift_opl']:.2g} m")
+    return f"detectable (flagged half the time): a scale error of {100 * detectable['scale']:.2g} %, {shift}"

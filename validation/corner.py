@@ -189,8 +189,11 @@ def check_corner(corner: Corner | None = None, *, spp: int = 2**22, seed: int = 
         the full render with the one-bounce model), ``mitransient`` (the
         independent check, or why it did not run), ``text``, ``arrays``.
     """
+    from validation.arrays import whole_number
     from validation.compare import compare_transients
 
+    if mitransient_samples is not None:
+        mitransient_samples = whole_number("mitransient_samples", mitransient_samples, smallest=1)
     corner = corner or default_corner()
     model = corner_model(corner)
     one = render_corner(corner, spp=spp, seed=seed, max_depth=1)

@@ -6,7 +6,9 @@ For a scene, :func:`check_scene`
 2. renders y with the Monte Carlo renderer at ``spp`` samples and judges
    the difference with :func:`validation.compare.compare_transients`
    (docs/design.md section 6), its limits from the render's replicas (valid
-   whatever the correlation between bins);
+   whatever the correlation between bins), the render's scale and time
+   offset tested against the model's, and states the smallest such errors
+   it can detect (:attr:`validation.agreement.Agreement.detectable`);
 3. shows that the model's own quadrature error is far below the render's
    noise: y at looser tolerances against y at 1e-7, over each judged bin's
    standard error;
@@ -35,6 +37,9 @@ from analytic.errors import SceneError
 from analytic.response import impulse_response
 from analytic.scene import Scene
 from analytic.system import QuadratureWarning, forward, system_matrix
+from validation.check.fit import ShiftedModel
+from validation.check.readers import scene_of
+from validation.check.verdict import DERIVATIVE_STEP
 from validation.compare import Agreement, compare_transients, model_tolerance_for, tighter_model_note
 
 __all__ = ["SceneCheck", "check_scene", "refuse_dark", "imaging_problem", "simplification_costs", "model_convergence",
@@ -316,11 +321,11 @@ def check_scene(scene: Scene, *, spp: int, seed: int = 0, convergence: bool = Tr
 
     Parameters
     ----------
-    scene : Scene or analytic.relay_wall.RelayWallScene
+    scene : Scene, analytic.relay_wall.RelayWallScene, str or Path
         A one-plane scene, or a capture through a relay wall (its pairs as
-        the sensors, the hidden image as the image).
+        the sensors, the hidden image as the image), or its file.
     spp : int
-        Samples of the main render.
+        Samples of the main render, in [2, 2^48].
     seed : int
         Render seed (the convergence renders use seed + 1, + 2, + 3).
     convergence : bool
@@ -344,6 +349,7 @@ def check_scene(scene: Scene, *, spp: int, seed: int = 0, convergence: bool = Tr
 
     from analytic.window import warn_if_cut, window_share
 
+    scene = scene_of(scene)          # spp and seed: the renderer refuses them (OptionError) before any work
     timings = {}
     share = window_share(scene) if share is None else share
     refuse_dark(scene, share)
@@ -356,16 +362,21 @@ def check_scene(scene: Scene, *, spp: int, seed: int = 0, convergence: bool = Tr
     timings["render_seconds"] = result.seconds
     # a render more precise than the scene's tolerance is judged against the model evaluated tighter
     tighter = model_tolerance_for(scene.tolerance, result.mean, result.stderr)
-    judged_model = model if tighter is None else forward(scene.replace(tolerance=tighter))
-    # the replicas give the null of χ² and max |z| whatever the correlation between bins
-    agreement = compare_transients(result.mean, result.stderr, judged_model, dof=result.dof,
-                                   replicas=result.replica_means)
+    judged_scene = scene if tighter is None else scene.replace(tolerance=tighter)
+    judged_model = ShiftedModel(judged_scene, model if tighter is None else None)
+    # the replicas give the null of χ² and max |z| whatever the correlation between bins; the model's scale
+    # and time offset are tested too, and the verdict states what it can detect (docs/design.md section 6)
+    step = DERIVATIVE_STEP * scene.sampling.bin_width_opl
+    directions = np.stack([judged_model(0.0), (judged_model(step) - judged_model(0.0)) / step])
+    agreement = compare_transients(result.mean, result.stderr, judged_model(0.0), dof=result.dof,
+                                   replicas=result.replica_means, directions=directions)
     check = SceneCheck(scene.name, scene, spp, seed, model, result.mean, result.stderr, agreement,
                        replicas=result.replicas)
     check.metrics.update(timings)
     check.metrics["window_share"] = share
     check.metrics["model_tolerance"] = tighter
     check.metrics["agreement"] = agreement.as_dict()
+    check.metrics["detectable"] = agreement.detectable
     judged = np.isfinite(agreement.z)
     if convergence:
         check.model_convergence = model_convergence(

@@ -44,11 +44,17 @@ import math
 import numpy as np
 from scipy import special, stats
 
-__all__ = ["normal_scores", "independent_limits", "replica_limits", "replica_deviations", "flip_count", "FLIPS",
-           "TAIL_PATTERNS", "FLIP_SEED"]
+from analytic.errors import DataError, OptionError
+
+__all__ = ["normal_scores", "independent_limits", "replica_limits", "replica_deviations", "flip_count", "flips_needed",
+           "FLIPS", "MAX_FLIPS", "TAIL_PATTERNS", "FLIP_SEED"]
 
 #: Fewest sign patterns drawn for the replicas' null distribution (more when α/4 needs them).
 FLIPS = 2**14
+
+#: Most sign patterns drawn (a few seconds for a thousand bins): a false-alarm rate whose smallest tail needs
+#: more is judged with the independent-bins limits.
+MAX_FLIPS = 2**20
 
 #: The smallest tail, α/4, must hold at least this many sign patterns, of those drawn and of the
 #: 2^(R-1) distinct ones R replicas have, for the replicas' null to resolve it.
@@ -84,14 +90,25 @@ def normal_scores(t, dof) -> np.ndarray:
     return z
 
 
+def flips_needed(false_alarm: float) -> int:
+    """Fewest patterns whose tail α/4 holds :data:`TAIL_PATTERNS` of them (α: the share of χ² and max |z|)."""
+    return math.ceil(TAIL_PATTERNS / (false_alarm / 4))
+
+
 def flip_count(false_alarm: float, flips: int | None) -> int:
-    """Patterns to draw: :data:`FLIPS`, or more so that α/4 of them is :data:`TAIL_PATTERNS`."""
-    needed = math.ceil(TAIL_PATTERNS / (false_alarm / 4))
+    """Patterns to draw: :data:`FLIPS`, or more so that α/4 of them is :data:`TAIL_PATTERNS`.
+
+    Raises
+    ------
+    OptionError
+        ``flips`` not a whole number in [needed, :data:`MAX_FLIPS`].
+    """
+    needed = flips_needed(false_alarm)
     if flips is None:
         return max(FLIPS, needed)
-    if isinstance(flips, bool) or not isinstance(flips, (int, np.integer)) or flips < needed:
-        raise ValueError(f"flips: must be an integer >= {needed} (α/4 = {false_alarm / 4:g} of them must be "
-                         f"{TAIL_PATTERNS} patterns), got {flips!r}")
+    if (isinstance(flips, bool) or not isinstance(flips, (int, np.integer)) or not needed <= flips <= MAX_FLIPS):
+        raise OptionError(f"flips: must be a whole number in [{needed}, {MAX_FLIPS}] (α/4 = {false_alarm / 4:g} "
+                          f"of them must be {TAIL_PATTERNS} patterns), got {flips!r}")
     return int(flips)
 
 
@@ -203,16 +220,17 @@ def replica_limits(deviations: np.ndarray, bins: int, false_alarm: float,
 def replica_deviations(replicas, rendered, stderr, model, judged) -> np.ndarray:
     """``(R, D)`` deviations y_r - y_model over the judged bins, each bin scaled by its largest.
 
-    Raises ValueError when the replicas' mean and standard error are not
+    Raises DataError when the replicas' mean and standard error are not
     ``rendered`` and ``stderr`` (replicas of another render).
     """
+
     count = replicas.shape[0]
     mean = replicas.mean(axis=0)
     spread = replicas.std(axis=0, ddof=1) / math.sqrt(count)
     scale = np.maximum(np.abs(rendered), stderr)
     if np.any(np.abs(mean - rendered) > 1e-9 * scale) or np.any(np.abs(spread - stderr) > 1e-6 * scale):
-        raise ValueError("replicas: their mean and standard error are not `rendered` and `stderr`; "
-                         "pass the replicas of the same render")
+        raise DataError("replicas: their mean and standard error are not `rendered` and `stderr`; "
+                        "pass the replicas of the same render")
     deviations = replicas[:, judged] - model[judged]
     largest = np.max(np.abs(deviations), axis=0)
     return deviations / np.where(largest > 0, largest, 1.0)

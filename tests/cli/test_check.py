@@ -79,6 +79,26 @@ def test_stated_conventions_refused_in_one_line(tmp_path, rng, capsys, options, 
     assert not (tmp_path / "out").exists()
 
 
+def test_check_states_what_the_data_can_detect(tmp_path, rng, capsys):
+    """The summary, report.md and metrics.json carry `detectable` of the verdict that matters, and the
+    stated scale is tested: data 1 % off a stated scale exit 1."""
+    scene = write_scene(tmp_path, period=0.0125, count=96)
+    truth = model_of(scene)
+    paths = save_replicas(tmp_path, 0.25 * truth, rng)
+    assert main(["check", str(scene), "--data", *map(str, paths), "--expect-scale", "0.25", "--out",
+                 str(tmp_path / "quarter")]) == 0
+    printed = capsys.readouterr().out
+    metrics = json.loads((tmp_path / "quarter" / "metrics.json").read_text())
+    detectable = metrics["detectable"]
+    assert 0 < detectable["scale"] < 0.01 and detectable == metrics["expected"]["detectable"]
+    assert "Detectable (flagged half the time): a scale error of" in printed
+    assert "detectable (flagged half the time)" in (tmp_path / "quarter" / "report.md").read_text()
+    assert main(["check", str(scene), "--data", *map(str, paths), "--expect-scale", "0.2525", "--out",
+                 str(tmp_path / "off"), "--quiet"]) == 1
+    stated = json.loads((tmp_path / "off" / "metrics.json").read_text())["as_expected_detail"]["directed"]
+    assert abs(stated["scale_t"]) > stated["limit"]
+
+
 def test_a_one_bin_scene_is_judged_and_says_why_nothing_was_fitted(tmp_path, rng, capsys):
     """One bin per sensor (two bins): the verdict as given, exit 0, and the reason the fit is skipped;
     formerly 'render more samples to judge them', which cannot help."""

@@ -51,6 +51,15 @@ def test_run_reconstructs_from_noisy_data_better_than_a_flat_image(run_folder):
     assert metrics["agreement"]["agrees"] and metrics["window_share"] == 1.0
 
 
+def test_run_states_what_its_render_can_detect(run_folder):
+    """metrics.json and report.md carry `detectable`, the directed tests' power (docs/design.md section 6)."""
+    metrics = json.loads((run_folder / "metrics.json").read_text())
+    detectable = metrics["detectable"]
+    assert 0 < detectable["scale"] < 0.01 and 0 < detectable["shift_opl"] < 0.1        # bins of 0.1 m
+    assert metrics["agreement"]["detectable"] == detectable and metrics["agreement"]["directed"]["agrees"]
+    assert "detectable (flagged half the time)" in (run_folder / "report.md").read_text()
+
+
 def test_run_report_links_only_files_that_exist(run_folder):
     report = (run_folder / "report.md").read_text()
     links = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", report)

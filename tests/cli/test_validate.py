@@ -19,6 +19,10 @@ def test_validate_command_on_a_scene_file(tmp_path):
     assert metrics["all_agree"] and "scene" in metrics["scenes"]
     assert (out / "report.md").read_text().count("agree") >= 1
     assert (out / "scene" / "z_map.png").exists()
+    # every verdict states its power: 2^20 samples see well under 1 % of scale
+    detectable = metrics["scenes"]["scene"]["detectable"]
+    assert 0 < detectable["scale"] < 0.01 and 0 < detectable["shift_opl"] < 0.05
+    assert "| detectable |" in (out / "report.md").read_text()
 
 
 

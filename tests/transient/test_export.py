@@ -24,11 +24,10 @@ import OpenEXR
 import pytest
 
 from analytic.scene import Illumination, Sampling, Scene, SceneError
-from analytic.system import forward
 from scene_files import write_scene_file
 from transient.export import RADIUS, export_scene, plane_to_world_matrix
 from validation.cli import main
-from validation.compare import assert_transients_agree
+from validation import assert_agrees
 
 needs_mitransient = pytest.mark.skipif(importlib.util.find_spec("mitransient") is None,
                                        reason="mitransient is not installed (pip install -e .[bench])")
@@ -119,7 +118,7 @@ def test_our_plugins_render_the_exported_scene_as_render_does(tmp_path, illumina
     exported = render_loaded(loaded, spp=2**20, seed=7)
     # Same plugin, same samples: equal up to the order of the parallel float64 accumulation.
     assert np.allclose(exported.mean, reference.mean, rtol=1e-12, atol=1e-15 * reference.mean.max())
-    assert_transients_agree(exported.mean, exported.stderr, forward(scene), dof=exported.dof)
+    assert_agrees(scene, exported.replica_means)
 
 
 def integrator_description(scene: Scene) -> str:

@@ -175,9 +175,6 @@ def run_readme(folder, spp: int) -> None:
 
 @needs_mitransient
 @pytest.mark.slow
-# 8 mitransient seeds are too few replicas for sign flips: the independent-bin limits and their
-# CorrelationWarning are expected here (tests/validation/test_compare.py tests that fallback).
-@pytest.mark.filterwarnings("ignore::validation.compare.CorrelationWarning")
 @pytest.mark.parametrize("scan", [Scan(type="single", grid=(3, 3), laser_point=(0.3, -0.2, 0.0)),
                                   Scan(type="confocal", grid=(2, 2))], ids=["single", "confocal"])
 def test_mitransient_renders_of_the_export_agree_once_its_ray_offsets_are_stated(tmp_path, scan):
@@ -195,7 +192,7 @@ def test_mitransient_renders_of_the_export_agree_once_its_ray_offsets_are_stated
     assert main(["export", str(scene_file), "--format", "mitransient", "--out", str(tmp_path / "xml"), "--quiet"]) == 0
     run_readme(tmp_path / "xml", 2**18)
     films = sorted((tmp_path / "xml").glob("render_*.npy"))
-    assert len(films) == 8 and np.load(films[0]).shape == (scan.grid[1], scan.grid[0], 60, 1)
+    assert len(films) == 16 and np.load(films[0]).shape == (scan.grid[1], scan.grid[0], 60, 1)
     status = main(["check", str(scene_file), "--data", *map(str, films), "--expect", "transient_nlos_path",
                    "--out", str(tmp_path / "check"), "--quiet"])
     metrics = json.loads((tmp_path / "check" / "metrics.json").read_text())

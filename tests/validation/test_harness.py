@@ -1,5 +1,7 @@
 """The cross-check harness: passes the right model, fails deliberately wrong ones, reports every figure."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -108,3 +110,28 @@ def test_a_render_more_precise_than_the_scenes_tolerance_is_judged_against_a_tig
     assert check.agreement.agrees, check.summary()
     assert check.metrics["model_tolerance"] < scene.tolerance
     assert "tighter than the scene's" in check.summary()
+
+
+def test_check_scene_takes_a_scene_file_and_states_what_it_can_detect(tmp_path):
+    """A path is a scene here too; the verdict tests the render's scale and offset and states its power."""
+    import scene_files
+    from check_cases import small_scene
+
+    check = check_scene(scene_files.write_scene_file(tmp_path, small_scene()), spp=2**16, convergence=False,
+                        reconstruction=False)
+    assert check.agreement.agrees and check.agreement.directed.agrees
+    assert 0 < check.metrics["detectable"]["scale"] < 0.01 and check.metrics["detectable"]["shift_opl"] > 0
+
+
+@pytest.mark.parametrize("call, words", [
+    (lambda: check_scene(hard_cases(pixels=4)["outside"], spp=-3), "spp: must be in [2, 2^48]"),
+    (lambda: check_scene(hard_cases(pixels=4)["outside"], spp="many"), "spp: must be an integer"),
+    (lambda: check_scene(hard_cases(pixels=4)["outside"], spp=2**12, seed=-1), "seed: must be an integer"),
+    (lambda: check_scene(42, spp=2**12), "scene: expected a Scene"),
+    (lambda: __import__("validation").check_corner(mitransient_samples="x"), "mitransient_samples: must be"),
+])
+def test_a_bad_argument_is_the_librarys_one_line_error(call, words):
+    from analytic.errors import OptionError
+
+    with pytest.raises(OptionError, match=re.escape(words)):
+        call()

@@ -10,7 +10,9 @@ One job per module:
   exact model);
 - :mod:`.conventions`: a stated convention (``--expect``) and the known
   ones a fit is diagnosed by;
-- :mod:`.verdict`: :func:`check_transient` and its :class:`CheckResult`;
+- :mod:`.inputs`: what ``check`` is given (arrays, films, lists, files), as the arrays it judges;
+- :mod:`.verdict`: :func:`check_transient`; :mod:`.result`: its :class:`CheckResult`;
+- :mod:`.assertion`: :func:`assert_agrees`, a renderer's regression test;
 - :mod:`.report`: report.md, metrics.json and the figures;
 - :mod:`.scan_figure`: a relay-wall capture's z over pairs x bins and on its scan grid;
 - :mod:`.mitransient_nlos`: what mitransient's NLOS integrator renders (the model plus its ray offsets).
@@ -24,8 +26,12 @@ import lazy_loader
 __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "readers": ["read_data", "read_stderr", "stderr_beside", "replicas_beside"],
     "fit": ["Fit", "ShiftedModel", "fit_scale_offset"],
-    "conventions": ["Convention", "irradiancemeter", "diagnose", "KNOWN_SCALES", "RAY_EPSILON_FLOAT32"],
-    "verdict": ["CheckResult", "check_transient", "FIT_BINS", "MAX_DATA", "MAX_RELATIVE_STDERR"],
+    "conventions": ["Convention", "irradiancemeter", "convention", "diagnose", "CONVENTIONS", "KNOWN_SCALES",
+                    "RAY_EPSILON_FLOAT32"],
+    "inputs": ["read_inputs", "scene_of"],
+    "verdict": ["check_transient", "FIT_BINS", "MAX_DATA", "MAX_RELATIVE_STDERR"],
+    "result": ["CheckResult"],
+    "assertion": ["assert_agrees"],
     "report": ["write_check_report"],
     "scan_figure": ["scan_z_figure", "summed_z"],
     "mitransient_nlos": ["emulated_estimates", "spawn_offset_difference", "moved_read_points", "offset_model",

@@ -2,7 +2,10 @@
 
 A :class:`Convention` states that data read scale · y_model(start_opl +
 offset_opl) (``check --expect``): :func:`irradiancemeter` derives it for
-mitransient's irradiancemeter spheres. :func:`diagnose` names the known
+mitransient's irradiancemeter spheres; :func:`convention` makes one from
+its name (:data:`CONVENTIONS`, ``check --expect``'s names, also taken by
+``validation.check_transient`` and ``validation.assert_agrees``).
+:func:`diagnose` names the known
 conventions (:data:`KNOWN_SCALES`, whole-bin offsets, short or long path
 lengths) that explain a fitted scale and offset.
 """
@@ -10,10 +13,13 @@ lengths) that explain a fitted scale and offset.
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from analytic.errors import OptionError
+from analytic.relay_wall import RelayWallScene
 from analytic.scene import Scene
 # Mitsuba's ``math::RayEpsilon`` in single-precision variants (1500 x 2⁻²⁴ m): an irradiancemeter starts its
 # rays this far off its sphere (mitransient runs float32 variants). One definition, the renderer's.
@@ -21,7 +27,11 @@ from transient.constants import RAY_EPSILON as RAY_EPSILON_FLOAT32
 
 from .fit import Fit
 
-__all__ = ["Convention", "irradiancemeter", "diagnose", "KNOWN_SCALES", "RAY_EPSILON_FLOAT32"]
+__all__ = ["Convention", "irradiancemeter", "convention", "check_expect", "diagnose", "CONVENTIONS", "KNOWN_SCALES",
+           "RAY_EPSILON_FLOAT32"]
+
+#: The conventions stated by name (``check --expect NAME``, ``expect="NAME"``).
+CONVENTIONS = ("irradiancemeter", "transient_nlos_path")
 
 # Relative accuracy of the model (the system matrix's default tolerance): a
 # fitted scale within it of 1, or an offset within it of a bin of 0, is none.
@@ -65,10 +75,14 @@ class Convention:
     added: np.ndarray | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
+        for key, value in (("scale", self.scale), ("offset_opl", self.offset_opl)):
+            if isinstance(value, bool) or not isinstance(value, numbers.Real):
+                raise OptionError(f"{key}: the stated {key} must be a number, got {value!r}")
         if not (math.isfinite(self.scale) and self.scale > 0):
-            raise ValueError(f"scale: the stated scale must be a finite number > 0, got {self.scale!r}")
+            raise OptionError(f"scale: the stated scale must be a finite number > 0, got {self.scale!r}")
         if not math.isfinite(self.offset_opl):
-            raise ValueError(f"offset: the stated offset must be a finite number of metres, got {self.offset_opl!r}")
+            raise OptionError(f"offset_opl: the stated offset must be a finite number of metres, got "
+                              f"{self.offset_opl!r}")
 
     def as_dict(self) -> dict:
         stated = {"name": self.name, "scale": self.scale, "offset_opl": self.offset_opl}
@@ -101,7 +115,7 @@ def irradiancemeter(scene: Scene, radius: float, *, ray_epsilon: float = RAY_EPS
 
     Raises
     ------
-    ValueError
+    OptionError
         A radius outside (0, lowest sensor height), or a negative ``ray_epsilon``.
 
     Notes
@@ -143,15 +157,80 @@ def irradiancemeter(scene: Scene, radius: float, *, ray_epsilon: float = RAY_EPS
     relative: ~1e-6 of y for r = 1 mm, d ~ 1 m, T ~ 0.05 m.
     """
     lowest = float(np.min(scene.sensors[:, 2]))
+    if isinstance(radius, bool) or not isinstance(radius, numbers.Real) or not (
+            math.isfinite(radius) and 0.0 < radius < lowest):
+        raise OptionError(f"radius: must lie in (0, {lowest:g}) m, below the lowest sensor's height (the spheres "
+                          f"must not reach the plane), got {radius!r}")
     radius = float(radius)
-    if not (math.isfinite(radius) and 0.0 < radius < lowest):
-        raise ValueError(f"radius: must lie in (0, {lowest:g}) m, below the lowest sensor's height (the spheres "
-                         f"must not reach the plane), got {radius:g}")
-    if not (math.isfinite(ray_epsilon) and ray_epsilon >= 0):
-        raise ValueError(f"ray_epsilon: must be a finite number of metres >= 0, got {ray_epsilon!r}")
+    if isinstance(ray_epsilon, bool) or not isinstance(ray_epsilon, numbers.Real) or not (
+            math.isfinite(ray_epsilon) and ray_epsilon >= 0):
+        raise OptionError(f"ray_epsilon: must be a finite number of metres >= 0, got {ray_epsilon!r}")
     return Convention(scale=0.25, offset_opl=2.0 * radius / 3.0 + float(ray_epsilon),
                       name=f"irradiancemeter spheres of radius {radius:g} m")
 
+
+def check_expect(expect, scene, radius, words) -> None:
+    """Refuse, before any work, a stated convention that does not exist or does not apply to ``scene``.
+
+    Parameters
+    ----------
+    expect : str, Convention or None
+        A name of :data:`CONVENTIONS`, a :class:`Convention`, or None.
+    scene : Scene or RelayWallScene
+        The scene judged.
+    radius : float or None
+        The irradiancemeter spheres' radius (``irradiancemeter`` only).
+    words : validation.check.inputs.Words
+        The caller's names of the options, for messages.
+
+    Raises
+    ------
+    OptionError
+        An unknown name, a convention for the other kind of scene, a radius
+        without ``irradiancemeter``.
+    """
+    relay_wall = isinstance(scene, RelayWallScene)
+    if radius is not None and expect != "irradiancemeter":
+        raise OptionError(f"{words.radius}: applies to {words.expect} irradiancemeter only")
+    if expect is None or isinstance(expect, Convention):
+        return
+    if not isinstance(expect, str) or expect not in CONVENTIONS:
+        raise OptionError(f"{words.expect}: {expect!r} is no convention; give one of {', '.join(CONVENTIONS)} or a "
+                          f"Convention(scale, offset_opl, name)")
+    if expect == "irradiancemeter" and relay_wall:
+        raise OptionError(f"{words.expect} irradiancemeter: states mitransient's irradiancemeter spheres of a plane "
+                          f"scene; a relay-wall scene's nlos_capture_meter reads the model's own units (judge it as "
+                          f"given, or state transient_nlos_path or a scale and offset)")
+    if expect == "transient_nlos_path":
+        if not relay_wall:
+            raise OptionError(f"{words.expect} transient_nlos_path: states mitransient's NLOS integrator, for a "
+                              f"relay-wall scene; a plane scene's mitransient renders are irradiancemeter")
+        if scene.illumination.waveform != "impulse":
+            raise OptionError(f"{words.expect} transient_nlos_path: mitransient renders the impulse response only; "
+                              f"give the scene with waveform = \"impulse\"")
+
+
+def convention(expect, scene, radius, words, *, model=None) -> Convention | None:
+    """The :class:`Convention` that ``expect`` states for ``scene`` (checked by :func:`check_expect`).
+
+    ``"irradiancemeter"``: :func:`irradiancemeter` with ``radius`` (default
+    the export's, :data:`transient.export.RADIUS`); ``"transient_nlos_path"``:
+    :func:`validation.check.transient_nlos_path` (``model``: the scene's, if
+    computed); a Convention as itself; None for None.
+    """
+    check_expect(expect, scene, radius, words)
+    if expect is None or isinstance(expect, Convention):
+        return expect
+    if expect == "transient_nlos_path":
+        from .mitransient_nlos import transient_nlos_path
+
+        return transient_nlos_path(scene, model=model)
+    from transient.export import RADIUS
+
+    try:
+        return irradiancemeter(scene, RADIUS if radius is None else radius)
+    except OptionError as error:
+        raise OptionError(f"{words.radius}{str(error).removeprefix('radius')}") from None
 
 
 def _plus_minus(value: float, error: float, unit: str = "") -> str:
@@ -174,7 +253,8 @@ def _plus_minus(value: float, error: float, unit: str = "") -> str:
     return f"{value / factor:+.{decimals}f}{suffix} ± {error / factor:.{decimals}f}{suffix}{unit}"
 
 
-def diagnose(fit: Fit, *, agrees: bool, agrees_after_fit: bool, bin_width_opl: float) -> str:
+def diagnose(fit: Fit, *, agrees: bool, agrees_after_fit: bool, bin_width_opl: float,
+             stating: str = "--expect irradiancemeter") -> str:
     """One sentence naming the conventions that explain the fitted scale and offset.
 
     Parameters
@@ -185,6 +265,8 @@ def diagnose(fit: Fit, *, agrees: bool, agrees_after_fit: bool, bin_width_opl: f
         Verdicts as given and after the fit.
     bin_width_opl : float
         T, metres: an offset of whole bins is named as such.
+    stating : str
+        How the caller states the irradiancemeter's convention, for the hint.
     """
     scale_text = f"scale {_plus_minus(fit.scale, fit.scale_stderr)}".replace("scale +", "scale ")
     offset_text = f"offset {_plus_minus(fit.offset_opl, fit.offset_stderr, ' m')}"
@@ -213,6 +295,6 @@ def diagnose(fit: Fit, *, agrees: bool, agrees_after_fit: bool, bin_width_opl: f
     explanation = " and ".join(parts) if parts else "within its errors of the model"
     if factor == 0.25 and parts and parts[0].startswith("a sensor") and shifted and fit.offset_opl > 0:
         explanation = ("a sensor that reads 1/4 of the fluence and path lengths short (an irradiancemeter? "
-                       "--expect irradiancemeter states that convention)")
+                       f"{stating} states that convention)")
     return f"agrees after {scale_text} and {offset_text}: {explanation}."
 

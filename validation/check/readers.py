@@ -17,18 +17,20 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import re
 from pathlib import Path
 
 import numpy as np
 
-from analytic.errors import DataError
+from analytic.errors import DataError, OptionError
 from analytic.files import (CaptureError, TRANSIENT_FILES, read_capture, read_exr, read_exr_channels, read_npy,
                             transient_format, transient_in_folder)
 from analytic.relay_wall import RelayWallScene
 from analytic.scene import Sampling, Scene
+from analytic.scene_file import load_scene
 
-__all__ = ["read_data", "read_stderr", "stderr_beside", "replicas_beside"]
+__all__ = ["read_data", "scene_of", "read_stderr", "stderr_beside", "replicas_beside", "film_transient", "checked_transient"]
 
 
 def _time_axis(name: str, start: float, width: float, sampling: Sampling) -> None:
@@ -268,6 +270,24 @@ def _relay_wall_film(name: str, array: np.ndarray, scene: RelayWallScene) -> np.
     return values.reshape(height * width, bins)
 
 
+def scene_of(scene):
+    """A scene object, loaded when given as a path (TOML or tal YAML, as ``check``'s SCENE).
+
+    Raises
+    ------
+    SceneError
+        A bad scene file.
+    OptionError
+        Neither a scene nor a path.
+    """
+    if isinstance(scene, (Scene, RelayWallScene)):
+        return scene
+    if isinstance(scene, (str, os.PathLike)):
+        return load_scene(scene)
+    raise OptionError(f"scene: expected a Scene, a RelayWallScene or a scene file's path (TOML or tal YAML), "
+                      f"got {type(scene).__name__}")
+
+
 def read_data(path: str | Path, scene: Scene) -> np.ndarray:
     """Read one transient of ``scene`` from any of the formats users produce.
 
@@ -306,8 +326,8 @@ def read_data(path: str | Path, scene: Scene) -> np.ndarray:
           one render: ``(H, W, T, C)`` (single, confocal) or
           ``(H, W, Lh, Lw, T, C)`` (exhaustive), row j and column i reading
           grid cell (i, j).
-    scene : Scene or RelayWallScene
-        The scene the data were rendered from.
+    scene : Scene, RelayWallScene, str or Path
+        The scene the data were rendered from (or its file, :func:`scene_of`).
 
     Returns
     -------
@@ -320,6 +340,10 @@ def read_data(path: str | Path, scene: Scene) -> np.ndarray:
         No such file, unknown format, wrong shape, a time axis, source or sensor
         positions other than the scene's, NaN or infinity.
     """
+    if not isinstance(path, (str, os.PathLike)):
+        raise DataError(f"path: expected a file or folder's path, got {type(path).__name__} (arrays are judged by "
+                        f"validation.check_transient as they are)")
+    scene = scene_of(scene)
     path = Path(path)
     sensors, bins = scene.sensor_count, scene.sampling.count
     relay_wall = isinstance(scene, RelayWallScene)
@@ -346,10 +370,8 @@ def read_data(path: str | Path, scene: Scene) -> np.ndarray:
         data = _relay_wall_capture(path, scene) if relay_wall else _capture(path, scene)
     elif kind == "npy":
         array = read_npy(path)
-        if relay_wall and array.ndim >= 4:
-            data = _relay_wall_film(name, array, scene)
-        elif array.ndim in (4, 5):
-            data = _film_tensor(name, array, sensors)
+        if array.ndim >= 4 and (relay_wall or array.ndim in (4, 5)):
+            data = film_transient(name, array, scene)
         else:
             _meta_time_axis(path, scene.sampling)
             data = array
@@ -358,8 +380,24 @@ def read_data(path: str | Path, scene: Scene) -> np.ndarray:
         _meta_time_axis(path, scene.sampling)
     else:
         raise DataError(f"{path}: unknown format (expected .npy, .exr, .h5/.hdf5 or a folder of them)")
+    return checked_transient(str(path), data, scene)
+
+
+def film_transient(name: str, array: np.ndarray, scene: Scene, *, sensors: int | None = None) -> np.ndarray:
+    """mitransient's developed film(s) of ``scene`` -> ``(K, N)``: a plane scene's irradiancemeter film
+    ``(1, 1, N, C)`` or the K sensors' stacked ``(K, 1, 1, N, C)`` (``sensors`` of them, default the
+    scene's); a relay wall's nlos_capture_meter film (see :func:`read_data`)."""
+    if isinstance(scene, RelayWallScene):
+        return _relay_wall_film(name, array, scene)
+    return _film_tensor(name, array, scene.sensor_count if sensors is None else sensors)
+
+
+def checked_transient(name: str, data: np.ndarray, scene: Scene) -> np.ndarray:
+    """``data`` if it is one ``(K, N)`` transient of ``scene`` with finite values; else DataError naming
+    ``name`` and what the shape looks like (transposed, a stack of replicas)."""
+    sensors, bins = scene.sensor_count, scene.sampling.count
     if data.shape != (sensors, bins):
-        rows = "pairs" if relay_wall else "sensors"
+        rows = "pairs" if isinstance(scene, RelayWallScene) else "sensors"
         if data.shape == (bins, sensors):
             hint = f"it looks transposed: save ({rows}, bins)"
         elif data.ndim == 3 and data.shape[1:] == (sensors, bins):
@@ -367,11 +405,11 @@ def read_data(path: str | Path, scene: Scene) -> np.ndarray:
                     f"render's folder, or one file per replica")
         else:
             hint = f"save a ({sensors}, {bins}) array of the scene's {rows} and bins"
-        raise DataError(f"{path}: shape {data.shape} does not match the scene's {sensors} {rows} x "
+        raise DataError(f"{name}: shape {data.shape} does not match the scene's {sensors} {rows} x "
                         f"{bins} bins; {hint}")
     if not np.all(np.isfinite(data)):
         bad = int(np.sum(~np.isfinite(data)))
-        raise DataError(f"{path}: {bad} value(s) are NaN or infinite; re-render or drop the file")
+        raise DataError(f"{name}: {bad} value(s) are NaN or infinite; re-render or drop the file")
     return data
 
 

@@ -11,7 +11,9 @@ from validation.report import write_markdown
 from analytic.relay_wall import RelayWallScene
 
 from .scan_figure import scan_z_figure
-from .verdict import CheckResult, expected_sentence
+from validation.agreement import detectable_text
+
+from .result import CheckResult, expected_sentence
 
 __all__ = ["write_check_report"]
 
@@ -52,6 +54,7 @@ def write_check_report(out: str | Path, result: CheckResult, *, scene_name: str 
     else:
         lines += _statistical_lines(result)
     lines += _fit_lines(result)
+    lines += _power_lines(result)
     with staged_writes():
         save_json(out / "metrics.json", metrics)
         if result.fit is not None:    # the figures draw the fitted model beside the data
@@ -95,6 +98,21 @@ def _statistical_lines(result: CheckResult) -> list[str]:
             + [f"| {name} | {'agrees' if agreement.agrees else 'disagrees'} | {agreement.chi2_per_dof:.4g} "
                f"[{agreement.chi2_interval[0]:.3f}, {agreement.chi2_interval[1]:.3f}] | {agreement.max_abs_z:.3g} "
                f"(≤ {agreement.z_threshold:.2f}) | {relative:.3e} |" for name, agreement, relative in rows])
+
+
+def _power_lines(result: CheckResult) -> list[str]:
+    """The directed tests of the verdict that matters and what these data can detect."""
+    judgement = result.judgement
+    if judgement is None:
+        return []
+    lines = [f"**Power.** {detectable_text(result.detectable)} at the false-alarm rate "
+             f"{judgement.false_alarm:g}, by the verdict {'as stated' if result.expected is not None else 'as given'} "
+             f"(its directed tests of the scale and offset). The standard errors fall as 1/sqrt(samples): to "
+             f"detect an error k times smaller, render k² times as many samples.", ""]
+    if judgement.directed is not None:
+        lines[0:0] = [f"{judgement.directed.text()} (each test at α = {judgement.directed.false_alarm_each:g}; "
+                      f"χ² and max |z| share the rest).", ""]
+    return lines
 
 
 def _fit_lines(result: CheckResult) -> list[str]:

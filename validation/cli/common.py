@@ -13,7 +13,7 @@ import re
 import sys
 import warnings
 
-from analytic.errors import UserError
+from analytic.errors import OptionError
 
 __all__ = ["UsageError", "OneLineParser", "seed_type", "samples_type", "positive_float_type",
            "load_scene_argument", "show_progress", "MAX_SAMPLES", "add_quiet",
@@ -24,7 +24,7 @@ __all__ = ["UsageError", "OneLineParser", "seed_type", "samples_type", "positive
 MAX_SAMPLES = 2**44
 
 
-class UsageError(UserError, ValueError):
+class UsageError(OptionError):
     """A bad command-line flag or combination of flags."""
 
 

@@ -14,77 +14,17 @@ from .counts import add_counts_options, check_counts_options, command_check_coun
 __all__ = ["add_commands", "command_check", "command_export"]
 
 
-def _read_inputs(args, scene):
-    """The data (one transient or replicas), its stderr and dof, read under the data folders' shared locks.
+def _stated(args):
+    """What --expect / --expect-scale / --expect-offset state: a convention's name, a Convention, or None."""
+    from validation.check import Convention
 
-    Our render's output (its folder or transient file) brings its own
-    error: ``replicas.npy`` beside it when present (three or more), else
-    ``stderr.npy`` with the render's degrees of freedom.
-    """
-    import numpy as np
-
-    from analytic.files import reading_folder
-    from validation.check import read_data, read_stderr, replicas_beside, stderr_beside
-
-    with contextlib.ExitStack() as locks:
-        for path in args.data:
-            locks.enter_context(reading_folder(path, option="--data"))
-        if args.stderr is not None:
-            locks.enter_context(reading_folder(args.stderr, option="--stderr"))
-        arrays = [read_data(path, scene) for path in args.data]
-        stderr = read_stderr(args.stderr, scene) if args.stderr is not None else None
-        dof = None
-        if stderr is None and len(arrays) == 1 and not args.shape_only:
-            replicas = replicas_beside(args.data[0], scene, arrays[0])
-            if replicas is not None:
-                return replicas, None, None
-            stderr, dof = stderr_beside(args.data[0], scene) or (None, None)
-    return (arrays[0] if len(arrays) == 1 else np.stack(arrays)), stderr, dof
-
-
-def _check_expect(args, scene) -> None:
-    """Refuse the --expect options that do not go together or do not apply to the scene (before any work)."""
-    from analytic.relay_wall import RelayWallScene
-
-    relay_wall = isinstance(scene, RelayWallScene)
     if args.expect is not None and (args.expect_scale is not None or args.expect_offset is not None):
         raise UsageError("--expect: give a named convention or --expect-scale/--expect-offset, not both")
-    if args.radius is not None and args.expect != "irradiancemeter":
-        raise UsageError("--radius: applies to --expect irradiancemeter only")
-    if args.expect == "irradiancemeter" and relay_wall:
-        raise UsageError("--expect irradiancemeter: states mitransient's irradiancemeter spheres of a plane scene; a "
-                         "relay-wall scene's nlos_capture_meter reads the model's own units (judge it as given, "
-                         "--expect transient_nlos_path, or state --expect-scale/--expect-offset)")
-    if args.expect == "transient_nlos_path":
-        if not relay_wall:
-            raise UsageError("--expect transient_nlos_path: states mitransient's NLOS integrator, for a relay-wall "
-                             "scene; a plane scene's mitransient renders are --expect irradiancemeter")
-        if scene.illumination.waveform != "impulse":
-            raise UsageError("--expect transient_nlos_path: mitransient renders the impulse response only; give "
-                             "the scene with waveform = \"impulse\"")
-
-
-def _convention(args, scene):
-    """The convention stated by --expect, or --expect-scale / --expect-offset; None when none is
-    (options checked by :func:`_check_expect`)."""
-    from validation.check import Convention, irradiancemeter
-
-    if args.expect == "transient_nlos_path":
-        from validation.check import transient_nlos_path
-
-        return transient_nlos_path(scene)
-    if args.expect == "irradiancemeter":
-        from transient.export import RADIUS
-
-        try:
-            return irradiancemeter(scene, RADIUS if args.radius is None else args.radius)
-        except ValueError as error:
-            raise UsageError(f"--{error}") from None
     if args.expect_scale is not None or args.expect_offset is not None:
         scale = 1.0 if args.expect_scale is None else args.expect_scale
         offset = 0.0 if args.expect_offset is None else args.expect_offset
         return Convention(scale=scale, offset_opl=offset, name="the stated scale and offset")
-    return None
+    return args.expect
 
 
 def command_check(args) -> int:
@@ -92,11 +32,15 @@ def command_check(args) -> int:
 
     Exit status 0 when the data agree with the model as given, or with the
     convention stated by ``--expect``/``--expect-scale``/``--expect-offset``
-    when one is; 1 when not.
+    when one is; 1 when not. The work is :func:`validation.check.verdict.judge`,
+    the function under ``validation.check_transient`` and
+    ``validation.assert_agrees``, with the command line's words in its messages.
     """
     from analytic.cost import refuse_impractical_illumination
     from analytic.files import output_folder
-    from validation.check import check_transient, write_check_report
+    from validation.check import write_check_report
+    from validation.check.inputs import COMMAND_WORDS
+    from validation.check.verdict import judge
 
     scene = load_scene_argument(args.scene)
     if args.counts:
@@ -107,11 +51,10 @@ def command_check(args) -> int:
                          "spread is their error")
     if args.shape_only and (args.stderr is not None or len(args.data) > 1):
         raise UsageError("--shape-only: only for one --data file without --stderr")
-    _check_expect(args, scene)
     refuse_impractical_illumination(scene)      # before the data are read: the model is what takes long
-    data, stderr, dof = _read_inputs(args, scene)
-    expect = _convention(args, scene)    # after the data are read: transient_nlos_path's emulation takes a while
-    result = check_transient(scene, data, stderr=stderr, dof=dof, shape_only=args.shape_only, expect=expect)
+    data = args.data[0] if len(args.data) == 1 else list(args.data)
+    result = judge(scene, data, stderr=args.stderr, shape_only=args.shape_only, expect=_stated(args),
+                   radius=args.radius, words=COMMAND_WORDS)
     with output_folder(args.out) as out:
         announce_window(args, scene)
         write_check_report(out, result, scene_name=scene.name, data_paths=args.data, scene=scene)

@@ -355,7 +355,7 @@ def z_map_figure(z: np.ndarray, threshold: float, sampling, title: str, *, row_k
     axis.invert_yaxis()
     if origin == 0:
         nanosecond_axis(axis)
-    figure.legend(handles=[Patch(color="0.85", label="not judged: too few samples (se ≥ 0.1 y) or none")],
+    figure.legend(handles=[Patch(color="0.85", label="not judged: too few samples (under about 100) or none")],
                   fontsize=7, loc="outside lower center", frameon=False)
     axis.set_title(plain_text(title), fontsize=9, parse_math=False)
     return figure

@@ -2,7 +2,7 @@
 
 Rows of A are (pair k, bin n), k N + n; columns are pixels p = r M + c.
 The pixels are cut into blocks, and each block is one job for a thread
-(:mod:`analytic.system` runs them on a pool of threads: these kernels
+(:mod:`analytic.operator.system` runs them on a pool of threads: these kernels
 release Python's lock). :func:`count_block` tells, for one block and every
 row, how many entries the block's pixels put in that row; their prefix sums
 over the blocks give each block its own slice of each row of the CSR

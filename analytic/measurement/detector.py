@@ -37,8 +37,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import DataError, SceneError
-from .values import _integer, _number, exact
+from ..errors import DataError, SceneError
+from ..values import _integer, _number, exact
 
 __all__ = ["Detector", "DEAD_TIMES", "rates", "expected_counts", "detection_probabilities", "draw_counts",
            "coates_estimate", "excess_key", "MAX_CYCLES", "MAX_MEAN"]

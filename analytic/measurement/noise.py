@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import SceneError
-from .scene import Noise
-from .values import exact
+from ..errors import SceneError
+from ..scenes.common import Noise
+from ..values import exact
 
 __all__ = ["add_noise", "MAX_EXPECTED_PHOTONS"]
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 import concurrent.futures
 from typing import Callable, Sequence
 
-from .kernels.cache import compiled
+from ..kernels.cache import compiled
 
 __all__ = ["run_blocks", "thread_count"]
 

@@ -23,7 +23,7 @@ from __future__ import annotations
 import math
 import numpy as np
 
-from .scene import Illumination, Scene, sensor_grid
+from ..scenes.common import Illumination, Scene, sensor_grid
 from .system import system_matrix
 from .window import covering_sampling
 
@@ -92,7 +92,7 @@ def scene_for(base: Scene, *, extent: float, period: float, illumination: Illumi
         Array extent W, metres.
     period : float
         Bin width T, metres of path length (bins cover every path, see
-        :func:`analytic.window.covering_sampling`).
+        :func:`analytic.operator.window.covering_sampling`).
     illumination : Illumination, optional
         Default: the base scene's.
     attenuation : {"lambertian", "paper"}, optional

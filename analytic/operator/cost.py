@@ -1,6 +1,6 @@
 """What assembling A will cost, before it starts, and a refusal when the illumination makes it impractical.
 
-The model (:mod:`analytic.system`) integrates each (pixel, pair) over the
+The model (:mod:`analytic.operator.system`) integrates each (pixel, pair) over the
 pixel's range of path lengths [d_lo, d_hi], cut at every kink b_i of the
 waveform shifted to a bin edge t_n (τ = t_n - b_i), and fills every bin the
 pixel's light reaches (τ + lead to τ + duration). Its work therefore grows
@@ -41,8 +41,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import SceneError
-from .resources import available_memory
+from ..errors import SceneError
+from ..resources import available_memory
 
 __all__ = ["ModelCost", "model_cost", "impractical_illumination", "refuse_impractical_illumination",
            "LIMIT_SECONDS", "PAIR_LIMIT_SECONDS"]
@@ -117,7 +117,7 @@ def _family_cost(terms) -> float:
     Error-function pieces cost in proportion to their terms squared (measured: a Gaussian's one term
     per piece 8 µs, an EMG's up to three 90 µs: more terms, and more of its Taylor series to keep).
     """
-    from .waveforms.pieces import ERRORFUNCTIONS, EXPONENTIALS, TERM_SIZES
+    from ..waveforms.pieces import ERRORFUNCTIONS, EXPONENTIALS, TERM_SIZES
 
     families = np.asarray(terms.families)
     polynomial, exponential, special = _SECONDS["cut"]
@@ -129,9 +129,9 @@ def _family_cost(terms) -> float:
 
 def _ranges(rectangle, pairs, pixels: int) -> np.ndarray:
     """``(S, 2)`` [d_lo, d_hi] + the pair's offset of a sample of (pixel, pair), metres."""
-    from .geometry import pair_table
-    from .kernels.formulas import LAMBERTIAN
-    from .kernels.isochrone import PixelBox, pair_frame, rectangle_range
+    from ..geometry import pair_table
+    from ..kernels.formulas import LAMBERTIAN
+    from ..kernels.isochrone import PixelBox, pair_frame, rectangle_range
 
     count = len(pairs)
     chosen = np.unique(np.linspace(0, count - 1, min(count, _SAMPLED_PAIRS)).round().astype(int))
@@ -177,7 +177,7 @@ def _breakpoints(kinks: np.ndarray, start: float, width: float, first: int, bins
 
 
 def model_cost(scene) -> ModelCost:
-    """The estimated cost of assembling the scene's A (:mod:`analytic.system`), from a sample of its ranges.
+    """The estimated cost of assembling the scene's A (:mod:`analytic.operator.system`), from a sample of its ranges.
 
     Parameters
     ----------
@@ -198,7 +198,7 @@ def model_cost(scene) -> ModelCost:
     scaled to every (pixel, pair) and divided among the threads.
     """
     from .blocks import thread_count
-    from .waveforms import make_waveform
+    from ..waveforms import make_waveform
 
     sampling = scene.sampling
     waveform = make_waveform(scene.illumination, sampling.bin_width_opl)
@@ -294,7 +294,7 @@ def impractical_illumination(scene, cost: ModelCost | None = None) -> str | None
 
 
 def _sample_spacing(illumination) -> float:
-    from .waveforms.measured import sample_width_metres
+    from ..waveforms.measured import sample_width_metres
 
     return sample_width_metres(illumination.sample_width, illumination.sample_width_ps)
 

@@ -4,7 +4,7 @@ For now every derivative is a finite difference of the exact model
 (Richardson-extrapolated central differences, the model assembled at
 tolerance :data:`TOLERANCE`), through the geometry door of
 :mod:`analytic.geometry`: a parameter moves the rectangle or the points of
-its pairs, and :func:`analytic.system.rectangle_matrix` assembles A again.
+its pairs, and :func:`analytic.operator.system.rectangle_matrix` assembles A again.
 An exact (analytic) derivative of a parameter replaces its entry in
 :data:`PARAMETERS` without changing the callers; the finite differences then
 become its test.
@@ -24,9 +24,9 @@ import re
 
 import numpy as np
 
-from .geometry import PointPairs, Rectangle, plane_geometry
+from ..geometry import PointPairs, Rectangle, plane_geometry
 from .system import rectangle_matrix
-from .waveforms import make_waveform
+from ..waveforms import make_waveform
 
 __all__ = ["derivative", "PARAMETERS", "TOLERANCE", "STEP"]
 

@@ -19,9 +19,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .attenuation import attenuation, attenuation_code
-from .kernels.isochrone import ellipse, make_frame
-from .scene import Scene
+from ..attenuation import attenuation, attenuation_code
+from ..kernels.isochrone import ellipse, make_frame
+from ..scenes.common import Scene
 
 __all__ = ["impulse_response", "binned_contour_model"]
 

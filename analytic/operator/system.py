@@ -78,26 +78,26 @@ from typing import NamedTuple
 import numpy as np
 import scipy.sparse
 
-from .attenuation import attenuation_code
-from .errors import ResourceError
-from .geometry import PointPairs, Rectangle, pair_table
-from .kernels import assembly
-from .kernels.assembly import Assembly, ImageGrid, Jobs, Slots, StepAssembly, auto_entries, pair_frame_of, pixel_box
-from .kernels.cache import compiled
-from .kernels.isochrone import rectangle_range
-from .kernels.quadrature import nested_integral_arguments, pixel_isochrone_integral
-from .kernels import routes
-from .kernels.routes import SAFETY, Route, TimeAxis, make_scratch, pixel_bins
+from ..attenuation import attenuation_code
+from ..errors import ResourceError
+from ..geometry import PointPairs, Rectangle, pair_table
+from ..kernels import assembly
+from ..kernels.assembly import Assembly, ImageGrid, Jobs, Slots, StepAssembly, auto_entries, pair_frame_of, pixel_box
+from ..kernels.cache import compiled
+from ..kernels.isochrone import rectangle_range
+from ..kernels.quadrature import nested_integral_arguments, pixel_isochrone_integral
+from ..kernels import routes
+from ..kernels.routes import SAFETY, Route, TimeAxis, make_scratch, pixel_bins
 from .blocks import run_blocks, thread_count
 from .cost import may_be_impractical, refuse_impractical_illumination
-from .resources import available_memory
-from .scene import MAX_TOLERANCE, MIN_TOLERANCE, Sampling, Scene, check_heights, check_tolerance
-from .waveforms import Waveform, make_waveform
+from ..resources import available_memory
+from ..scenes.common import MAX_TOLERANCE, MIN_TOLERANCE, Sampling, Scene, check_heights, check_tolerance
+from ..waveforms import Waveform, make_waveform
 
 __all__ = ["system_matrix", "rectangle_matrix", "forward", "count_entries", "check_tolerance", "pair_entries",
            "METHODS", "QuadratureWarning", "MIN_TOLERANCE", "MAX_TOLERANCE"]
 
-# The tolerance's range (analytic.scene.MIN_TOLERANCE, MAX_TOLERANCE): from
+# The tolerance's range (analytic.scenes.common.MIN_TOLERANCE, MAX_TOLERANCE): from
 # 1e-9 down, a few dozen τ-pieces near tangencies stop at the rounding of
 # their geometry (a QuadratureWarning says so); below 1e-10 the quadrature no
 # longer converges: on the default scene 1e-11 takes about 10 times the time
@@ -291,8 +291,8 @@ def system_matrix(scene: Scene, *, tolerance: float | None = None, memory_limit:
     SceneError
         A tolerance outside the supported range (``model.tolerance``), a
         source or sensor too low to resolve (see
-        :func:`analytic.scene.check_heights`), or an illumination that would
-        make A take impractically long (:func:`analytic.cost.impractical_illumination`:
+        :func:`analytic.scenes.common.check_heights`), or an illumination that would
+        make A take impractically long (:func:`analytic.operator.cost.impractical_illumination`:
         the estimate and what to change), as every command refuses it.
     ResourceError
         An A that does not fit in memory (the need and the limit named).

@@ -3,7 +3,7 @@
 Path length d(x) = |x − p_s| + |x − p_k| is convex on the plane, so its
 range over the plane is exact: the maximum at a corner, the minimum at the
 first-arrival point or on an edge (:func:`analytic.kernels.isochrone.rectangle_range`).
-The same holds for any scene's geometry (:meth:`analytic.scene.Scene.geometry`): a relay-wall
+The same holds for any scene's geometry (:meth:`analytic.scenes.common.Scene.geometry`): a relay-wall
 capture's hidden rectangle with the lit and read wall points as the foci, each
 pair's counted laser and sensor legs added (docs/design.md section 7).
 A window [t0, t0 + N T) holds all the light when it covers
@@ -26,10 +26,10 @@ import warnings
 
 import numpy as np
 
-from .geometry import PointPairs, Rectangle, pair_table
-from .kernels.formulas import LAMBERTIAN
-from .kernels.isochrone import PixelBox, pair_frame, rectangle_range
-from .scene import Sampling, Scene, SceneError
+from ..geometry import PointPairs, Rectangle, pair_table
+from ..kernels.formulas import LAMBERTIAN
+from ..kernels.isochrone import PixelBox, pair_frame, rectangle_range
+from ..scenes.common import Sampling, Scene, SceneError
 
 __all__ = ["response_range", "pairs_range", "covering_sampling", "auto_sampling", "window_share", "empty_bins",
            "warn_if_cut", "warn_if_mostly_empty", "WindowWarning", "FULL_SHARE", "impulse_totals"]
@@ -45,7 +45,7 @@ class WindowWarning(UserWarning):
 def response_range(scene: Scene) -> tuple[float, float]:
     """(first, last) path length from the source over the plane to any sensor, metres (exact).
 
-    For a relay-wall capture (:class:`analytic.relay_wall.RelayWallScene`): from a lit point over the
+    For a relay-wall capture (:class:`analytic.scenes.relay_wall.RelayWallScene`): from a lit point over the
     hidden rectangle to a read point, plus |o_l - l| + |s - o_s| when the scan counts those legs.
     """
     return pairs_range(*scene.geometry())
@@ -78,9 +78,9 @@ def covering_sampling(scene: Scene, bin_width_opl: float, *, margin: int = 0) ->
     SceneError
         When no window of this period can be made to cover the light (a
         pulse so long that its bins would not be numbers, or beyond what
-        :class:`~analytic.scene.Sampling` accepts).
+        :class:`~analytic.scenes.common.Sampling` accepts).
     """
-    from .waveforms import make_waveform
+    from ..waveforms import make_waveform
 
     low, high = response_range(scene)
     waveform = make_waveform(scene.illumination, bin_width_opl)
@@ -107,7 +107,7 @@ def auto_sampling(scene: Scene) -> Sampling:
 
 def _light_span(scene: Scene) -> tuple[float, float]:
     """(earliest, latest) path length at which light reaches any sensor, the pulse included, metres."""
-    from .waveforms import make_waveform
+    from ..waveforms import make_waveform
 
     low, high = response_range(scene)
     waveform = make_waveform(scene.illumination, scene.sampling.bin_width_opl)
@@ -153,9 +153,9 @@ def window_share(scene: Scene) -> float:
     as the pulse's energy ∫ s dt times the impulse's one bin that holds
     every path (so a pulse of any length needs no bin longer than the paths).
     """
-    from .scene import Illumination
+    from ..scenes.common import Illumination
     from .system import forward
-    from .waveforms import make_waveform
+    from ..waveforms import make_waveform
 
     sampling = scene.sampling
     low, high = response_range(scene)
@@ -181,7 +181,7 @@ def impulse_totals(scene: Scene) -> np.ndarray:
     a millionth); a bin of the scene's y, of any pulse of unit peak, is at most this times
     min(T, ∫|s| dt) (the bin's kernel is ∫_bin s, |s| <= 1), or this for the impulse.
     """
-    from .scene import Illumination
+    from ..scenes.common import Illumination
     from .system import forward
 
     low, high = response_range(scene)

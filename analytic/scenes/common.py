@@ -5,7 +5,7 @@ Every length is in metres and every time is an optical path length in metres
 dataclass is built, so a bad one fails with a :class:`SceneError` naming its
 scene-file key before anything is computed or written; sizes that would not
 fit in memory fail with a :class:`ResourceError` before anything is
-allocated. Reading and writing scene files is :mod:`analytic.scene_file`.
+allocated. Reading and writing scene files is :mod:`analytic.scenes.scene_file`.
 
 Limits (each a clean error, not a silently wrong number):
 
@@ -29,12 +29,12 @@ from typing import Any
 
 import numpy as np
 
-from .detector import Detector
-from .errors import SceneError
-from .geometry import ATTENUATIONS, plane_geometry
+from ..measurement.detector import Detector
+from ..errors import SceneError
+from ..geometry import ATTENUATIONS, plane_geometry
 from .reflectance import builtin_reflectance, reflectance_image
-from .resources import require_memory
-from .values import MAX_LENGTH, MIN_LENGTH, _integer, _number, exact
+from ..resources import require_memory
+from ..values import MAX_LENGTH, MIN_LENGTH, _integer, _number, exact
 
 __all__ = ["SceneError", "Illumination", "Sampling", "Noise", "Scene", "default_scene", "sensor_grid",
            "WAVEFORMS", "ATTENUATIONS", "NOISE_KINDS", "MAX_LENGTH", "MIN_LENGTH", "MIN_HEIGHT_FRACTION", "MAX_SENSORS", "MIN_TOLERANCE", "MAX_TOLERANCE",
@@ -222,7 +222,7 @@ class Illumination:
 
     def _check_sampled(self):
         """Samples from ``samples`` or ``file`` (exactly one), a spacing from exactly one key, a resolvable span."""
-        from .waveforms.measured import check_samples, finite_span, read_samples, sample_width_metres
+        from ..waveforms.measured import check_samples, finite_span, read_samples, sample_width_metres
 
         if self.file is not None and not isinstance(self.file, str):
             raise SceneError("illumination.file", f"expected a file name, got {self.file!r}")
@@ -370,7 +370,7 @@ class Scene:
         largest entry of its row. Default 1e-6.
     noise : Noise or None
         Noise for ``transient_noisy.npy``; None means noiseless.
-    detector : analytic.detector.Detector or None
+    detector : analytic.measurement.detector.Detector or None
         Photon counting for ``counts_expected.npy`` and ``counts.npy``
         (docs/design.md section 8); None: no counts.
     name : str
@@ -432,7 +432,7 @@ class Scene:
         if self.noise is not None and not isinstance(self.noise, Noise):
             raise SceneError("noise", "expected a Noise or None")
         if self.detector is not None and not isinstance(self.detector, Detector):
-            raise SceneError("detector", "expected an analytic.detector.Detector or None")
+            raise SceneError("detector", "expected an analytic.measurement.detector.Detector or None")
         if not isinstance(self.name, str):
             raise SceneError("name", f"expected a string, got {self.name!r}")
         # the name labels reports, figures and printed lines: one line of printable text

@@ -21,8 +21,8 @@ from typing import Any
 
 import numpy as np
 
-from .errors import ImageError, SceneError
-from .values import _number
+from ..errors import ImageError, SceneError
+from ..values import _number
 
 __all__ = ["builtin_reflectance", "read_reflectance", "reflectance_image", "regular_file_problem"]
 

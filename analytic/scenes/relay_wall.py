@@ -35,14 +35,14 @@ from typing import Any
 
 import numpy as np
 
-from .detector import Detector
-from .errors import SceneError
-from .geometry import PointPairs, Rectangle
-from .resources import require_memory
+from ..measurement.detector import Detector
+from ..errors import SceneError
+from ..geometry import PointPairs, Rectangle
+from ..resources import require_memory
 from .reflectance import reflectance_image
-from .scene import (MAX_INTENSITY, MAX_LENGTH, MIN_LENGTH, Illumination, Noise, Sampling, _choice, _integer, _number,
+from .common import (MAX_INTENSITY, MAX_LENGTH, MIN_LENGTH, Illumination, Noise, Sampling, _choice, _integer, _number,
                     check_tolerance)
-from .values import exact
+from ..values import exact
 
 __all__ = ["RelayWallScene", "Scan", "SCAN_TYPES", "MAX_PAIRS", "grid_points", "check_edges",
            "default_relay_wall_scene"]
@@ -209,7 +209,7 @@ class RelayWallScene:
         I, the laser's radiant intensity toward the wall, W/sr.
     scan : Scan
     illumination, sampling, tolerance, noise, detector, name
-        As for :class:`analytic.scene.Scene`.
+        As for :class:`analytic.scenes.common.Scene`.
     """
 
     wall_size: tuple = (2.0, 2.0)
@@ -257,7 +257,7 @@ class RelayWallScene:
         if self.noise is not None and not isinstance(self.noise, Noise):
             raise SceneError("noise", "expected a Noise or None")
         if self.detector is not None and not isinstance(self.detector, Detector):
-            raise SceneError("detector", "expected an analytic.detector.Detector or None")
+            raise SceneError("detector", "expected an analytic.measurement.detector.Detector or None")
         object.__setattr__(self, "tolerance", check_tolerance(self.tolerance))
         if not isinstance(self.name, str):
             raise SceneError("name", f"expected a string, got {self.name!r}")

@@ -1,5 +1,5 @@
-"""Scene files: TOML <-> :class:`analytic.scene.Scene` (docs/design.md section 5), or
-:class:`analytic.relay_wall.RelayWallScene` when the file has a ``[relay_wall]`` table (section 7).
+"""Scene files: TOML <-> :class:`analytic.scenes.common.Scene` (docs/design.md section 5), or
+:class:`analytic.scenes.relay_wall.RelayWallScene` when the file has a ``[relay_wall]`` table (section 7).
 
 Missing tables and keys take the defaults docs/design.md section 5 lists; an
 unknown key is an error, so a typo never falls back to a default. Every bad
@@ -19,12 +19,12 @@ from typing import Any
 
 import numpy as np
 
-from .detector import Detector
-from .errors import ImageError, SceneError
+from ..measurement.detector import Detector
+from ..errors import ImageError, SceneError
 from .reflectance import printable, read_reflectance, regular_file_problem
-from .scene import (_ILLUMINATION_KEYS, MAX_SENSORS, Illumination, Noise, Sampling, Scene, _integer, _number,
+from .common import (_ILLUMINATION_KEYS, MAX_SENSORS, Illumination, Noise, Sampling, Scene, _integer, _number,
                     _point, sensor_grid)
-from .values import exact
+from ..values import exact
 
 __all__ = ["load_scene", "read_toml", "scene_from_dict", "scene_to_tables", "MAX_FILE_BYTES"]
 
@@ -195,7 +195,7 @@ def _illumination(table: dict, base_dir) -> Illumination:
         if not isinstance(name, str) or not name:
             raise SceneError("illumination.file", f"expected a file name (.npy or .csv, relative to the scene "
                                                   f"file), got {name!r}")
-        from .waveforms.measured import HISTOGRAM_SUFFIXES, histogram_axis, read_samples
+        from ..waveforms.measured import HISTOGRAM_SUFFIXES, histogram_axis, read_samples
 
         path = Path(base_dir) / name
         table["samples"] = read_samples(path)
@@ -206,7 +206,7 @@ def _illumination(table: dict, base_dir) -> Illumination:
 
 def _histogram_spacing(table: dict, width: float, start: float) -> None:
     """A tal histogram's own spacing (the scene's must equal it) and, unless the scene sets one, its start."""
-    from .waveforms.measured import sample_width_metres
+    from ..waveforms.measured import sample_width_metres
 
     given = [key for key in ("sample_width", "sample_width_ps") if table.get(key) is not None]
     if not given:
@@ -346,7 +346,7 @@ def scene_to_tables(scene: Scene) -> dict:
 
 
 def load_scene(path: str | Path) -> Scene:
-    """Read a scene TOML file, or a tal render configuration (``.yaml``/``.yml``: :mod:`analytic.tal_config`).
+    """Read a scene TOML file, or a tal render configuration (``.yaml``/``.yml``: :mod:`interop.tal.config`).
 
     Parameters
     ----------
@@ -359,7 +359,7 @@ def load_scene(path: str | Path) -> Scene:
         Unreadable file, bad TOML, unknown key or bad value.
     """
     if isinstance(path, (str, Path)) and str(path) and Path(path).suffix.lower() in (".yaml", ".yml"):
-        from .tal_config import load_tal_config
+        from interop.tal.config import load_tal_config
 
         return load_tal_config(path)           # a tal render configuration (docs/tal.md)
     data = read_toml(path, "scene")

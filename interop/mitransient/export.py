@@ -33,7 +33,7 @@ along the ray, so path lengths come out short by 2r/3 (the mean of r cos θ
 over cosine-distributed directions) + 8.94e-5 m. ``diffuse-imaging check``
 finds exactly these as scale 1/4 and a positive offset.
 
-A relay-wall (NLOS) scene is written by :mod:`transient.export_relay_wall`
+A relay-wall (NLOS) scene is written by :mod:`interop.mitransient.export_relay_wall`
 (our ``transient_opl_nlos``, or mitransient's ``transient_nlos_path``).
 
 No Mitsuba import is needed to write the files.
@@ -47,12 +47,12 @@ from pathlib import Path
 import numpy as np
 
 from analytic.files import float32_problem
-from analytic.relay_wall import RelayWallScene
-from analytic.scene import Scene, SceneError
+from analytic.scenes.relay_wall import RelayWallScene
+from analytic.scenes.common import Scene, SceneError
 from analytic.values import exact
 
-from .intensity import emitter_intensity
-from .scene_xml import add as _add, add_entries, number as _number, point as _point, scene_text, \
+from transient.intensity import emitter_intensity
+from transient.scene_xml import add as _add, add_entries, number as _number, point as _point, scene_text, \
     textured_diffuse, transform as _transform, waveform_entries, write_scene_files
 
 __all__ = ["export_scene", "FORMATS", "RADIUS", "SPP", "SPP_RELAY_WALL", "plane_to_world_matrix",
@@ -60,7 +60,7 @@ __all__ = ["export_scene", "FORMATS", "RADIUS", "SPP", "SPP_RELAY_WALL", "plane_
 
 FORMATS = ("mitsuba", "mitransient")
 
-#: Default irradiancemeter sphere radius, metres (as validation/bench.py uses).
+#: Default irradiancemeter sphere radius, metres (as validation/runs/bench.py uses).
 RADIUS = 1e-3
 
 #: Default samples per irradiancemeter for mitransient (``$spp`` in the XML).
@@ -238,7 +238,7 @@ def export_scene(scene: Scene, out_dir: str | Path, format: str, *, radius: floa
         The scene. Our integrator renders either attenuation (written as its
         ``attenuation``); mitransient renders physical (``lambertian``)
         transport only, so ``paper`` is refused for it. A relay-wall scene
-        goes to :func:`transient.export_relay_wall.export_relay_wall`.
+        goes to :func:`interop.mitransient.export_relay_wall.export_relay_wall`.
     out_dir : str or Path
         Output folder (created).
     format : {"mitsuba", "mitransient"}

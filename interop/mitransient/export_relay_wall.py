@@ -45,10 +45,10 @@ from pathlib import Path
 import numpy as np
 
 from analytic.files import float32_problem
-from analytic.relay_wall import RelayWallScene
-from analytic.scene import SceneError
+from analytic.scenes.relay_wall import RelayWallScene
+from analytic.scenes.common import SceneError
 
-from .scene_xml import (add, add_entries, number, point, scene_text, textured_diffuse, transform, waveform_entries,
+from transient.scene_xml import (add, add_entries, number, point, scene_text, textured_diffuse, transform, waveform_entries,
                         write_scene_files)
 
 __all__ = ["export_relay_wall", "hidden_to_world_matrix", "wall_to_world_matrix", "MITRANSIENT_SCANS",

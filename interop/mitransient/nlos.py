@@ -33,10 +33,10 @@ import math
 
 import numpy as np
 
-from analytic.relay_wall import WALL_NORMAL, RelayWallScene
+from analytic.scenes.relay_wall import WALL_NORMAL, RelayWallScene
 from transient.constants import RAY_EPSILON
 
-from .conventions import Convention
+from validation.check.conventions import Convention
 
 __all__ = ["emulated_estimates", "spawn_offset_difference", "moved_read_points", "offset_model",
            "transient_nlos_path", "EMULATED_SAMPLES", "EDGE_POINTS"]
@@ -234,7 +234,7 @@ def offset_model(scene: RelayWallScene, *, world_offset=None, ray_epsilon: float
         :func:`moved_read_points` (same lit points, legs and scales), minus the strip (module docstring).
     """
     from analytic.geometry import PointPairs
-    from analytic.system import rectangle_matrix
+    from analytic.operator.system import rectangle_matrix
     from analytic.waveforms import make_waveform
 
     if scene.illumination.waveform != "impulse":
@@ -266,7 +266,7 @@ def transient_nlos_path(scene: RelayWallScene, *, model: np.ndarray | None = Non
         Scale 1, offset 0, and ``added`` = :func:`offset_model` minus the model: derived, no fitted
         parameter.
     """
-    from analytic.system import forward
+    from analytic.operator.system import forward
 
     model = forward(scene) if model is None else model
     return Convention(scale=1.0, offset_opl=0.0, added=offset_model(scene) - model,

@@ -40,7 +40,7 @@ The times are still measured from the source's emission (t = 0 when the
 pulse leaves p_s), the same ``start_opl`` as every other output. Checked:
 ``tal.reconstruct.bp`` (DIRECT_LIGHT camera) on our capture of a plane with
 one bright pixel focuses on that pixel with the flag False, and elsewhere
-with it True (tests/analytic/files/test_capture.py).
+with it True (tests/interop/tal/test_capture.py).
 """
 
 from __future__ import annotations
@@ -55,8 +55,8 @@ import numpy as np
 from analytic.errors import DataError
 from analytic.values import exact
 
-from .atomic import atomic_write
-from .formats import json_default
+from analytic.files.atomic import atomic_write
+from analytic.files.formats import json_default
 
 __all__ = ["Capture", "CaptureError", "write_capture", "read_capture", "H_FORMATS", "GRID_FORMATS",
            "VOLUME_FORMATS", "ACCOUNTS_FIRST_AND_LAST_BOUNCES"]

@@ -8,14 +8,14 @@ scene for mitransient's ``transient_nlos_path`` and an ``nlos_capture_meter``
 on the relay wall, and stores the capture as HDF5. What each key used here
 means there, and so here (docs/tal.md has the table):
 
-- every geometry's ``to_world`` (:mod:`analytic.tal_geometry`) is scale,
+- every geometry's ``to_world`` (:mod:`interop.tal.geometry`) is scale,
   then rotate about x, y, z (degrees, right-handed), then translate:
   T Rz Ry Rx S, each value through Python's
   ``or`` (a scale of 0 is 1); a ``rectangle`` is [-1, 1]² at z = 0 with normal
   +z; an OBJ ``filename`` is resolved against the working directory, and a
   planar OBJ polygon is its bounding rectangle with the polygon's indicator
   image as the reflectance, exact when its sides lie on the pixel grid
-  (:mod:`analytic.tal_mesh`; refused otherwise);
+  (:mod:`interop.tal.mesh`; refused otherwise);
 - the relay wall is a ``rectangle`` of ``scale_x`` x ``scale_y`` half sides at
   the origin facing +z; read points are the cell centres of a
   ``sensor_width`` x ``sensor_height`` grid over it; confocal and exhaustive
@@ -59,11 +59,11 @@ from typing import Any
 
 import numpy as np
 
-from .errors import SceneError
-from .relay_wall import RelayWallScene, Scan
-from .resources import require_memory
-from .scene import MAX_INTENSITY, Noise, Sampling, _integer, _number
-from .tal_geometry import check_extent, check_facing, geometries, hidden_rectangle, tal_or, wall_halves
+from analytic.errors import SceneError
+from analytic.scenes.relay_wall import RelayWallScene, Scan
+from analytic.resources import require_memory
+from analytic.scenes.common import MAX_INTENSITY, Noise, Sampling, _integer, _number
+from .geometry import check_extent, check_facing, geometries, hidden_rectangle, tal_or, wall_halves
 
 __all__ = ["TalScene", "TalConfigWarning", "load_tal_config", "tal_config_scene", "is_tal_config",
            "TAL_DEFAULTS", "TAL_VERSION"]
@@ -156,7 +156,7 @@ def load_tal_config(path: str | Path, *, cwd: str | Path | None = None) -> TalSc
     """
     import yaml
 
-    from .scene_file import read_text
+    from analytic.scenes.scene_file import read_text
 
     text, shown = read_text(path, "tal configuration", language="YAML")
     try:
@@ -409,7 +409,7 @@ def tal_config_scene(data: dict, *, name: str = "tal", config: str = "",
     pixels = _integer(f"{_OURS}.pixels", ours.get("pixels", 32))
     require_memory(8 * 8 * pixels**2, f"{_OURS}.pixels = {pixels}", "use fewer pixels")
     if outline is not None:
-        from .tal_mesh import indicator_image
+        from .mesh import indicator_image
 
         covered = indicator_image(outline, corner, u, v, pixels, f"{hidden_key}.mesh.filename",
                                   hidden["mesh"]["filename"], f"{_OURS}.pixels")

@@ -4,9 +4,9 @@ tal (y-tal 0.20.0) places every geometry by its ``to_world``: scale, then
 rotate about x, y, z (degrees), then translate, each value through Python's
 ``or`` (a scale of 0 is 1). The relay wall must be an unmoved, unrotated
 rectangle facing +z; the hidden surface is a rectangle or a planar OBJ
-(:mod:`analytic.tal_mesh`), which must lie in front of the wall, within the
+(:mod:`interop.tal.mesh`), which must lie in front of the wall, within the
 lengths float64 resolves, and face every scanned point
-(:mod:`analytic.tal_config` reads the rest of the configuration).
+(:mod:`interop.tal.config` reads the rest of the configuration).
 """
 
 from __future__ import annotations
@@ -17,10 +17,10 @@ from typing import Any
 
 import numpy as np
 
-from .errors import SceneError
-from .relay_wall import Scan, grid_points
-from .scene import MAX_LENGTH, MIN_LENGTH, _number
-from .values import exact
+from analytic.errors import SceneError
+from analytic.scenes.relay_wall import Scan, grid_points
+from analytic.scenes.common import MAX_LENGTH, MIN_LENGTH, _number
+from analytic.values import exact
 
 __all__ = ["GEOMETRY_KEYS", "tal_or", "to_world", "hidden_rectangle", "geometries", "wall_halves", "check_extent",
            "check_facing"]
@@ -59,8 +59,8 @@ def to_world(geometry: dict, key: str) -> tuple[np.ndarray, np.ndarray]:
 
 def hidden_rectangle(geometry: dict, key: str, cwd: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, Any]:
     """The hidden geometry's (corner, u, v), u x v along its lit normal, in world metres, and an OBJ's
-    outline (``(E, 2, 3)`` directed sides, for :func:`analytic.tal_mesh.indicator_image`; None for a rectangle)."""
-    from .tal_mesh import planar_polygon, read_obj
+    outline (``(E, 2, 3)`` directed sides, for :func:`interop.tal.mesh.indicator_image`; None for a rectangle)."""
+    from .mesh import planar_polygon, read_obj
 
     mesh = geometry.get("mesh")
     kind = mesh.get("type") if isinstance(mesh, dict) else None
@@ -163,7 +163,7 @@ def check_extent(corner, u, v, key: str) -> None:
 
 def check_facing(corner, u, v, halves, scan: Scan, laser: np.ndarray, key: str) -> None:
     """The hidden rectangle in front of the wall, its lit face toward every scanned point (the scene checks the
-    laser's and the sensor's lines: :meth:`analytic.relay_wall.RelayWallScene.blocked`)."""
+    laser's and the sensor's lines: :meth:`analytic.scenes.relay_wall.RelayWallScene.blocked`)."""
     corners = corner + np.array([[0, 0], [1, 0], [0, 1], [1, 1]]) @ np.array([u, v])
     if not np.all(corners[:, 2] > 0):
         raise SceneError(key, f"the hidden surface crosses or lies behind the relay wall (a corner at z = "

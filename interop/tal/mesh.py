@@ -30,8 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import SceneError
-from .values import MAX_LENGTH, MIN_LENGTH, exact
+from analytic.errors import SceneError
+from analytic.values import MAX_LENGTH, MIN_LENGTH, exact
 
 __all__ = ["read_obj", "planar_polygon", "indicator_image", "MAX_OBJ_BYTES"]
 
@@ -218,7 +218,7 @@ def indicator_image(edges: np.ndarray, corner: np.ndarray, u: np.ndarray, v: np.
     M x M pixel grid: the faces' coverage (the outline's winding number) is
     then constant over each pixel, and a pixel's column of A times 0 or 1 is
     the light of the part of the polygon over it. Row 0 is at v's far end
-    (the image convention of :class:`analytic.relay_wall.RelayWallScene`).
+    (the image convention of :class:`analytic.scenes.relay_wall.RelayWallScene`).
 
     Raises
     ------

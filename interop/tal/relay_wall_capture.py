@@ -1,6 +1,6 @@
 """A relay-wall (NLOS) transient as a tal capture: ``transient.h5`` in the layout ``tal render`` writes.
 
-tal keeps an NLOS capture in one HDF5 file (:mod:`analytic.files.capture`
+tal keeps an NLOS capture in one HDF5 file (:mod:`interop.tal.capture`
 reads it). For a relay-wall scene with a W x H scan grid (docs/design.md
 section 7) we write what ``tal render`` writes for the same scan
 (y-tal 0.20, ``tal/render/render.py`` and ``util.get_grid_xyz``):
@@ -35,11 +35,11 @@ from pathlib import Path
 
 import numpy as np
 
-from analytic.relay_wall import WALL_NORMAL, RelayWallScene
+from analytic.scenes.relay_wall import WALL_NORMAL, RelayWallScene
 
-from .atomic import atomic_write
+from analytic.files.atomic import atomic_write
 from .capture import GRID_FORMATS, H_FORMATS, _TAL_KEYS, _enum, read_capture
-from .formats import json_default
+from analytic.files.formats import json_default
 
 __all__ = ["write_relay_wall_capture", "relay_wall_layout"]
 
@@ -103,7 +103,7 @@ def write_relay_wall_capture(path: str | Path, transient, scene: RelayWallScene,
     ----------
     path : str or Path
         Destination (``transient.h5``); written to a temporary file in the
-        same folder, read back with :func:`analytic.files.read_capture` and
+        same folder, read back with :func:`interop.tal.read_capture` and
         compared (every sample, every read and lit point, the time axis and
         the flag), then renamed.
     transient : array_like

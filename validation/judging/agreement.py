@@ -1,4 +1,4 @@
-"""The verdict of a cross-check (:func:`validation.compare.compare_transients`) and its report.
+"""The verdict of a cross-check (:func:`validation.judging.compare.compare_transients`) and its report.
 
 :class:`Agreement` holds the verdict and every figure behind it: the
 normal scores, the two statistics and their acceptance limits, the null
@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from validation.directed import DirectedTests
+from validation.judging.directed import DirectedTests
 
 __all__ = ["Agreement", "SIGN_FLIP", "INDEPENDENT", "null_note", "detectable_text"]
 
@@ -65,7 +65,7 @@ class Agreement:
         Sign patterns drawn (0 for the independent-bins null).
     directed : DirectedTests or None
         The data's scale and offset tested against the model's
-        (:mod:`validation.directed`); None where the caller gave no
+        (:mod:`validation.judging.directed`); None where the caller gave no
         directions or too few bins are judged.
     """
 

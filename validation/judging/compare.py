@@ -16,7 +16,7 @@ acceptance limits:
 - max |z|, accepted up to a limit z*;
 
 and, given the model's derivatives along a scale and a time offset
-(``directions``), by the two directed tests of :mod:`validation.directed`,
+(``directions``), by the two directed tests of :mod:`validation.judging.directed`,
 which see a global scale error that χ² cannot at that count. The tests
 share the false-alarm rate α (default 1e-3) equally (Bonferroni: α/2 each
 without directed tests, α/4 each with them), so together they raise a
@@ -25,8 +25,8 @@ max |z| come from the sign flips of R independent replicas where R
 resolves χ²'s smallest tail (:func:`replica_null_resolves`), valid
 whatever the correlation between bins; otherwise from χ²(D) and Šidák,
 which assume independent bins, with a :class:`CorrelationWarning` where
-replicas were given (:mod:`validation.null_distribution` derives both).
-The verdict and its figures are an :class:`validation.agreement.Agreement`.
+replicas were given (:mod:`validation.judging.null_distribution` derives both).
+The verdict and its figures are an :class:`validation.judging.agreement.Agreement`.
 
 (With ν small the same |z| needs a larger |t|: a render's own error
 estimate is itself uncertain.) z is Gaussian only where the central limit theorem
@@ -50,10 +50,10 @@ from scipy import stats
 
 from analytic.errors import DataError, OptionError
 
-from validation.agreement import INDEPENDENT, SIGN_FLIP, Agreement, null_note
-from validation.arrays import false_alarm_rate, real_array, whole_number
-from validation.directed import directed_columns, directed_tests
-from validation.null_distribution import (FLIPS, MAX_FLIPS, TAIL_PATTERNS, flip_count, flips_needed,
+from validation.judging.agreement import INDEPENDENT, SIGN_FLIP, Agreement, null_note
+from validation.judging.arrays import false_alarm_rate, real_array, whole_number
+from validation.judging.directed import directed_columns, directed_tests
+from validation.judging.null_distribution import (FLIPS, MAX_FLIPS, TAIL_PATTERNS, flip_count, flips_needed,
                                           independent_limits, normal_scores, replica_deviations, replica_limits)
 
 __all__ = ["Agreement", "compare_transients", "normal_scores", "combined_dof", "replica_null_resolves",
@@ -77,11 +77,11 @@ def model_tolerance_for(tolerance: float, values, stderr, max_relative_stderr: f
     judged bin's standard error is under tolerance / :data:`MODEL_SHARE` of
     its value, the model's own error could fail data that are right (a 1 mm
     hidden square renders to 1e-12). Then: :data:`MODEL_SHARE` x the data's
-    smallest relative error, not below :data:`analytic.scene.MIN_TOLERANCE`
+    smallest relative error, not below :data:`analytic.scenes.common.MIN_TOLERANCE`
     (where the data are more precise still, :func:`tighter_model_note` says
     so).
     """
-    from analytic.scene import MIN_TOLERANCE
+    from analytic.scenes.common import MIN_TOLERANCE
 
     values, stderr = np.asarray(values, dtype=np.float64), np.asarray(stderr, dtype=np.float64)
     judged = (stderr > 0) & (stderr < max_relative_stderr * np.abs(values))
@@ -93,7 +93,7 @@ def model_tolerance_for(tolerance: float, values, stderr, max_relative_stderr: f
 
 def tighter_model_note(tolerance: float, scene_tolerance: float) -> str:
     """Why data were judged against the model at ``tolerance`` (:func:`model_tolerance_for`), in words."""
-    from analytic.scene import MIN_TOLERANCE
+    from analytic.scenes.common import MIN_TOLERANCE
 
     note = (f"model evaluated at tolerance {tolerance:g}, tighter than the scene's {scene_tolerance:g}: some bins' "
             f"standard errors are under {1 / MODEL_SHARE:g} x the scene's tolerance of their values")
@@ -127,10 +127,10 @@ def replica_null_resolves(replicas: int, false_alarm: float, tests: int = 2) -> 
     χ² and max |z| share α with the other tests (``tests`` in all: 2
     without directed tests, 4 with them), each α / tests, and χ²'s smallest
     tail is α / (2 tests). It must hold at least
-    :data:`validation.null_distribution.TAIL_PATTERNS` of the 2^(R-1)
+    :data:`validation.judging.null_distribution.TAIL_PATTERNS` of the 2^(R-1)
     distinct patterns (flipping every sign gives the same χ² and max |z|),
     and the patterns it needs must not exceed
-    :data:`validation.null_distribution.MAX_FLIPS`: R >= 15 at α = 1e-3
+    :data:`validation.judging.null_distribution.MAX_FLIPS`: R >= 15 at α = 1e-3
     without directed tests, R >= 16 with them; R >= 9 at α = 0.1.
     """
     omnibus = 2 * false_alarm / tests
@@ -140,7 +140,7 @@ def replica_null_resolves(replicas: int, false_alarm: float, tests: int = 2) -> 
 
 def fewest_replicas(false_alarm: float, tests: int = 2) -> int:
     """The fewest replicas whose sign flips give the limits (:func:`replica_null_resolves`), or 0 when
-    no number does (α too small for :data:`validation.null_distribution.MAX_FLIPS` patterns)."""
+    no number does (α too small for :data:`validation.judging.null_distribution.MAX_FLIPS` patterns)."""
     if flips_needed(2 * false_alarm / tests) > MAX_FLIPS:
         return 0
     count = 2
@@ -323,7 +323,7 @@ def compare_transients(rendered, stderr, model, *, dof=None, replicas=None, fals
         ``(2, K, N)`` the model's derivatives along a relative scale error
         (the model itself, less any stated additive part) and a time offset
         (per metre of path): the data's scale and offset are then tested
-        against the model's too (:mod:`validation.directed`), and the
+        against the model's too (:mod:`validation.judging.directed`), and the
         verdict states the errors it can detect
         (:attr:`Agreement.detectable`).
 

@@ -1,6 +1,6 @@
 """Directed tests: the data's scale and time offset against the stated ones, and the power they state.
 
-χ² and max |z| (:func:`validation.compare.compare_transients`) are
+χ² and max |z| (:func:`validation.judging.compare.compare_transients`) are
 omnibus tests: they see any difference, but a small global scale error
 spread over D bins moves χ²/D by only (its z)²/D. The directed tests look
 along the two differences a convention makes (docs/design.md section 6):

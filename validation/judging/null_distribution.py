@@ -1,6 +1,6 @@
 """Normal scores of t, and the null distribution that the cross-check's limits come from.
 
-:func:`validation.compare.compare_transients` judges two statistics of the
+:func:`validation.judging.compare.compare_transients` judges two statistics of the
 normal scores z of its D bins (:func:`normal_scores`): χ² = Σ z² inside a
 central interval, and max |z| under a limit z*. Where those limits come
 from (the *null distribution*) depends on what is known about the noise:
@@ -26,14 +26,14 @@ from (the *null distribution*) depends on what is known about the noise:
   most of the power against a global scale error is kept.
 - **Per-bin standard errors only** (no replicas), or too few replicas for
   2^(R-1) patterns to resolve the tail α/4
-  (:func:`validation.compare.replica_null_resolves`): the bins are
+  (:func:`validation.judging.compare.replica_null_resolves`): the bins are
   *assumed* independent, so the z are independent standard normals and χ²
   follows χ²(D) (interval [F⁻¹(α/4), F⁻¹(1 - α/4)]) and max |z| the Šidák
   limit z* = Φ⁻¹(1 - p/2), p = 1 - (1 - α/2)^(1/D)
   (:func:`independent_limits`). Correlated bins then raise false alarms
   above α; the verdict says which null it used
-  (:attr:`validation.agreement.Agreement.null`), and too few replicas raise
-  a :class:`validation.compare.CorrelationWarning`.
+  (:attr:`validation.judging.agreement.Agreement.null`), and too few replicas raise
+  a :class:`validation.judging.compare.CorrelationWarning`.
 """
 
 from __future__ import annotations

@@ -43,7 +43,7 @@ from pathlib import Path
 import numpy as np
 
 from analytic.files import atomic_write, save_json
-from analytic.scene import Sampling, Scene, default_scene, sensor_grid
+from analytic.scenes.common import Sampling, Scene, default_scene, sensor_grid
 from validation.plots import save_figure, speed_against_error_figure
 
 __all__ = ["plane_scene", "throughput_scene", "MitransientRuns", "run_mitransient", "device_name", "cpu_model",
@@ -83,12 +83,12 @@ import numpy as np, mitsuba as mi
 spec = np.load(sys.argv[1], allow_pickle=False)
 mi.set_variant(str(spec["variant"]))
 import mitransient
-from analytic.scene import Sampling
+from analytic.scenes.common import Sampling
 from transient.mitsuba_scene import mitransient_planes, mitransient_scene_dict
 sampling = Sampling(bin_width_opl=float(spec["bin_width_opl"]), start_opl=float(spec["start_opl"]),
                     count=int(spec["count"]))
 if spec["reflectance"].size:
-    from analytic.scene import Scene
+    from analytic.scenes.common import Scene
     plane = Scene(size=float(spec["size"]), pixels=spec["reflectance"].shape[0], reflectance=spec["reflectance"],
                   source=spec["source"], sensors=spec["sensors"], sampling=sampling)
     planes = mitransient_planes(plane)
@@ -254,7 +254,7 @@ def _relative(estimate, reference) -> float:
 
 
 def _model(scene: Scene, tolerance: float | None = None) -> tuple[np.ndarray, float]:
-    from analytic.system import QuadratureWarning, forward, system_matrix
+    from analytic.operator.system import QuadratureWarning, forward, system_matrix
 
     with warnings.catch_warnings():
         # The reference's own error (1e-8 relative) is far below every error measured.

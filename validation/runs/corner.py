@@ -6,7 +6,7 @@ the corner: one scene of two rectangles (:class:`analytic.geometry.Rectangle`,
 each lit face turned into the corner) and one set of point pairs (the
 source and each sensor). Nothing occludes a single bounce there, so the one-bounce
 transient is the sum over the rectangles of
-:func:`analytic.system.rectangle_matrix` times the albedo; light that
+:func:`analytic.operator.system.rectangle_matrix` times the albedo; light that
 bounces between the rectangles is outside the analytic model.
 :func:`check_corner` renders with max_depth = 1 (must agree with the model)
 and max_depth = 3 (reports the share of further bounces, and, when
@@ -22,8 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from analytic.geometry import PointPairs, Rectangle
-from analytic.scene import Illumination, Sampling, check_heights
-from analytic.system import rectangle_matrix
+from analytic.scenes.common import Illumination, Sampling, check_heights
+from analytic.operator.system import rectangle_matrix
 from analytic.waveforms import make_waveform
 
 __all__ = ["Corner", "default_corner", "corner_rectangles", "corner_pairs", "corner_model", "render_corner",
@@ -75,7 +75,7 @@ def corner_pairs(corner: Corner) -> PointPairs:
     ------
     SceneError
         The source or a sensor outside the corner, or too close to either
-        rectangle to resolve (:func:`analytic.scene.check_heights`, in each
+        rectangle to resolve (:func:`analytic.scenes.common.check_heights`, in each
         rectangle's frame).
     """
     sensors = np.asarray(corner.sensors, dtype=np.float64).reshape(-1, 3)
@@ -152,8 +152,8 @@ def corner_against_mitransient(corner: Corner, ours, *, samples: int = 2**20, re
     RuntimeError
         mitransient not installed or failing.
     """
-    from validation.bench import run_mitransient
-    from validation.compare import combined_dof, compare_transients
+    from validation.runs.bench import run_mitransient
+    from validation.judging.compare import combined_dof, compare_transients
 
     theirs = run_mitransient(source=corner.source, sensors=corner.sensors, sampling=corner.sampling,
                              samples=samples, seeds=range(seed, seed + replicas), max_depth=max_depth,
@@ -189,8 +189,8 @@ def check_corner(corner: Corner | None = None, *, spp: int = 2**22, seed: int = 
         the full render with the one-bounce model), ``mitransient`` (the
         independent check, or why it did not run), ``text``, ``arrays``.
     """
-    from validation.arrays import whole_number
-    from validation.compare import compare_transients
+    from validation.judging.arrays import whole_number
+    from validation.judging.compare import compare_transients
 
     if mitransient_samples is not None:
         mitransient_samples = whole_number("mitransient_samples", mitransient_samples, smallest=1)

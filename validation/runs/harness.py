@@ -4,11 +4,11 @@ For a scene, :func:`check_scene`
 
 1. assembles A and y = A f (the exact `lambertian` model);
 2. renders y with the Monte Carlo renderer at ``spp`` samples and judges
-   the difference with :func:`validation.compare.compare_transients`
+   the difference with :func:`validation.judging.compare.compare_transients`
    (docs/design.md section 6), its limits from the render's replicas (valid
    whatever the correlation between bins), the render's scale and time
    offset tested against the model's, and states the smallest such errors
-   it can detect (:attr:`validation.agreement.Agreement.detectable`);
+   it can detect (:attr:`validation.judging.agreement.Agreement.detectable`);
 3. shows that the model's own quadrature error is far below the render's
    noise: y at looser tolerances against y at 1e-7, over each judged bin's
    standard error;
@@ -34,13 +34,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from analytic.errors import SceneError
-from analytic.response import impulse_response
-from analytic.scene import Scene
-from analytic.system import QuadratureWarning, forward, system_matrix
+from analytic.operator.response import impulse_response
+from analytic.scenes.common import Scene
+from analytic.operator.system import QuadratureWarning, forward, system_matrix
 from validation.check.fit import ShiftedModel
 from validation.check.readers import scene_of
 from validation.check.verdict import DERIVATIVE_STEP
-from validation.compare import Agreement, compare_transients, model_tolerance_for, tighter_model_note
+from validation.judging.compare import Agreement, compare_transients, model_tolerance_for, tighter_model_note
 
 __all__ = ["SceneCheck", "check_scene", "refuse_dark", "imaging_problem", "simplification_costs", "model_convergence",
            "noise_sigma", "data_driven_rule", "reconstruct_from_noisy_data"]
@@ -199,7 +199,7 @@ def reconstruct_from_noisy_data(matrix, scene: Scene, model: np.ndarray, rendere
     """
     from analytic.inversion import (RankDeficiencyWarning, RegularizationWarning, flat_image_psnr, image_metrics,
                                     reconstruct)
-    from analytic.noise import add_noise
+    from analytic.measurement.noise import add_noise
 
     truth = scene.reflectance
     pixels = scene.pixels
@@ -282,7 +282,7 @@ def imaging_problem(scene) -> str | None:
     noiseless data (the spad example read 235 dB from the model's data and
     -26 dB from the render's).
     """
-    from analytic.relay_wall import RelayWallScene
+    from analytic.scenes.relay_wall import RelayWallScene
 
     if scene.sensor_count >= 2:
         return None
@@ -295,9 +295,9 @@ def refuse_dark(scene, share: float) -> None:
     """Refuse a scene whose sensors get no light in the window: model and render would both be exactly zero,
     with nothing to judge the render by (every standard error zero) and no image to recover.
 
-    ``share`` is the window's share of the light (:func:`analytic.window.window_share`).
+    ``share`` is the window's share of the light (:func:`analytic.operator.window.window_share`).
     """
-    from analytic.relay_wall import RelayWallScene
+    from analytic.scenes.relay_wall import RelayWallScene
 
     relay_wall = isinstance(scene, RelayWallScene)
     if relay_wall and scene.wall_reflectance == 0:
@@ -321,7 +321,7 @@ def check_scene(scene: Scene, *, spp: int, seed: int = 0, convergence: bool = Tr
 
     Parameters
     ----------
-    scene : Scene, analytic.relay_wall.RelayWallScene, str or Path
+    scene : Scene, analytic.scenes.relay_wall.RelayWallScene, str or Path
         A one-plane scene, or a capture through a relay wall (its pairs as
         the sensors, the hidden image as the image), or its file.
     spp : int
@@ -343,11 +343,11 @@ def check_scene(scene: Scene, *, spp: int, seed: int = 0, convergence: bool = Tr
         The λ grid the rules search (default: from A's singular values).
     share : float, optional
         The window's share of the light, when the caller has it
-        (:func:`analytic.window.window_share`, computed here otherwise).
+        (:func:`analytic.operator.window.window_share`, computed here otherwise).
     """
     from transient.render import render
 
-    from analytic.window import warn_if_cut, window_share
+    from analytic.operator.window import warn_if_cut, window_share
 
     scene = scene_of(scene)          # spp and seed: the renderer refuses them (OptionError) before any work
     timings = {}

@@ -3,7 +3,7 @@
 Set-up (paper Section VI): the default scene's plane (L = 1 m, M = 50, the
 built-in reflectance), the source 1 m above its centre, a 4 x 4 sensor array
 of extent W centred on the source at the same height, bins of width T
-covering every path (:func:`analytic.window.covering_sampling`),
+covering every path (:func:`analytic.operator.window.covering_sampling`),
 Gaussian noise σ = 0.1 per sample, λ by the oracle rule (the ℓ2-error
 minimiser, as the paper uses). Illuminations: "impulsive" = unit-amplitude
 square of width T/5 (the paper's stand-in for [1]'s short pulse); "low-pass"
@@ -27,15 +27,15 @@ from pathlib import Path
 
 import numpy as np
 
-from analytic.conditioning import conditioning_summary, scene_for, singular_values
+from analytic.operator.conditioning import conditioning_summary, scene_for, singular_values
 from analytic.inversion import flat_image_psnr, image_metrics, reconstruct
 from analytic.files import save_json, staged_writes
-from analytic.noise import add_noise
-from analytic.scene import Illumination, Noise, default_scene
-from analytic.system import system_matrix
+from analytic.measurement.noise import add_noise
+from analytic.scenes.common import Illumination, Noise, default_scene
+from analytic.operator.system import system_matrix
 from analytic.waveforms import make_waveform
 from validation.plots import conditioning_figure, panels_figure, save_figure
-from validation.report import write_markdown
+from validation.runs.report import write_markdown
 
 __all__ = ["PAPER_DEVICE", "device_figures", "run_cases", "poisson_cases", "check_claims", "reproduce"]
 

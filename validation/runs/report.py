@@ -28,8 +28,8 @@ import re
 from pathlib import Path
 
 from analytic.files import save_json, save_text
-from analytic.window import FULL_SHARE
-from analytic.relay_wall import RelayWallScene
+from analytic.operator.window import FULL_SHARE
+from analytic.scenes.relay_wall import RelayWallScene
 from validation.plots import (WallScan, convergence_figure, reconstructions_figure, relay_wall_figure, save_figure,
                               transients_figure, z_map_figure)
 from validation.plots.worker import FigureWorker
@@ -261,7 +261,7 @@ def write_report(out: Path, checks: list, corner: dict | None = None, *, false_a
     checks : list of SceneCheck
         The scenes, in report order.
     corner : dict, optional
-        :func:`validation.corner.check_corner`'s result.
+        :func:`validation.runs.corner.check_corner`'s result.
     false_alarm : float
         α, the false-alarm rate per scene the verdicts used.
     headline : bool

@@ -20,10 +20,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from analytic.reflectance import builtin_reflectance
-from analytic.relay_wall import RelayWallScene, Scan
-from analytic.scene import Illumination, Sampling, Scene
-from analytic.window import covering_sampling, response_range
+from analytic.scenes.reflectance import builtin_reflectance
+from analytic.scenes.relay_wall import RelayWallScene, Scan
+from analytic.scenes.common import Illumination, Sampling, Scene
+from analytic.operator.window import covering_sampling, response_range
 
 __all__ = ["hard_cases", "relay_wall_cases", "validation_suite", "MINIMUM_SAMPLES", "RELAY_WALL_SAMPLES"]
 
@@ -129,10 +129,10 @@ def validation_suite() -> list[tuple[Scene, int]]:
     The default scene under each illumination, every hard case, a large M,
     and the relay-wall captures (:func:`relay_wall_cases`); the corner
     (outside the one-bounce model) is run separately by
-    :func:`validation.corner.check_corner`. Sample counts keep the whole run
+    :func:`validation.runs.corner.check_corner`. Sample counts keep the whole run
     within a few minutes on 2 cores.
     """
-    from analytic.scene import default_scene
+    from analytic.scenes.common import default_scene
 
     suite = []
     for waveform in ("impulse", "square", "butterworth"):

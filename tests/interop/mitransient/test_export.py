@@ -1,4 +1,4 @@
-"""transient.export: the scene as Mitsuba 3 XML, rendered by our plugins and by mitransient.
+"""interop.mitransient.export: the scene as Mitsuba 3 XML, rendered by our plugins and by mitransient.
 
 References: for ``--format mitsuba``, the same scene built in memory by
 ``transient.mitsuba_scene`` and rendered by :func:`transient.render.render`
@@ -23,9 +23,9 @@ import numpy as np
 import OpenEXR
 import pytest
 
-from analytic.scene import Illumination, Sampling, Scene, SceneError
+from analytic.scenes.common import Illumination, Sampling, Scene, SceneError
 from scene_files import write_scene_file
-from transient.export import RADIUS, export_scene, plane_to_world_matrix
+from interop.mitransient.export import RADIUS, export_scene, plane_to_world_matrix
 from validation.cli import main
 from validation import assert_agrees
 
@@ -164,7 +164,7 @@ def run_command(*argv) -> int:
 @needs_mitransient
 # 8 (4) mitransient seeds are too few replicas for sign flips: the independent-bin limits and their
 # CorrelationWarning are expected here (tests/validation/test_compare.py tests that fallback).
-@pytest.mark.filterwarnings("ignore::validation.compare.CorrelationWarning")
+@pytest.mark.filterwarnings("ignore::validation.judging.compare.CorrelationWarning")
 def test_mitransient_renders_of_the_exported_scene_check_after_the_fit(tmp_path):
     """The README's round trip: export, render in mitransient, check.
 
@@ -194,7 +194,7 @@ def test_mitransient_renders_of_the_exported_scene_check_after_the_fit(tmp_path)
 @needs_mitransient
 # 8 (4) mitransient seeds are too few replicas for sign flips: the independent-bin limits and their
 # CorrelationWarning are expected here (tests/validation/test_compare.py tests that fallback).
-@pytest.mark.filterwarnings("ignore::validation.compare.CorrelationWarning")
+@pytest.mark.filterwarnings("ignore::validation.judging.compare.CorrelationWarning")
 def test_mitransient_save_frames_folders_are_replicas(tmp_path):
     """mitransient.vis.save_frames writes 000.exr ... per bin: one sensor's film, one folder per seed."""
     scene_file = write_scene_file(tmp_path, small_scene(sensors=[(0.8, 0.3, 1.0)]))

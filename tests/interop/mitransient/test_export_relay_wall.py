@@ -1,12 +1,12 @@
-"""transient.export_relay_wall: a relay-wall capture as Mitsuba 3 XML, rendered by our plugin and by mitransient.
+"""interop.mitransient.export_relay_wall: a relay-wall capture as Mitsuba 3 XML, rendered by our plugin and by mitransient.
 
 References: for ``--format mitsuba``, the same scene built in memory
 (``transient.mitsuba_scene.relay_wall_scene_dict``) and rendered by the same
 plugin with the same samples; for ``--format mitransient``, mitransient
 itself (the exported README's script, run as written in a subprocess),
 judged against the exact model and against mitransient's estimator in
-closed form (validation.check.mitransient_nlos, held to an emulation of its
-code in tests/validation/check/test_mitransient_nlos.py).
+closed form (interop.mitransient.nlos, held to an emulation of its
+code in tests/interop/mitransient/test_nlos.py).
 """
 
 from __future__ import annotations
@@ -25,9 +25,9 @@ import OpenEXR
 import pytest
 from scene_files import write_relay_wall_file
 
-from analytic.relay_wall import RelayWallScene, Scan
-from analytic.scene import Illumination, Sampling, SceneError
-from transient.export import export_scene
+from analytic.scenes.relay_wall import RelayWallScene, Scan
+from analytic.scenes.common import Illumination, Sampling, SceneError
+from interop.mitransient.export import export_scene
 from validation.cli import main
 
 needs_mitransient = pytest.mark.skipif(importlib.util.find_spec("mitransient") is None,
@@ -184,8 +184,9 @@ def test_mitransient_renders_of_the_export_agree_once_its_ray_offsets_are_stated
     estimator in closed form (``--expect transient_nlos_path``, no fitted parameter) it agrees, and a fit
     against that expectation finds scale 1 and offset 0 within their errors.
     """
-    from analytic.system import forward
-    from validation.check import check_transient, offset_model, read_data
+    from analytic.operator.system import forward
+    from validation.check import check_transient, read_data
+    from interop.mitransient import offset_model
 
     scene = scene_of(scan=scan)
     scene_file = write_relay_wall_file(tmp_path, scene)

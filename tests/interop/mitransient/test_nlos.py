@@ -11,11 +11,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from analytic.relay_wall import RelayWallScene, Scan
-from analytic.scene import Sampling
-from analytic.system import forward
-from validation.check import emulated_estimates, moved_read_points, offset_model, spawn_offset_difference
-from validation.check import mitransient_nlos
+from analytic.scenes.relay_wall import RelayWallScene, Scan
+from analytic.scenes.common import Sampling
+from analytic.operator.system import forward
+from interop.mitransient import emulated_estimates, moved_read_points, offset_model, spawn_offset_difference
+from interop.mitransient import nlos as mitransient_nlos
 
 EPSILON = 2e-3
 
@@ -69,7 +69,7 @@ def test_the_closed_form_is_mitransients_estimator():
 
 
 def test_only_the_impulse_is_stated():
-    from analytic.scene import Illumination
+    from analytic.scenes.common import Illumination
 
     scene = scene_of(illumination=Illumination(waveform="square"))
     with pytest.raises(ValueError, match="impulse"):

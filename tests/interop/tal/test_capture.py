@@ -1,4 +1,4 @@
-"""transient.h5 in tal's HDF5 capture layout (analytic.files.capture), read back by tal itself.
+"""transient.h5 in tal's HDF5 capture layout (interop.tal.capture), read back by tal itself.
 
 tal (y-tal) pins numpy < 2 and Pillow 10.3.0, so it lives in its own virtual
 environment, ``.venv-tal`` (``scripts/setup_interop.sh``); the tests that need
@@ -16,10 +16,10 @@ import h5py
 import numpy as np
 import pytest
 
-from analytic.files import capture as capture_module
-from analytic.files import CaptureError, read_capture, write_capture
-from analytic.scene import Sampling, Scene, sensor_grid
-from analytic.system import forward
+from interop.tal import capture as capture_module
+from interop.tal import CaptureError, read_capture, write_capture
+from analytic.scenes.common import Sampling, Scene, sensor_grid
+from analytic.operator.system import forward
 from analytic.errors import DataError
 from tal_env import TAL_READ, needs_tal, run_tal
 from validation.check import read_data
@@ -237,7 +237,7 @@ print(int(np.argmax(np.abs(np.asarray(image)))))
 
 @needs_tal
 def test_tal_backprojection_focuses_on_the_bright_pixel(tmp_path):
-    """Our path lengths are tal's d_2 + d_3 with the flag False (analytic.files.capture's docstring).
+    """Our path lengths are tal's d_2 + d_3 with the flag False (interop.tal.capture's docstring).
 
     A plane dark but for one pixel: tal's backprojection of our capture
     peaks on that pixel as written (flag False), and elsewhere when the

@@ -1,6 +1,6 @@
 """tal render configurations (YAML) read as the scene tal renders: every key's meaning, and the refusals.
 
-The expected poses are built here independently of analytic.tal_config: the
+The expected poses are built here independently of interop.tal.config: the
 transform by SciPy's extrinsic x-y-z Euler rotation (Rz Ry Rx), the grid
 and lookat points from tal's formulas written out.
 """
@@ -15,8 +15,8 @@ import yaml
 from scipy.spatial.transform import Rotation
 
 from analytic.errors import SceneError
-from analytic.scene_file import load_scene
-from analytic.tal_config import TalConfigWarning, TalScene, load_tal_config, tal_config_scene
+from analytic.scenes.scene_file import load_scene
+from interop.tal.config import TalConfigWarning, TalScene, load_tal_config, tal_config_scene
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples" / "tal"
 

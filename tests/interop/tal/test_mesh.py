@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from analytic.errors import SceneError
-from analytic.tal_mesh import planar_polygon, read_obj
+from interop.tal.mesh import planar_polygon, read_obj
 
 KEY = "geometry[m].mesh.filename"
 SQUARE = "v -{s} -{s} 0\nv {s} -{s} 0\nv {s} {s} 0\nv -{s} {s} 0\nf 1 2 3 4\n"

@@ -1,4 +1,4 @@
-"""A relay-wall transient as tal's NLOS capture (analytic.files.relay_wall_capture), read back by tal itself.
+"""A relay-wall transient as tal's NLOS capture (interop.tal.relay_wall_capture), read back by tal itself.
 
 The independent references: tal's own reader (``tal.io.read_capture``, in
 ``.venv-tal``: tal pins numpy < 2) for our files, tal's own writer and grid
@@ -17,10 +17,10 @@ import pytest
 from tal_env import TAL_READ, needs_tal, run_tal
 
 from analytic.errors import DataError
-from analytic.files import read_capture, write_relay_wall_capture
-from analytic.files import relay_wall_capture as module
-from analytic.relay_wall import RelayWallScene, Scan
-from analytic.scene import Sampling
+from interop.tal import read_capture, write_relay_wall_capture
+from interop.tal import relay_wall_capture as module
+from analytic.scenes.relay_wall import RelayWallScene, Scan
+from analytic.scenes.common import Sampling
 from validation.check import read_data
 
 SCANS = {

@@ -1,0 +1,27 @@
+"""Other tools' files: tal's YAML scenes, OBJ meshes and HDF5 captures; Mitsuba 3 / mitransient XML and films.
+
+The exact model (:mod:`analytic`) imports none of it: what it offers the
+model (a tal configuration as a scene, a tal histogram as an instrument
+response) it registers with the model's readers by file suffix
+(:mod:`analytic.scenes.readers`), which load it on the first file of that
+kind. Two sub-packages, one per tool family:
+
+- :mod:`interop.tal`: tal's render configuration (YAML) and the OBJ meshes
+  it names, read as the relay-wall scene tal renders; tal's HDF5 capture
+  layout, written and read;
+- :mod:`interop.mitransient`: a scene as Mitsuba 3 XML for our plugins or
+  mitransient's, mitransient's developed films read as transients, and what
+  its NLOS integrator renders (the model plus its ray offsets).
+
+Names are loaded on first use (``lazy_loader``, as in every package of this
+project); ``__all__`` lists the public API.
+"""
+
+import lazy_loader
+
+__getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
+    "tal.config": ["TalScene", "TalConfigWarning", "load_tal_config"],
+    "tal.capture": ["Capture", "CaptureError", "write_capture", "read_capture"],
+    "tal.relay_wall_capture": ["write_relay_wall_capture"],
+    "mitransient.export": ["export_scene"],
+})

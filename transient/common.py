@@ -64,7 +64,7 @@ def erfcx(v):
 
 
 def _piece_index(terms: WaveformTerms, u):
-    """Index of the piece holding u (-1 where S = 0), as analytic.waveforms.piece_of: the count of starts below u."""
+    """Index of the piece holding u (-1 where S = 0), as analytic.kernels.pieces.piece_of: the count of starts below u."""
     index = mi.Int32(-1)
     for start in terms.starts:
         index += dr.select(u > float(start), mi.Int32(1), mi.Int32(0))
@@ -197,7 +197,7 @@ def height_over_cube(x, y, point):
 
 
 def attenuation(x, y, source, sensor, mode: int = LAMBERTIAN):
-    """a_k(x) at plane points, 1/m⁴: :func:`analytic.attenuation.attenuation_formula` in Dr.Jit.
+    """a_k(x) at plane points, 1/m⁴: :func:`analytic.kernels.formulas.attenuation_formula` in Dr.Jit.
 
     Parameters
     ----------

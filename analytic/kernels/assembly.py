@@ -245,7 +245,7 @@ def _finish(outcome, frame, box, column, terms, axis, rtol, out, scratch):
     """(served, exact column): the moments of what :func:`_step_column` left; ``served`` False leaves it.
 
     A ``_MOMENTS`` pixel first takes its moments over the bound; then, as
-    :func:`analytic.kernels.routes.general_entries` begins, a pixel clear of the
+    the general routes begin (:func:`analytic.kernels.routes.route_entries`), a pixel clear of the
     feet whose exact range no breakpoint cuts takes its moments over that range.
     """
     run = column.run
@@ -491,9 +491,8 @@ DIRECT_APPLIES, STRIPS_APPLY = 1, 2
 def job_routes(problem, jobs, routes):
     """routes[j]: which general routes apply to left (pixel, pair) j (:data:`DIRECT_APPLIES` | :data:`STRIPS_APPLY`).
 
-    Cheap geometric tests (no quadrature), so that each route's kernel is compiled only when some job
-    needs it; the cut route applies to every job. The order is
-    :func:`analytic.kernels.routes.general_entries`'.
+    Cheap geometric tests (no quadrature), which say what each route is tried on; the cut route
+    applies to every job. :mod:`analytic.system` tries the direct route, then strips, then the cut route.
     """
     axis = problem.axis
     for j in range(jobs.pairs.size):

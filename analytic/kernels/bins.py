@@ -96,7 +96,7 @@ def kernel_values(problem, tau, scale, values, noise):
     """values[i] = scale κ_{first + i}(τ), i < bins, and noise[i] a bound on its rounding.
 
     κ_n = S(t_{n+1} - τ) - S(t_n - τ), taken piece by piece
-    (:func:`analytic.waveforms.kernel_scalar`): within one piece the
+    (as :func:`analytic.waveforms.pieces.kernel_array` in NumPy): within one piece the
     constants cancel exactly, so a kernel far in a pulse's tail keeps its
     own relative accuracy; the rounding bound counts each term's size.
     """

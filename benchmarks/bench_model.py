@@ -320,7 +320,7 @@ def main():
     results = {"machine": machine(), "load_average_start": load(), "before": args.before}
     print(f"machine: {results['machine']}; load average at start {results['load_average_start']} "
           f"(shared machine: timings provisional)\n")
-    for package in ("analytic", "transient", "validation"):  # as scripts/setup.sh does
+    for package in ("analytic", "transient", "validation", "interop"):  # as scripts/setup.sh does
         compileall.compile_dir(ROOT / package, quiet=1)
     system_matrix(default_scene(pixels=2, noise=None))       # compile or load the cached kernels
     work = Path(tempfile.mkdtemp(prefix="bench_model_"))

@@ -1,10 +1,9 @@
 """Other tools' files: tal's YAML scenes, OBJ meshes and HDF5 captures; Mitsuba 3 / mitransient XML and films.
 
-The exact model (:mod:`analytic`) imports none of it: what it offers the
-model (a tal configuration as a scene, a tal histogram as an instrument
-response) it registers with the model's readers by file suffix
-(:mod:`analytic.scenes.readers`), which load it on the first file of that
-kind. Two sub-packages, one per tool family:
+The exact model (:mod:`analytic`) reaches it only where a user hands it one
+of these files (a tal configuration as a scene, a tal histogram as an
+instrument response, a transient written as tal's HDF5), on first use.
+Two sub-packages, one per tool family:
 
 - :mod:`interop.tal`: tal's render configuration (YAML) and the OBJ meshes
   it names, read as the relay-wall scene tal renders; tal's HDF5 capture

@@ -492,7 +492,7 @@ def job_routes(problem, jobs, routes):
     """routes[j]: which general routes apply to left (pixel, pair) j (:data:`DIRECT_APPLIES` | :data:`STRIPS_APPLY`).
 
     Cheap geometric tests (no quadrature), which say what each route is tried on; the cut route
-    applies to every job. :mod:`analytic.system` tries the direct route, then strips, then the cut route.
+    applies to every job. :mod:`analytic.operator.system` tries the direct route, then strips, then the cut route.
     """
     axis = problem.axis
     for j in range(jobs.pairs.size):

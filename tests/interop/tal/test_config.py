@@ -18,7 +18,7 @@ from analytic.errors import SceneError
 from analytic.scenes.scene_file import load_scene
 from interop.tal.config import TalConfigWarning, TalScene, load_tal_config, tal_config_scene
 
-EXAMPLES = Path(__file__).resolve().parents[2] / "examples" / "tal"
+EXAMPLES = Path(__file__).resolve().parents[3] / "examples" / "tal"
 
 WALL = {"name": "relay_wall", "mesh": {"type": "rectangle"}, "displacement_x": 0.0, "displacement_y": 0.0,
         "displacement_z": 0.0, "scale_x": 1, "scale_y": 1, "material": {"id": "white"}}

@@ -1,8 +1,8 @@
 """Scalar values of scene tables, checked: a finite number (a length within range), a whole number.
 
 Each helper raises :class:`~analytic.errors.SceneError` naming the key, so
-every table's dataclass (:mod:`analytic.scene`, :mod:`analytic.detector`,
-:mod:`analytic.relay_wall`) says what is wrong the same way.
+every table's dataclass (:mod:`analytic.scenes.common`, :mod:`analytic.measurement.detector`,
+:mod:`analytic.scenes.relay_wall`) says what is wrong the same way.
 """
 
 from __future__ import annotations

@@ -23,13 +23,13 @@ from pathlib import Path
 
 import numpy as np
 
-from analytic.detector import Detector, draw_counts
+from analytic.measurement.detector import Detector, draw_counts
 from analytic.files import save_json
 from analytic.inversion import RankDeficiencyWarning, RegularizationWarning, flat_image_psnr, image_metrics
 from analytic.inversion.poisson import compare_to_map, reconstruct_counts
-from analytic.scene import default_scene
-from analytic.system import system_matrix
-from validation.bench import cpu_model
+from analytic.scenes.common import default_scene
+from analytic.operator.system import system_matrix
+from validation.runs.bench import cpu_model
 
 LEVELS = (10.0, 1e2, 1e3, 1e4, 1e5)
 CYCLES = 1e4

@@ -60,10 +60,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import numpy as np  # noqa: E402
 
 from analytic.files import save_json  # noqa: E402
-from analytic.scene import default_scene  # noqa: E402
-from analytic.system import MIN_TOLERANCE, QuadratureWarning, system_matrix  # noqa: E402
+from analytic.scenes.common import default_scene  # noqa: E402
+from analytic.operator.system import MIN_TOLERANCE, QuadratureWarning, system_matrix  # noqa: E402
 from supersampled import supersampled  # noqa: E402
-from validation.bench import cpu_model  # noqa: E402
+from validation.runs.bench import cpu_model  # noqa: E402
 
 FORWARD = "{python} -m validation.cli forward {scene} --out {out} --quiet"
 BRUTE = ("{python} " + str(Path(__file__).resolve().parent / "supersampled.py")
@@ -148,8 +148,8 @@ def child(code: str, root: Path = ROOT) -> dict:
 
 SCALING = """
 import time, json, resource, warnings
-from analytic.scene_file import load_scene
-from analytic.system import system_matrix
+from analytic.scenes.scene_file import load_scene
+from analytic.operator.system import system_matrix
 
 def resident_kib(field):
     with open("/proc/self/status") as handle:
@@ -169,7 +169,7 @@ matrix = system_matrix(scene, statistics=statistics)
 wall = time.perf_counter() - wall
 cpu = time.process_time() - cpu
 peak = resident_kib("VmHWM")
-from analytic.scene import Sampling
+from analytic.scenes.common import Sampling
 uncut = scene.replace(sampling=Sampling(bin_width_opl=100.0, start_opl=0.0, count=1))
 uncut_statistics = {{}}
 uncut_cpu = time.process_time()
@@ -184,8 +184,8 @@ print(json.dumps(dict(seconds=wall, cpu_seconds=cpu, nnz=int(matrix.nnz), rss_be
 
 IN_PROCESS = """
 import json, time
-from analytic.scene import default_scene
-from analytic.system import system_matrix
+from analytic.scenes.common import default_scene
+from analytic.operator.system import system_matrix
 from supersampled import supersampled
 
 def best(function, repeats):
@@ -208,19 +208,19 @@ for pixels, factor in ((50, 32), (256, 8)):
 print(json.dumps(rows))
 """
 
-WARM = "{python} -c 'from analytic.scene import default_scene; from analytic.system import forward; " \
+WARM = "{python} -c 'from analytic.scenes.common import default_scene; from analytic.operator.system import forward; " \
        "forward(default_scene(pixels=4, noise=None))'"
 
 # What a fresh clone compiles: A's assembly (the set-up's warm-up), then the routes only the tests call
 COMPILE_ASSEMBLY = """
-from analytic.scene import default_scene
-from analytic.system import system_matrix
+from analytic.scenes.common import default_scene
+from analytic.operator.system import system_matrix
 system_matrix(default_scene(pixels=4, noise=None))
 """
 COMPILE_ROUTES = """
 import contextlib
-from analytic.scene import default_scene
-from analytic.system import METHODS, pair_entries
+from analytic.scenes.common import default_scene
+from analytic.operator.system import METHODS, pair_entries
 for method in METHODS:
     for taylor in (True, False):
         with contextlib.suppress(ValueError):      # a route that does not apply to this pixel was still compiled
@@ -320,7 +320,7 @@ def main():
     results = {"machine": machine(), "load_average_start": load(), "before": args.before}
     print(f"machine: {results['machine']}; load average at start {results['load_average_start']} "
           f"(shared machine: timings provisional)\n")
-    for package in ("analytic", "transient", "validation"):  # as scripts/setup.sh does
+    for package in ("analytic", "transient", "validation", "interop"):  # as scripts/setup.sh does
         compileall.compile_dir(ROOT / package, quiet=1)
     system_matrix(default_scene(pixels=2, noise=None))       # compile or load the cached kernels
     work = Path(tempfile.mkdtemp(prefix="bench_model_"))

@@ -48,11 +48,11 @@ BIN_WIDTH_OPL, START_OPL, BINS = 0.01, 1.9, 512
 CHILD = """
 import json, time
 import numpy as np
-from analytic.reflectance import builtin_reflectance
-from analytic.relay_wall import RelayWallScene, Scan
-from analytic.scene import Sampling, Scene, sensor_grid
-from analytic.system import system_matrix
-from analytic.window import window_share
+from analytic.scenes.reflectance import builtin_reflectance
+from analytic.scenes.relay_wall import RelayWallScene, Scan
+from analytic.scenes.common import Sampling, Scene, sensor_grid
+from analytic.operator.system import system_matrix
+from analytic.operator.window import window_share
 
 def resident_kib(field):
     with open("/proc/self/status") as handle:

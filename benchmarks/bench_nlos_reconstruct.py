@@ -188,13 +188,14 @@ def run_tal(capture: Path, centres: np.ndarray, folder: Path) -> dict:
 
 def main(argv=None) -> int:
     from analytic import load_scene, system_matrix
-    from analytic.files import save_json, write_relay_wall_capture
+    from analytic.files import save_json
+    from interop.tal import write_relay_wall_capture
     from analytic.inversion import image_metrics
-    from analytic.noise import add_noise
-    from analytic.reflectance import builtin_reflectance
-    from analytic.relay_wall import Scan
-    from analytic.scene import Sampling
-    from validation.bench import cpu_model
+    from analytic.measurement.noise import add_noise
+    from analytic.scenes.reflectance import builtin_reflectance
+    from analytic.scenes.relay_wall import Scan
+    from analytic.scenes.common import Sampling
+    from validation.runs.bench import cpu_model
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("out/bench-nlos-reconstruct"))

@@ -36,7 +36,7 @@ over ``--repeats`` renders of different seeds. Efficiency: 1 / (error² x
 seconds), with the wall-clock seconds and, beside them, the process's CPU
 seconds (all threads; steadier than wall time on a shared machine).
 mitransient's renders also hold a bias (its ray offsets, docs/interop.md),
-whose RMS (from :func:`validation.check.offset_model`) is reported beside
+whose RMS (from :func:`interop.mitransient.offset_model`) is reported beside
 them: its variance part alone sets its efficiency and time, and the bias is
 the floor no number of samples goes below.
 
@@ -74,8 +74,8 @@ from pathlib import Path
 import numpy as np
 
 from analytic.files import save_json
-from analytic.relay_wall import Scan, default_relay_wall_scene
-from validation.bench import cpu_model
+from analytic.scenes.relay_wall import Scan, default_relay_wall_scene
+from validation.runs.bench import cpu_model
 
 _MITRANSIENT = r"""
 import json, sys, time
@@ -164,7 +164,7 @@ def export_for_mitransient(scene, folder: Path) -> None:
     from unittest import mock
 
     import analytic.files
-    from transient.export import export_scene
+    from interop.mitransient.export import export_scene
 
     try:
         import OpenEXR  # noqa: F401
@@ -200,11 +200,11 @@ def exact_model(scene, path: Path | None, out: Path, bias: bool):
             raise SystemExit(f"{path}: not the model of this capture ({scene.name}, {scene.sensor_count} pairs x "
                              f"{scene.sampling.count} bins)")
     else:
-        from analytic.system import forward
+        from analytic.operator.system import forward
 
         model, offset = forward(scene), None
     if bias and offset is None:
-        from validation.check import offset_model
+        from interop.mitransient import offset_model
 
         offset = offset_model(scene)
     out.mkdir(parents=True, exist_ok=True)
@@ -260,10 +260,10 @@ def seconds_to_target(rows, stratified: bool, clock: str = "seconds") -> float:
 
 def near_wall_strategies(variant: str | None = None, samples: int = 2**16, seeds: int = 6) -> list[dict]:
     """Each strategy's variance gain over area sampling on near-wall single scans (module docstring)."""
-    from analytic.relay_wall import RelayWallScene
-    from analytic.scene import Sampling
-    from analytic.system import forward
-    from analytic.window import pairs_range
+    from analytic.scenes.relay_wall import RelayWallScene
+    from analytic.scenes.common import Sampling
+    from analytic.operator.system import forward
+    from analytic.operator.window import pairs_range
 
     rows = []
     for distance in (0.3, 0.15, 0.05, 0.02, 0.005):

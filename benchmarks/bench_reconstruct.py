@@ -18,11 +18,11 @@ from pathlib import Path
 
 import numpy as np
 
-from analytic.noise import add_noise
+from analytic.measurement.noise import add_noise
 from analytic.files import save_json
 from analytic.inversion import RULES, RankDeficiencyWarning, image_metrics, reconstruct_rules, reconstruct_tv
-from analytic.scene import default_scene
-from analytic.system import system_matrix
+from analytic.scenes.common import default_scene
+from analytic.operator.system import system_matrix
 
 
 def _problem(pixels: int):

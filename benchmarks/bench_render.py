@@ -1,6 +1,6 @@
 """The renderer against mitransient, side by side in one run, and its throughput.
 
-The logic is :func:`validation.bench.speed_against_error` (also behind
+The logic is :func:`validation.runs.bench.speed_against_error` (also behind
 ``diffuse-imaging bench``): on the 1 m plane (1 sensor, 40 bins) and the
 built-in default scene (16 sensors, 40 bins, M = 50), ours and
 mitransient's RMS relative error and wall time over sample counts and
@@ -26,7 +26,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from validation.bench import speed_against_error
+from validation.runs.bench import speed_against_error
 
 
 def deposit_strategies(variant: str | None, samples: int, repeats: int = 3) -> list[dict]:

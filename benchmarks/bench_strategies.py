@@ -2,7 +2,7 @@
 
     python benchmarks/bench_strategies.py [--samples-power 20] [--seeds 4]
 
-The ``low`` case of :func:`validation.suite.hard_cases`: the source and
+The ``low`` case of :func:`validation.runs.suite.hard_cases`: the source and
 two sensors 1 mm above a 1 m plane. For each strategy of ``transient_opl``
 (``mis``: the source's solid angle with multiple importance sampling of the
 peaked sensors, the default; ``source``: the source's solid angle alone;
@@ -23,10 +23,10 @@ import time
 
 import numpy as np
 
-from analytic.scene import Sampling
-from analytic.system import forward, system_matrix
+from analytic.scenes.common import Sampling
+from analytic.operator.system import forward, system_matrix
 from transient.backend import select_variant
-from validation.suite import hard_cases
+from validation.runs.suite import hard_cases
 
 
 def main(argv=None) -> int:

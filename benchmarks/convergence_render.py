@@ -32,13 +32,13 @@ from pathlib import Path
 import numpy as np
 
 from analytic.files import save_json
-from analytic.scene import Sampling, Scene, default_scene
-from analytic.system import QuadratureWarning, forward
+from analytic.scenes.common import Sampling, Scene, default_scene
+from analytic.operator.system import QuadratureWarning, forward
 from transient.backend import select_variant
 from transient.chunks import ChunkPlan, ReplicaLayout
-from validation.bench import plane_scene
-from analytic.window import response_range
-from validation.suite import hard_cases
+from validation.runs.bench import plane_scene
+from analytic.operator.window import response_range
+from validation.runs.suite import hard_cases
 
 
 def low_scene(which: str) -> Scene:

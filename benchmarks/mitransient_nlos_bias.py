@@ -15,14 +15,14 @@ origin), this script
    as given, the fitted scale and offset (jackknife errors from the
    replicas), and the same fit pair by pair;
 2. judges them against mitransient's estimator stated in closed form with
-   no fitted parameter (:func:`validation.check.offset_model`: the model
+   no fitted parameter (:func:`interop.mitransient.offset_model`: the model
    read from o = s + (1 + max|s_i|) RayEpsilon n, where Mitsuba's
    ``spawn_ray`` starts the ray that hidden-geometry sampling aims from s,
    less the strip of the hidden rectangle its sampling misses), and
    predicts the scale and offset a fit against the model finds, overall and
    pair by pair, from that statement and the data's errors;
 3. holds the closed form to a float64 emulation of mitransient's code
-   (:func:`validation.check.spawn_offset_difference`).
+   (:func:`interop.mitransient.spawn_offset_difference`).
 
 Writes results.json in --out and prints the table that docs/interop.md
 quotes. mitransient takes about 11 minutes per shift at the defaults on 2
@@ -42,8 +42,8 @@ from pathlib import Path
 import numpy as np
 
 from analytic.files import save_json
-from analytic.relay_wall import Scan, default_relay_wall_scene
-from validation.bench import cpu_model
+from analytic.scenes.relay_wall import Scan, default_relay_wall_scene
+from validation.runs.bench import cpu_model
 
 # Renders an exported mitransient NLOS scene in a fresh process: one (H, W, T, C) film per seed.
 _RENDER = r"""
@@ -78,7 +78,7 @@ def render_mitransient(scene, shift: float, spp: int, renders: int, out: Path) -
     run with the same settings reads them back)."""
     import json
 
-    from transient.export_relay_wall import export_relay_wall
+    from interop.mitransient.export_relay_wall import export_relay_wall
     from validation.check import read_data
 
     out.mkdir(parents=True, exist_ok=True)
@@ -133,9 +133,9 @@ def main(argv=None) -> int:
     parser.add_argument("--pair-fits", type=float, nargs="*", default=[0.0],
                         help="the shifts whose pairs are also fitted one by one (32 fits: minutes each shift)")
     args = parser.parse_args(argv)
-    from analytic.system import forward
-    from validation.check import (ShiftedModel, check_transient, moved_read_points, offset_model,
-                                  spawn_offset_difference)
+    from analytic.operator.system import forward
+    from validation.check import ShiftedModel, check_transient
+    from interop.mitransient import moved_read_points, offset_model, spawn_offset_difference
 
     scene = study_scene()
     model = forward(scene)

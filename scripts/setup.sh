@@ -17,7 +17,7 @@ fi
 python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ignore -e ".[test]"
 # pip compiles a regular install's modules, not an editable one's: compile them here, so that commands
 # do not recompile them at every start where PYTHONDONTWRITEBYTECODE is set
-python3 -m compileall -q analytic transient validation
+python3 -m compileall -q analytic transient validation interop
 # A command compiles the model's kernels that its scene needs on their first use (seconds for the
 # built-in scene) and the renderer's on its first render; the tests need every route. Both are compiled
 # and cached here (analytic/kernels/__pycache__, ~/.drjit), each in its own process, while tal's

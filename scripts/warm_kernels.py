@@ -17,10 +17,10 @@ import numpy as np
 
 
 def model() -> None:
-    from analytic.response import impulse_response
-    from analytic.scene import Illumination, Sampling, Scene
-    from analytic.system import METHODS, pair_entries, system_matrix
-    from analytic.window import window_share
+    from analytic.operator.response import impulse_response
+    from analytic.scenes.common import Illumination, Sampling, Scene
+    from analytic.operator.system import METHODS, pair_entries, system_matrix
+    from analytic.operator.window import window_share
 
     # a sensor near the plane (the cut route by its foot), bins finer than the pixels (strips), a far sensor
     scene = Scene(pixels=6, reflectance=1.0, source=(0.3, 0.6, 0.4), sensors=[(0.7, 0.2, 0.5), (0.5, 0.5, 0.02)],
@@ -39,7 +39,7 @@ def model() -> None:
 
 
 def renderer() -> None:
-    from analytic.scene import default_scene
+    from analytic.scenes.common import default_scene
     from transient.render import render
 
     render(default_scene(noise=None), spp=4096, seed=0, progress=False)

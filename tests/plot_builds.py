@@ -4,7 +4,7 @@ import warnings
 
 import numpy as np
 
-from analytic.scene import Sampling
+from analytic.scenes.common import Sampling
 from validation.plots import transient_figure
 
 

@@ -1,6 +1,6 @@
 """Shared by the renderer's tests: the exact model and the agreement test of docs/design.md section 6.
 
-Agreement is judged per bin (validation.compare): the render's standard
+Agreement is judged per bin (validation.judging.compare): the render's standard
 error comes from its 32 independent replicas, so each z is Student's t
 with 31 degrees of freedom mapped to a normal score; over the bins with
 enough samples, χ²/dof must lie inside the two-sided band and max |z|
@@ -13,10 +13,10 @@ independent bins.
 
 import numpy as np
 
-from analytic.scene import Scene
-from analytic.system import forward
+from analytic.scenes.common import Scene
+from analytic.operator.system import forward
 from transient.render import render_loaded
-from validation.compare import compare_transients
+from validation.judging.compare import compare_transients
 
 FALSE_ALARM = 1e-3
 
@@ -27,7 +27,7 @@ def model(scene: Scene) -> np.ndarray:
 
 
 def agreement(mean, stderr, reference, dof, replicas=None):
-    """(χ²/dof, max |z|, bins judged, passes) by validation.compare (docs/design.md section 6).
+    """(χ²/dof, max |z|, bins judged, passes) by validation.judging.compare (docs/design.md section 6).
 
     ``replicas``: the render's ``(R, K, N)`` replica means, for limits that hold with correlated bins.
     """

@@ -90,11 +90,11 @@ def _toml_value(value) -> str:
 def write_relay_wall_file(folder, scene, name=None):
     """A relay-wall scene as a scene file in ``folder`` (``<scene.name>.toml``); returns its path.
 
-    Written from :func:`analytic.scene_file.scene_to_tables`; a hidden image that is not uniform goes into
+    Written from :func:`analytic.scenes.scene_file.scene_to_tables`; a hidden image that is not uniform goes into
     ``hidden.exr`` beside the file (float32, as a user's would).
     """
     from analytic.files import save_exr
-    from analytic.scene_file import scene_to_tables
+    from analytic.scenes.scene_file import scene_to_tables
 
     if scene.noise is not None:
         raise ValueError("write_relay_wall_file: scenes with noise are not supported")

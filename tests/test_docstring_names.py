@@ -1,4 +1,4 @@
-"""Every dotted name the documentation cites resolves: ``analytic.system.forward`` in a docstring or in
+"""Every dotted name the documentation cites resolves: ``analytic.operator.system.forward`` in a docstring or in
 docs/*.md must import, so that a rename or a move cannot leave a citation pointing at nothing.
 
 The reference is the interpreter: each name is imported (its longest importable prefix) and the rest looked
@@ -16,10 +16,10 @@ import types
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("analytic", "transient", "validation")
+PACKAGES = ("analytic", "transient", "validation", "interop")
 
 # A dotted name rooted at one of our packages, in any text (roles, double backticks or plain prose).
-_DOTTED = re.compile(r"(?<![\w./-])((?:analytic|transient|validation)(?:\.[A-Za-z_][A-Za-z0-9_]*)+)")
+_DOTTED = re.compile(r"(?<![\w./-])((?:analytic|transient|validation|interop)(?:\.[A-Za-z_][A-Za-z0-9_]*)+)")
 # A Sphinx role whose target is relative to the current package: :mod:`.config`, :func:`..errors.X`.
 _RELATIVE_ROLE = re.compile(r":(?:mod|func|class|data|meth|attr|exc):`~?(\.+[A-Za-z_][\w.]*)`")
 # File names that read like dotted names: transient.npy is a file, not an attribute of the package.
@@ -114,17 +114,17 @@ def _citations() -> dict[str, list[str]]:
 
 
 def test_the_checker_finds_and_refuses_wrong_names():
-    text = (":func:`analytic.system.forward`, ``analytic.files.build_meta``, :mod:`.verdict`, "
-            "transient.npy and ``analytic.no_such_module.forward``; :func:`analytic.system.no_such_name`")
+    text = (":func:`analytic.operator.system.forward`, ``analytic.files.build_meta``, :mod:`.verdict`, "
+            "transient.npy and ``analytic.no_such_module.forward``; :func:`analytic.operator.system.no_such_name`")
     names = cited_names(text, "validation.check")
-    assert names == {"analytic.system.forward", "analytic.files.build_meta", "validation.check.verdict",
-                     "analytic.no_such_module.forward", "analytic.system.no_such_name"}
-    assert resolves("analytic.system.forward") and resolves("analytic.files.build_meta")
+    assert names == {"analytic.operator.system.forward", "analytic.files.build_meta", "validation.check.verdict",
+                     "analytic.no_such_module.forward", "analytic.operator.system.no_such_name"}
+    assert resolves("analytic.operator.system.forward") and resolves("analytic.files.build_meta")
     assert resolves("validation.check.verdict") and resolves("analytic.Sampling.start_opl")   # a field
-    assert not resolves("analytic.system.no_such_name")
+    assert not resolves("analytic.operator.system.no_such_name")
     assert not resolves("analytic.no_such_module.forward")
     assert not resolves("analytic.io.build_meta")            # moved to analytic.files
-    assert not resolves("analytic.conditioning.covering_sampling")   # imported there, defined in window
+    assert not resolves("analytic.operator.conditioning.covering_sampling")   # imported there, defined in window
 
 
 def test_every_cited_name_resolves():
@@ -152,12 +152,12 @@ def test_design_citations_name_sections_the_design_document_has():
     assert cited > 20
 
 
-_PATH = re.compile(r"(?<![\w/.-])((?:analytic|transient|validation|tests|docs|benchmarks|examples|scripts)"
+_PATH = re.compile(r"(?<![\w/.-])((?:analytic|transient|validation|interop|tests|docs|benchmarks|examples|scripts)"
                    r"/[\w/.-]+\.(?:py|md|toml|sh))\b")
 
 
 def test_every_cited_file_of_the_repository_exists():
-    """A path such as ``tests/analytic/files/test_capture.py`` in the code or docs/*.md names a file there."""
+    """A path such as ``tests/interop/tal/test_capture.py`` in the code or docs/*.md names a file there."""
     sources = [p for top in PACKAGES for p in (ROOT / top).rglob("*.py")] + sorted((ROOT / "docs").glob("*.md"))
     missing = sorted({f"{cited} ({source.relative_to(ROOT)})" for source in sources
                       for cited in _PATH.findall(source.read_text(encoding="utf-8"))

@@ -24,7 +24,7 @@ MODULE_PACKAGES = {"analytic.kernels"}
 
 def _packages() -> list[str]:
     found = []
-    for top in ("analytic", "transient", "validation"):
+    for top in ("analytic", "transient", "validation", "interop"):
         found.append(top)
         module = importlib.import_module(top)
         found += [info.name for info in pkgutil.walk_packages(module.__path__, f"{top}.") if info.ispkg]
@@ -64,8 +64,10 @@ print(len(clashes), bad)
 
 
 def test_importing_the_packages_imports_no_heavy_library():
-    done = _python("import sys, analytic, transient, validation, analytic.files, analytic.inversion, "
-                   "validation.check, validation.plots, validation.sweep, validation.cli\n"
+    done = _python("import sys, analytic, transient, validation, interop, analytic.files, analytic.inversion, "
+                   "analytic.scenes, analytic.operator, analytic.measurement, interop.tal, interop.mitransient, "
+                   "validation.judging, validation.runs, validation.check, validation.plots, validation.sweep, "
+                   "validation.cli\n"
                    "print(sorted({m.split('.')[0] for m in sys.modules} & {'numba', 'mitsuba', 'drjit', "
                    "'matplotlib', 'dask', 'distributed', 'scipy', 'h5py', 'OpenEXR'}))")
     assert done.returncode == 0, done.stderr
@@ -81,7 +83,7 @@ def test_help_imports_no_numba_mitsuba_matplotlib_or_dask():
 
 
 def test_the_model_never_imports_the_files_package():
-    done = _python("import sys, analytic.system, analytic.response, analytic.window, analytic.conditioning, "
-                   "analytic.scene_file\nprint(sorted(m for m in sys.modules if m.startswith('analytic.files')))")
+    done = _python("import sys, analytic.operator.system, analytic.operator.response, analytic.operator.window, "
+                   "analytic.operator.conditioning, analytic.scenes.scene_file\nprint(sorted(m for m in sys.modules if m.startswith('analytic.files')))")
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "[]"

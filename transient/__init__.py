@@ -26,6 +26,5 @@ __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "chunks": ["ReplicaLayout", "ChunkPlan", "ReplicaAccumulator"],
     "render": ["RenderResult", "render", "render_loaded", "resume", "RenderInterrupted"],
     "render_state": ["RenderStateError", "read_saved_render", "SavedRender"],
-    "export": ["export_scene"],
     "intensity": ["emitter_intensity"],
 })

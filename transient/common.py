@@ -28,7 +28,7 @@ import mitsuba as mi
 
 from analytic.attenuation import LAMBERTIAN, attenuation_formula
 from analytic.binning import bin_index
-from analytic.scene import Illumination
+from analytic.scenes.common import Illumination
 from analytic.waveforms import ERRORFUNCTIONS, POLYNOMIAL, WaveformTerms, make_waveform
 from analytic.kernels import formulas as special
 

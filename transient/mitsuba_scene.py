@@ -1,6 +1,6 @@
 """Every Mitsuba 3 scene dictionary of the project.
 
-- :func:`scene_dict`: a :class:`analytic.scene.Scene` for our single-plane
+- :func:`scene_dict`: a :class:`analytic.scenes.common.Scene` for our single-plane
   integrator ``transient_opl``. The plane [0, L]² x {0} is a ``rectangle``
   (local [-1, 1]², normal +z) scaled by L/2 and moved by (L/2, L/2, 0); its
   ``diffuse`` BSDF reads the reflectance image through a ``bitmap`` texture
@@ -23,7 +23,7 @@ from __future__ import annotations
 import mitsuba as mi
 import numpy as np
 
-from analytic.scene import Sampling, Scene
+from analytic.scenes.common import Sampling, Scene
 from .constants import RAY_EPSILON
 from .intensity import emitter_intensity
 from .scene_xml import waveform_entries
@@ -252,7 +252,7 @@ def hidden_to_world(scene) -> "mi.ScalarTransform4d":
 
     Local x runs along u, local y along v, local +z (Mitsuba's normal) along u x v, the lit face.
     """
-    from .export_relay_wall import hidden_to_world_matrix
+    from interop.mitransient.export_relay_wall import hidden_to_world_matrix
 
     return mi.ScalarTransform4d(hidden_to_world_matrix(scene))
 
@@ -262,7 +262,7 @@ def relay_wall_scene_dict(scene, **estimator) -> dict:
 
     Parameters
     ----------
-    scene : analytic.relay_wall.RelayWallScene
+    scene : analytic.scenes.relay_wall.RelayWallScene
         The wall, the hidden rectangle and its image, the laser, the sensor, the scan, sampling and
         illumination.
     **estimator

@@ -4,7 +4,7 @@ The scene is a relay wall (z = 0, normal +z), a hidden Lambertian rectangle
 and a scan of wall points (docs/design.md section 7). Every path is
 laser -> l -> x -> s -> sensor with x on the hidden rectangle: the third
 bounce, which nothing can occlude when the rectangle faces the wall and
-lies wholly in front of it (the only scenes :class:`analytic.relay_wall.RelayWallScene`
+lies wholly in front of it (the only scenes :class:`analytic.scenes.relay_wall.RelayWallScene`
 accepts), so no rays are traced. Each sample is a point x of the hidden
 rectangle that serves *every* (l, s) pair of the scan: for pair p it adds
 
@@ -52,7 +52,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from analytic.relay_wall import WALL_NORMAL, grid_points
+from analytic.scenes.relay_wall import WALL_NORMAL, grid_points
 
 from .chunks import ReplicaLayout, checked_chunk
 from .common import block_copy, deposit, is_diffuse, is_impulse, jittered_point, opaque_f64, opaque_u32, reduce_mode, \

@@ -4,7 +4,7 @@ A render of ``spp`` samples is R replicas of n = ⌈spp / R⌉ samples
 (:mod:`transient.chunks`): each replica a complete stratified estimate of
 y, independent of the others. The estimate is the mean of the replica
 means and its standard error their spread over sqrt(R), with R - 1 degrees
-of freedom (compare with ``validation.compare.compare_transients(...,
+of freedom (compare with ``validation.judging.compare.compare_transients(...,
 dof=result.dof)``). Sample g's random numbers depend only on (seed, g), so
 the result does not depend on the chunking, on interruptions or on
 resuming (up to the rounding of float64 additions). The replicas are
@@ -56,8 +56,8 @@ import numpy as np
 from analytic.errors import OptionError
 from analytic.files import build_meta, discard, save_npy, staged_writes, write_transient
 from analytic.resources import require_memory
-from analytic.scene import Scene
-from analytic.window import window_share
+from analytic.scenes.common import Scene
+from analytic.operator.window import window_share
 
 from .chunks import MAX_SAMPLES, Chunk, ReplicaAccumulator, ReplicaLayout, render_memory_bytes
 from .render_state import (STATE_FILE, load_state, read_saved_render, save_scene, save_state, scene_fingerprint,
@@ -224,7 +224,7 @@ def render_loaded(loaded, *, spp: int, seed: int = 0, replicas: int | None = Non
                   chunk_size: int | None = None) -> RenderResult:
     """Render an already loaded Mitsuba scene of one of our integrators (no files, no resume).
 
-    For scenes that are not an :class:`analytic.scene.Scene` (the corner of
+    For scenes that are not an :class:`analytic.scenes.common.Scene` (the corner of
     ``transient.mitsuba_scene.corner_scene_dict``, an exported XML), rendered
     with the same replicas and chunks as :func:`render`, each chunk in units
     of y (the integrator's ``render_chunk``).
@@ -345,7 +345,7 @@ def render(scene: Scene, *, spp: int, seed: int = 0, out_dir: str | Path | None 
 
     Parameters
     ----------
-    scene : Scene or analytic.relay_wall.RelayWallScene
+    scene : Scene or analytic.scenes.relay_wall.RelayWallScene
         The scene, rendered with its ``attenuation`` (``lambertian`` or
         ``paper``) and intensity (float64); its ``tolerance`` and ``noise``
         belong to the model and are not read. A relay-wall capture renders

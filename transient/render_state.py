@@ -23,7 +23,7 @@ import numpy as np
 
 from analytic.errors import UserError
 from analytic.files import atomic_write
-from analytic.scene import Scene
+from analytic.scenes.common import Scene
 from analytic.waveforms import make_waveform
 
 from .chunks import ReplicaAccumulator, ReplicaLayout
@@ -54,7 +54,7 @@ def scene_fingerprint(scene: Scene, estimator: dict | None = None) -> str:
 
     Every field but ``tolerance`` (the model's quadrature accuracy),
     ``noise`` (the model's; a render is noiseless) and ``name``. A
-    relay-wall capture (:class:`analytic.relay_wall.RelayWallScene`) is
+    relay-wall capture (:class:`analytic.scenes.relay_wall.RelayWallScene`) is
     described by its scene-file tables (wall, hidden rectangle, laser,
     sensor, scan, sampling, illumination) and its hidden image.
     """
@@ -88,7 +88,7 @@ _MODEL_ONLY = (("name", None), ("noise", None), ("model", "tolerance"))
 def _renderer_tables(scene) -> dict:
     """The scene's tables without what only the model reads (name, noise, tolerance) and without its image
     (a reflectance key holds the constant, or the image's place: the image itself is hashed apart)."""
-    from analytic.scene_file import scene_to_tables
+    from analytic.scenes.scene_file import scene_to_tables
 
     tables = scene_to_tables(scene)
     for table, key in _MODEL_ONLY:
@@ -116,7 +116,7 @@ def _estimator_record(estimator: dict | None) -> dict:
 
 def save_scene(folder: Path, scene: Scene) -> None:
     """Write ``render_scene.npz``: the scene's tables (JSON) and its reflectance image, atomically."""
-    from analytic.scene_file import scene_to_tables
+    from analytic.scenes.scene_file import scene_to_tables
 
     tables = scene_to_tables(scene)
     image = _image_table(tables)
@@ -140,7 +140,7 @@ def _python_number(value):
 
 def _load_saved_scene(folder: Path) -> Scene:
     """The scene of ``render_scene.npz``; :class:`RenderStateError` when it cannot be read."""
-    from analytic.scene_file import scene_from_dict
+    from analytic.scenes.scene_file import scene_from_dict
 
     path = folder / SCENE_FILE
     fix = f"give the scene file again: diffuse-imaging render SCENE --resume {folder}"

@@ -1,6 +1,6 @@
 """Writing a Mitsuba 3 scene as XML: elements, doubles that read back exactly, and the file's text.
 
-Shared by :mod:`transient.export` (the plane) and :mod:`transient.export_relay_wall`
+Shared by :mod:`interop.mitransient.export` (the plane) and :mod:`interop.mitransient.export_relay_wall`
 (a relay-wall capture). No Mitsuba import: the files are plain XML.
 """
 

@@ -22,13 +22,13 @@ and the figures (:mod:`validation.plots`) are packages of their own.
 import lazy_loader
 
 __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
-    "compare": ["Agreement", "compare_transients"],
-    "harness": ["SceneCheck", "check_scene", "data_driven_rule", "reconstruct_from_noisy_data"],
-    "suite": ["hard_cases", "validation_suite"],
-    "corner": ["check_corner"],
+    "judging.compare": ["Agreement", "compare_transients"],
+    "runs.harness": ["SceneCheck", "check_scene", "data_driven_rule", "reconstruct_from_noisy_data"],
+    "runs.suite": ["hard_cases", "validation_suite"],
+    "runs.corner": ["check_corner"],
     "check": ["check_transient", "assert_agrees", "CheckResult", "Convention", "irradiancemeter", "read_data"],
-    "report": ["write_report"],
-    "paper": ["reproduce"],
+    "runs.report": ["write_report"],
+    "runs.paper": ["reproduce"],
     "sweep": ["load_sweep", "run_sweep"],
-    "bench": ["speed_against_error"],
+    "runs.bench": ["speed_against_error"],
 })

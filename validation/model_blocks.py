@@ -16,7 +16,7 @@ from __future__ import annotations
 import scipy.sparse
 
 from analytic.geometry import PointPairs, Rectangle
-from analytic.scene import Sampling
+from analytic.scenes.common import Sampling
 from analytic.waveforms import Waveform, make_waveform
 
 __all__ = ["system_matrix_on_dask", "pair_block_matrix"]
@@ -31,7 +31,7 @@ def pair_block_matrix(rectangle: Rectangle, pairs: PointPairs, start: int, stop:
     scipy.sparse.csr_array
         ``((stop - start) N, M²)``, the same rows as the whole matrix's.
     """
-    from analytic.system import rectangle_matrix
+    from analytic.operator.system import rectangle_matrix
 
     return rectangle_matrix(rectangle, pairs.block(start, stop), sampling, waveform, tolerance=tolerance)
 
@@ -42,7 +42,7 @@ def system_matrix_on_dask(scene, client, *, pairs_per_task: int = 16,
 
     Parameters
     ----------
-    scene : analytic.scene.Scene or analytic.relay_wall.RelayWallScene
+    scene : analytic.scenes.common.Scene or analytic.scenes.relay_wall.RelayWallScene
         Anything with ``geometry()``, ``sampling``, ``illumination`` and ``tolerance``.
     client : distributed.Client
         The cluster (:func:`validation.sweep.driver.sweep_client` makes a local one).
@@ -54,7 +54,7 @@ def system_matrix_on_dask(scene, client, *, pairs_per_task: int = 16,
     Returns
     -------
     scipy.sparse.csr_array
-        ``(P N, M²)``, equal to :func:`analytic.system.system_matrix` of the scene.
+        ``(P N, M²)``, equal to :func:`analytic.operator.system.system_matrix` of the scene.
     """
     if pairs_per_task < 1:
         raise ValueError(f"pairs_per_task must be at least 1, got {pairs_per_task}")

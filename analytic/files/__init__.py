@@ -10,9 +10,7 @@ has one job:
 - :mod:`.locks`: one writing command per folder (:func:`output_folder`),
   readers kept out of a half-written one (:func:`reading_folder`);
 - :mod:`.formats`: one writer and one reader per format (``.npy``, JSON,
-  text, EXR, PNG);
-- :mod:`.capture`: tal's HDF5 capture layout (``transient.h5``), read for every layout;
-- :mod:`.relay_wall_capture`: a relay-wall (NLOS) transient in the layout ``tal render`` writes;
+  text, EXR, PNG; tal's HDF5 is :mod:`interop.tal`);
 - :mod:`.transients`: the metadata schema (:func:`build_meta`) and a
   transient's files (:func:`write_transient`, :func:`read_transient`).
 
@@ -27,9 +25,6 @@ __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "locks": ["output_folder", "reading_folder", "LOCK_FILE", "LOCK_WAIT_SECONDS"],
     "formats": ["save_npy", "read_npy", "save_json", "save_text", "json_ready", "json_default", "save_exr",
                 "read_exr", "read_exr_channels", "save_png_image", "float32_problem", "PrecisionWarning"],
-    "capture": ["Capture", "CaptureError", "write_capture", "read_capture", "H_FORMATS", "GRID_FORMATS",
-                "VOLUME_FORMATS", "ACCOUNTS_FIRST_AND_LAST_BOUNCES"],
-    "relay_wall_capture": ["write_relay_wall_capture", "relay_wall_layout"],
     "transients": ["build_meta", "relay_wall_meta", "write_transient", "read_transient", "transient_format",
                    "transient_in_folder", "UNITS", "RELAY_WALL_UNITS", "RELAY_WALL_KEYS", "TRANSIENT_FILES"],
 })

@@ -20,8 +20,8 @@ import numpy as np
 from analytic.errors import DataError
 
 from .atomic import discard, staged_writes
-from .capture import read_capture, write_capture
-from .relay_wall_capture import write_relay_wall_capture
+from interop.tal.capture import read_capture, write_capture
+from interop.tal.relay_wall_capture import write_relay_wall_capture
 from .formats import (PrecisionWarning, float32_problem, json_ready, read_exr, read_npy, save_exr, save_json,
                       save_npy)
 
@@ -41,7 +41,7 @@ def build_meta(scene, *, kind: str, samples: int = 0, seed: int | None = None,
 
     Parameters
     ----------
-    scene : analytic.Scene or analytic.relay_wall.RelayWallScene
+    scene : analytic.Scene or analytic.scenes.relay_wall.RelayWallScene
         The scene the transient belongs to: a plane, or a capture through a relay wall.
     kind : {"model", "render"}
         Who computed it.
@@ -76,7 +76,7 @@ def build_meta(scene, *, kind: str, samples: int = 0, seed: int | None = None,
         third bounce is Lambertian at every vertex: ``attenuation`` is
         ``lambertian``).
     """
-    from analytic.relay_wall import RelayWallScene
+    from analytic.scenes.relay_wall import RelayWallScene
     from analytic.waveforms import make_waveform   # here: the waveforms load Numba, files need not
 
     if kind not in ("model", "render"):
@@ -182,8 +182,8 @@ def write_transient(out_dir: str | Path, transient: np.ndarray, meta: dict[str, 
 
     ``transient.h5`` is tal's HDF5 capture, readable by ``tal.io.read_capture``,
     with the metadata as its ``scene_info``: a plane's in the layout of
-    :mod:`analytic.files.capture`, a relay-wall capture's in tal's NLOS layout
-    (:mod:`analytic.files.relay_wall_capture`).
+    :mod:`interop.tal.capture`, a relay-wall capture's in tal's NLOS layout
+    (:mod:`interop.tal.relay_wall_capture`).
 
     Parameters
     ----------
@@ -274,7 +274,7 @@ def read_transient(path: str | Path) -> np.ndarray:
     """Read a transient from ``.npy``, ``.exr`` (channel ``Y``) or tal's ``.h5``, or from a folder holding ours.
 
     Each format is read by its one reader (:func:`~analytic.files.read_npy`,
-    :func:`~analytic.files.read_exr`, :func:`~analytic.files.read_capture`),
+    :func:`~analytic.files.read_exr`, :func:`~interop.tal.read_capture`),
     the same that ``check`` and ``reconstruct`` use; the suffix may be in
     any case.
 

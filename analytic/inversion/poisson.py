@@ -1,6 +1,6 @@
 """Reconstruction from photon counts: the Laplacian-Tikhonov rule on counts under the detector's model.
 
-Counts c (``(K, N)``) of a detector (:class:`analytic.detector.Detector`:
+Counts c (``(K, N)``) of a detector (:class:`analytic.measurement.detector.Detector`:
 photons per cycle per unit of y, background per bin per cycle, cycles C,
 dead time) carry y through the rates λ = photons · y + background. Two
 solvers:
@@ -8,7 +8,7 @@ solvers:
 - :func:`reconstruct_counts` (the rule used; an approximation): each bin's
   rate is estimated from its counts, λ̂_n = c_n / C without dead time and
   Coates' λ̂_n = -log1p(-c_n / R_n) with it (R_n the cycles still armed,
-  :func:`analytic.detector.coates_estimate`), giving
+  :func:`analytic.measurement.detector.coates_estimate`), giving
   ŷ = (λ̂ - background) / photons with a variance v from the detector's
   model; then the weighted problem
 
@@ -40,7 +40,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse
 
-from ..detector import Detector, coates_estimate, detection_probabilities, rates
+from ..measurement.detector import Detector, coates_estimate, detection_probabilities, rates
 from ..errors import DataError
 from .laplacian import neumann_laplacian
 from .result import Reconstruction

@@ -6,8 +6,8 @@ argument lists. :mod:`.cache` keys their on-disk cache by these sources
 alone and says when a compile is slow. Importing this package imports
 no module until it is used (``lazy_loader``, as every package of this
 project): :mod:`.formulas` is imported by the renderer without Numba. The
-Python side (:mod:`analytic.system`, :mod:`analytic.window`,
-:mod:`analytic.response`) imports the modules it drives.
+Python side (:mod:`analytic.operator.system`, :mod:`analytic.operator.window`,
+:mod:`analytic.operator.response`) imports the modules it drives.
 
 - :mod:`.formulas`: formulas written once for NumPy, Numba and Dr.Jit (the
   attenuation, erfcx's ranges), with no import of their own;

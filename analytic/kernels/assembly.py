@@ -2,7 +2,7 @@
 
 Rows of A are (pair k, bin n), k N + n; columns are pixels p = r M + c.
 The pixels are cut into blocks, and each block is one job for a thread
-(:mod:`analytic.system` runs them on a pool of threads: these kernels
+(:mod:`analytic.operator.system` runs them on a pool of threads: these kernels
 release Python's lock). :func:`count_block` tells, for one block and every
 row, how many entries the block's pixels put in that row; their prefix sums
 over the blocks give each block its own slice of each row of the CSR
@@ -492,7 +492,7 @@ def job_routes(problem, jobs, routes):
     """routes[j]: which general routes apply to left (pixel, pair) j (:data:`DIRECT_APPLIES` | :data:`STRIPS_APPLY`).
 
     Cheap geometric tests (no quadrature), which say what each route is tried on; the cut route
-    applies to every job. :mod:`analytic.system` tries the direct route, then strips, then the cut route.
+    applies to every job. :mod:`analytic.operator.system` tries the direct route, then strips, then the cut route.
     """
     axis = problem.axis
     for j in range(jobs.pairs.size):

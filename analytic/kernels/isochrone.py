@@ -34,8 +34,8 @@ The attenuation under a source (or sensor) at height h is a peak of width h:
 tends to a finite limit (2 ρ cos θ_k / d_k² from the foot, docs/design.md section
 2). Resolving the peak needs h to span many roundings of the plane
 coordinates and path lengths, which are as large as the scene:
-:data:`analytic.scene.MIN_HEIGHT_FRACTION` of the scene's extent is the
-smallest height the model supports (:func:`analytic.scene.check_heights`);
+:data:`analytic.scenes.common.MIN_HEIGHT_FRACTION` of the scene's extent is the
+smallest height the model supports (:func:`analytic.scenes.common.check_heights`);
 at that height the peak is still ~10⁶ float64 roundings wide.
 """
 

@@ -5,7 +5,7 @@ bin kernel is a short Taylor polynomial in τ - c (:mod:`analytic.kernels.taylor
 so a pixel's entries for every bin it reaches are Σ_j c_{n,j} m_j with the
 *moments* m_j = ∫_pixel a(x) (d(x) - c)^j dx: a few scalars, one quadrature
 for all the bins. This module computes a whole pixel's moments (the smooth
-route of :mod:`analytic.system`) and turns moments into entries; the cut
+route of :mod:`analytic.operator.system`) and turns moments into entries; the cut
 route's τ-pieces use the same :func:`bin_moments` with moments of their
 own (:mod:`analytic.kernels`).
 """

@@ -1,4 +1,4 @@
-"""One pair's entries of A over one pixel, by the quadrature routes of :mod:`analytic.system` (compiled).
+"""One pair's entries of A over one pixel, by the quadrature routes of :mod:`analytic.operator.system` (compiled).
 
     A[(k, n), p] = ∫_{pixel p} a_k(x) κ_n(d_k(x)) dx
 
@@ -8,7 +8,7 @@ run of bins its light reaches (:class:`BinRun` of a :class:`TimeAxis`).
 :mod:`analytic.kernels.assembly` takes its own fast paths first, then the general routes here one at a
 time (:func:`route_entries` with a :class:`Route`), and the tests force any one of them
 (so that each fast route can be held to the adaptive one); the module
-docstring of :mod:`analytic.system` says what each route does.
+docstring of :mod:`analytic.operator.system` says what each route does.
 
 Every compiled function here takes records (NamedTuples, which Numba
 passes by value) instead of long positional lists: a pixel box, a time

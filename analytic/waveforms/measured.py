@@ -5,7 +5,7 @@ The ``sampled`` waveform (docs/design.md section 8) takes its samples from
 line, blank lines and lines starting with ``#`` skipped; .h5 or .hdf5: a tal
 capture holding one histogram, whose bin centres are the samples) or inline as
 ``[illumination] samples = [...]``. :func:`check_samples` is what the
-scene's :class:`~analytic.scene.Illumination` runs on either.
+scene's :class:`~analytic.scenes.common.Illumination` runs on either.
 """
 
 from __future__ import annotations
@@ -82,7 +82,7 @@ def read_samples(path, key: str = "illumination.file") -> np.ndarray:
 
 def _histogram(path: Path, key: str):
     from ..errors import DataError
-    from ..files.capture import read_capture
+    from interop.tal.capture import read_capture
 
     try:
         capture = read_capture(path)

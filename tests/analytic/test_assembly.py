@@ -22,8 +22,8 @@ import pytest
 import scipy.sparse
 
 from analytic.kernels.isochrone import make_frame, range_bound, rectangle_range, PixelBox
-from analytic.scene import Illumination, Sampling, Scene
-from analytic.system import pair_entries, system_matrix
+from analytic.scenes.common import Illumination, Sampling, Scene
+from analytic.operator.system import pair_entries, system_matrix
 
 
 def test_bound_holds_the_exact_range(rng):
@@ -70,7 +70,7 @@ def _matrix_on_threads(scene, threads, folder):
     scene_file, matrix_file = folder / f"scene-{threads}.pickle", folder / f"matrix-{threads}.npz"
     scene_file.write_bytes(pickle.dumps(scene))
     code = ("import pickle, sys, numba, scipy.sparse\n"
-            "from analytic.system import system_matrix\n"
+            "from analytic.operator.system import system_matrix\n"
             "assert numba.get_num_threads() == int(sys.argv[3])\n"
             "scipy.sparse.save_npz(sys.argv[2], system_matrix(pickle.loads(open(sys.argv[1], 'rb').read())))\n")
     done = subprocess.run([sys.executable, "-c", code, str(scene_file), str(matrix_file), str(threads)],

@@ -4,11 +4,11 @@
 import numpy as np
 import pytest
 
-from analytic.conditioning import conditioning_summary
+from analytic.operator.conditioning import conditioning_summary
 
 
 def test_conditioning_summary_on_known_singular_values():
-    from analytic.conditioning import singular_values
+    from analytic.operator.conditioning import singular_values
 
     values = np.array([5.0, 1.0, 0.2, 0.05])
     matrix = np.vstack([np.diag(values), np.zeros((3, 4))])  # zero rows add nothing

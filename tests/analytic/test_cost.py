@@ -1,19 +1,19 @@
 """The model's cost before it is paid: counts against independent ones, and the refusal of illuminations
 whose exact model would take hours (issue 38: a 100,000-sample response, pulses of 400 to 7,000 m on 1 cm bins).
 
-The entries are held to :func:`analytic.system.count_entries` (the assembly's own exact count, another
+The entries are held to :func:`analytic.operator.system.count_entries` (the assembly's own exact count, another
 code path) on scenes small enough that every (pixel, pair) is sampled; the breakpoints to a double loop.
 """
 
 import numpy as np
 import pytest
 
-from analytic.cost import _breakpoints, impractical_illumination, model_cost, refuse_impractical_illumination
+from analytic.operator.cost import _breakpoints, impractical_illumination, model_cost, refuse_impractical_illumination
 from analytic.errors import SceneError
-from analytic.relay_wall import RelayWallScene, Scan
-from analytic.scene import Illumination, Sampling, Scene
-from analytic.system import count_entries
-from analytic.window import auto_sampling, response_range
+from analytic.scenes.relay_wall import RelayWallScene, Scan
+from analytic.scenes.common import Illumination, Sampling, Scene
+from analytic.operator.system import count_entries
+from analytic.operator.window import auto_sampling, response_range
 
 
 def _brute_breakpoints(kinks, start, width, first, bins, low, high):

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from analytic.derivatives import derivative
-from analytic.scene import Sampling, default_scene
+from analytic.operator.derivatives import derivative
+from analytic.scenes.common import Sampling, default_scene
 
 
 def _scene():

@@ -1,7 +1,7 @@
 """The photon-counting detector: expected histograms against a direct simulation, draws, Coates' inversion.
 
 The direct simulation is written here and shares nothing with
-``analytic.detector``: per laser cycle, the photons of each bin are drawn
+``analytic.measurement.detector``: per laser cycle, the photons of each bin are drawn
 (Poisson), and a dead-time detector keeps the first one. Thresholds come
 from the simulation's own standard errors; a detector model that forgets
 the pile-up (or the background) must fail them.
@@ -14,9 +14,9 @@ import math
 import numpy as np
 import pytest
 
-from analytic.detector import Detector, coates_estimate, detection_probabilities, draw_counts, expected_counts
+from analytic.measurement.detector import Detector, coates_estimate, detection_probabilities, draw_counts, expected_counts
 from analytic.errors import DataError, SceneError
-from analytic.scene_file import scene_from_dict, scene_to_tables
+from analytic.scenes.scene_file import scene_from_dict, scene_to_tables
 
 # a pulse over 12 bins, high enough that pile-up matters (Σλ ≈ 1.4 photons per cycle)
 Y = np.array([[0.0, 0.1, 0.8, 2.0, 3.0, 2.2, 1.2, 0.6, 0.3, 0.1, 0.0, -0.2]])

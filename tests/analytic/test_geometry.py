@@ -6,10 +6,10 @@ from scipy.spatial.transform import Rotation
 
 from analytic.errors import SceneError
 from analytic.geometry import PointPairs, Rectangle, pair_table, plane_geometry
-from analytic.scene import Sampling, default_scene
-from analytic.system import rectangle_matrix, system_matrix
+from analytic.scenes.common import Sampling, default_scene
+from analytic.operator.system import rectangle_matrix, system_matrix
 from analytic.waveforms import make_waveform
-from validation.suite import hard_cases
+from validation.runs.suite import hard_cases
 
 
 def _moved(scene, matrix, shift):

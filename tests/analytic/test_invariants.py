@@ -10,10 +10,10 @@ from scipy import integrate
 from analytic.attenuation import LAMBERTIAN, PAPER, attenuation
 from analytic.kernels.attenuation import attenuation_at
 from analytic.kernels.isochrone import make_frame
-from analytic.scene import MIN_HEIGHT_FRACTION, scene_extent
-from analytic.response import impulse_response
-from analytic.scene import Illumination, Sampling, Scene, SceneError, default_scene
-from analytic.system import system_matrix
+from analytic.scenes.common import MIN_HEIGHT_FRACTION, scene_extent
+from analytic.operator.response import impulse_response
+from analytic.scenes.common import Illumination, Sampling, Scene, SceneError, default_scene
+from analytic.operator.system import system_matrix
 from analytic.waveforms import make_waveform
 
 

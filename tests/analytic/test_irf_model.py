@@ -19,8 +19,8 @@ from irf_reference import reference_for
 from reference import pixel_box, pixel_entry
 
 from analytic.kernels.isochrone import first_arrival_point, make_frame
-from analytic.scene import Illumination, Sampling, Scene
-from analytic.system import QuadratureWarning, pair_entries, system_matrix
+from analytic.scenes.common import Illumination, Sampling, Scene
+from analytic.operator.system import QuadratureWarning, pair_entries, system_matrix
 
 ILLUMINATIONS = {
     "gaussian": Illumination(waveform="gaussian", fwhm=0.04),

@@ -19,7 +19,7 @@ from scipy import integrate
 
 from analytic.kernels.bins import BinRun, TimeAxis
 from analytic.errors import SceneError
-from analytic.scene import Illumination, Sampling
+from analytic.scenes.common import Illumination, Sampling
 from analytic.kernels.taylor import MAX_TERMS, kernel_taylor
 from analytic.waveforms import make_waveform
 from analytic.waveforms.measured import METRES_PER_PICOSECOND, read_samples
@@ -243,7 +243,7 @@ def _tal_histogram(path, counts, delta_t, t_start):
 
 def test_a_tal_histogram_is_a_sampled_response(tmp_path):
     """Its counts are the samples, at its bins' centres, delta_t apart; the scene's width must agree."""
-    from analytic.scene_file import load_scene
+    from analytic.scenes.scene_file import load_scene
 
     counts = [0, 3, 40, 100, 61, 20, 7, 2, 0]
     _tal_histogram(tmp_path / "irf.hdf5", counts, 0.0015, -0.003)

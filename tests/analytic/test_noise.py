@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from analytic.errors import SceneError
-from analytic.noise import MAX_EXPECTED_PHOTONS, add_noise
-from analytic.scene import Noise
+from analytic.measurement.noise import MAX_EXPECTED_PHOTONS, add_noise
+from analytic.scenes.common import Noise
 
 
 def test_gaussian_noise_has_the_stated_sigma_and_is_seeded():

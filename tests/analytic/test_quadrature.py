@@ -1,6 +1,6 @@
 """Each fast quadrature route of the system matrix agrees with the adaptive one.
 
-A's entries are computed by three routes (analytic.system): the tensor rule
+A's entries are computed by three routes (analytic.operator.system): the tensor rule
 on a whole pixel that no kernel breakpoint crosses ("smooth"), the tensor
 rule in (τ, φ) on each τ-piece of a cut pixel ("isochrone"), and adaptive
 φ-integrals inside adaptive τ-integrals ("adaptive", the slowest and most
@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 from analytic.kernels.isochrone import first_arrival_point, make_frame
-from analytic.scene import Illumination, Sampling, Scene
-from analytic.system import QuadratureWarning, pair_entries
+from analytic.scenes.common import Illumination, Sampling, Scene
+from analytic.operator.system import QuadratureWarning, pair_entries
 
 AGREEMENT = 1e-9
 TOLERANCE = 1e-10

@@ -14,8 +14,8 @@ from PIL import Image
 from analytic import forward
 from analytic.errors import ImageError, SceneError
 from analytic.files import save_exr
-from analytic.reflectance import builtin_reflectance, read_reflectance
-from analytic.scene_file import load_scene
+from analytic.scenes.reflectance import builtin_reflectance, read_reflectance
+from analytic.scenes.scene_file import load_scene
 from scene_files import GOOD, write_scene
 
 SIDE = 8

@@ -13,10 +13,10 @@ import pytest
 from relay_wall_reference import pixel_region, reference_bin
 
 from analytic.errors import SceneError
-from analytic.relay_wall import RelayWallScene, Scan, grid_points
-from analytic.scene import Illumination, Sampling
-from analytic.system import system_matrix
-from analytic.window import pairs_range
+from analytic.scenes.relay_wall import RelayWallScene, Scan, grid_points
+from analytic.scenes.common import Illumination, Sampling
+from analytic.operator.system import system_matrix
+from analytic.operator.window import pairs_range
 
 TOLERANCE = 1e-6
 

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from analytic.errors import SceneError
-from analytic.relay_wall import RelayWallScene, Scan
-from analytic.scene import Illumination, Sampling
-from analytic.scene_file import load_scene, scene_from_dict, scene_to_tables
+from analytic.scenes.relay_wall import RelayWallScene, Scan
+from analytic.scenes.common import Illumination, Sampling
+from analytic.scenes.scene_file import load_scene, scene_from_dict, scene_to_tables
 
 EVERY_KEY = """
 name = "around the corner"

@@ -3,12 +3,12 @@
 import numpy as np
 import pytest
 
-from analytic.detector import Detector
+from analytic.measurement.detector import Detector
 from analytic.errors import ResourceError, SceneError
-from analytic.relay_wall import RelayWallScene, Scan
-from analytic.scene import (MAX_SENSORS, MIN_TOLERANCE, Noise, Sampling, Scene, check_tolerance, default_scene,
+from analytic.scenes.relay_wall import RelayWallScene, Scan
+from analytic.scenes.common import (MAX_SENSORS, MIN_TOLERANCE, Noise, Sampling, Scene, check_tolerance, default_scene,
                             sensor_grid)
-from analytic.window import response_range, window_share
+from analytic.operator.window import response_range, window_share
 
 
 def test_default_scene_is_the_papers_set_up_at_a_sensible_flux():

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from analytic.errors import SceneError
-from analytic.scene import default_scene
-from analytic.scene_file import load_scene, scene_from_dict, scene_to_tables
+from analytic.scenes.common import default_scene
+from analytic.scenes.scene_file import load_scene, scene_from_dict, scene_to_tables
 from scene_files import GOOD, write_scene
 
 
@@ -241,8 +241,8 @@ def test_a_whole_number_past_pythons_digit_limit_is_one_line(tmp_path):
 
 @pytest.mark.parametrize("image", [np.full((8, 8), "0.5"), np.full((8, 8), True), np.full((8, 8), None)])
 def test_a_reflectance_array_of_anything_but_numbers_is_refused(image):
-    from analytic.relay_wall import RelayWallScene
-    from analytic.scene import Scene
+    from analytic.scenes.relay_wall import RelayWallScene
+    from analytic.scenes.common import Scene
 
     with pytest.raises(SceneError, match="plane.reflectance: expected an image of numbers"):
         Scene(pixels=8, reflectance=image)

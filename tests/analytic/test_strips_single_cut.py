@@ -20,9 +20,9 @@ from scipy import optimize
 
 from analytic.kernels.isochrone import PixelBox, make_frame
 from analytic.kernels.routes import clear_of_birth, clear_of_feet
-from analytic.scene import Illumination, Sampling, Scene
+from analytic.scenes.common import Illumination, Sampling, Scene
 from analytic.kernels.strips import single_cut
-from analytic.system import QuadratureWarning, pair_entries
+from analytic.operator.system import QuadratureWarning, pair_entries
 from reference import attenuation, bin_kernel, distance_sum, pixel_box, pixel_entry
 
 TOLERANCE = 1e-10

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 from reference import bin_kernel, pixel_box, pixel_entry
 
-from analytic.scene import default_scene
-from analytic.system import QuadratureWarning, system_matrix
-from validation.suite import hard_cases
+from analytic.scenes.common import default_scene
+from analytic.operator.system import QuadratureWarning, system_matrix
+from validation.runs.suite import hard_cases
 
 TOLERANCE = 1e-6
 
@@ -138,7 +138,7 @@ def _exponential_tail_kernel(omega, duration, lower, upper):
 def test_butterworth_tail_entries_keep_the_per_entry_tolerance(rng):
     """A long first-order pulse over 160 bins: entries 1e-6 to 1e-15 of their row's largest stay within the
     tolerance of their own value (the difference of two values of S near the pulse's area did not)."""
-    from analytic.scene import Illumination, Sampling
+    from analytic.scenes.common import Illumination, Sampling
 
     cutoff, duration = 0.5, 12.0
     scene = default_scene(pixels=4, sensors=[[0.2, 0.7, 1.0]],

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from analytic.errors import ResourceError, SceneError
-from analytic.scene import Illumination, Sampling, Scene
-from analytic.system import MIN_TOLERANCE, count_entries, forward, system_matrix
+from analytic.scenes.common import Illumination, Sampling, Scene
+from analytic.operator.system import MIN_TOLERANCE, count_entries, forward, system_matrix
 
 
 def _scene(**changes):

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from analytic.kernels.bins import BinRun, TimeAxis
-from analytic.scene import Illumination, Sampling
+from analytic.scenes.common import Illumination, Sampling
 from analytic.kernels.taylor import MAX_TERMS, kernel_taylor
 from analytic.waveforms import make_waveform
 

@@ -17,7 +17,7 @@ from numba import njit
 from scipy import integrate, signal
 
 from analytic.binning import bin_index
-from analytic.scene import Illumination, Sampling, SceneError
+from analytic.scenes.common import Illumination, Sampling, SceneError
 from analytic.kernels.pieces import cumulative_scalar
 from analytic.waveforms import MAX_ORDER, make_waveform
 from waveform_reference import ButterworthReference
@@ -434,8 +434,8 @@ def test_butterworth_kernels_are_accurate_far_in_the_tail(order, cutoff, duratio
 
 def test_a_pulse_that_starts_before_zero_is_the_causal_one_moved():
     """A square centred at 0 (lead -w/2) gives the causal square's y with every bin edge moved by w/2."""
-    from analytic.scene import default_scene
-    from analytic.system import rectangle_matrix
+    from analytic.scenes.common import default_scene
+    from analytic.operator.system import rectangle_matrix
     from analytic.waveforms import Waveform, make_terms
     from analytic.waveforms.pieces import POLYNOMIAL
 

@@ -3,15 +3,15 @@
 import numpy as np
 import pytest
 
-from analytic.scene import Illumination, Sampling, Scene, default_scene
-from analytic.system import forward, system_matrix
-from analytic.window import FULL_SHARE, WindowWarning, covering_sampling, response_range, warn_if_cut, window_share
+from analytic.scenes.common import Illumination, Sampling, Scene, default_scene
+from analytic.operator.system import forward, system_matrix
+from analytic.operator.window import FULL_SHARE, WindowWarning, covering_sampling, response_range, warn_if_cut, window_share
 
 
 def test_covering_sampling_keeps_every_path():
     # With an impulse each pixel's row sum over all bins is ∫ a_k over the pixel,
     # whatever the bins; the covering bins must lose none of it.
-    from analytic.conditioning import scene_for
+    from analytic.operator.conditioning import scene_for
 
     base = Scene(pixels=6, reflectance=0.5, source=(0.5, 0.5, 1.0), sensors=((0.2, 0.3, 1.0),))
     narrow = scene_for(base, extent=3.0, period=0.1, grid=(2, 2))

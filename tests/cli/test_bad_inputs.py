@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from analytic.scene_file import load_scene
+from analytic.scenes.scene_file import load_scene
 from brute_force import binned_transient, path_length_range, sensor_totals
 from scene_files import GOOD, write_scene
 from validation.cli import main
@@ -115,7 +115,7 @@ def test_the_table_has_at_least_150_cases():
     assert len(CASES) >= 150
 
 
-@pytest.mark.filterwarnings("default::analytic.window.WindowWarning")
+@pytest.mark.filterwarnings("default::analytic.operator.window.WindowWarning")
 @pytest.mark.parametrize("key, label, value, legal", CASES,
                          ids=[f"{key}={label}" for key, label, *_ in CASES])
 def test_scene_value(tmp_path, capsys, key, label, value, legal):
@@ -262,7 +262,7 @@ def test_command_line_value(tmp_path, capsys, argv, words):
 @pytest.mark.parametrize("name", ["a\x00b", "two\nlines", "a\u202eb", "a\u2028b"])
 def test_a_scene_refuses_an_unprintable_name(name):
     from analytic.errors import SceneError
-    from analytic.scene import Scene
+    from analytic.scenes.common import Scene
 
     with pytest.raises(SceneError) as caught:
         Scene(name=name)
@@ -324,7 +324,7 @@ def test_a_string_in_a_list_of_numbers_is_refused_naming_its_place(tmp_path, cap
     assert len(error) == 1 and error[0].startswith(f"diffuse-imaging: error: {key}: expected "), error
 
 
-@pytest.mark.filterwarnings("ignore::analytic.window.WindowWarning")
+@pytest.mark.filterwarnings("ignore::analytic.operator.window.WindowWarning")
 def test_a_response_csv_with_a_byte_order_mark_is_read(tmp_path):
     (tmp_path / "irf.csv").write_bytes(b"\xef\xbb\xbf0\n1\n0.5\n0\n")
     text = SAMPLED.replace("samples = [0.0, 1.0, 0.5, 0.0]", 'file = "irf.csv"')

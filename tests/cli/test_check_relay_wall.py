@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 from scene_files import write_relay_wall_file
 
-from analytic.files import write_relay_wall_capture
-from analytic.relay_wall import RelayWallScene, Scan
-from analytic.scene import Sampling
+from interop.tal import write_relay_wall_capture
+from analytic.scenes.relay_wall import RelayWallScene, Scan
+from analytic.scenes.common import Sampling
 from validation.cli import main
 
 REPLICAS = 16

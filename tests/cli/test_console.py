@@ -9,7 +9,7 @@ import warnings
 
 import pytest
 
-from analytic.window import WindowWarning
+from analytic.operator.window import WindowWarning
 from scene_files import GOOD, write_scene
 from validation.cli.program import OWN_PACKAGES, _OneLineWarnings
 

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 import analytic
-from analytic.detector import draw_counts
+from analytic.measurement.detector import draw_counts
 from analytic.files import read_transient
-from analytic.scene_file import load_scene
+from analytic.scenes.scene_file import load_scene
 from scene_files import GOOD, write_scene
 from validation.cli import main
 
@@ -200,7 +200,7 @@ def test_render_and_run_write_counts_of_their_y(spad, tmp_path):
 
 def test_a_render_near_the_poisson_limit_is_judged_by_the_model_not_the_bound(tmp_path):
     """The cheap bound (all of a sensor's light in one bin) would refuse it; the exact y does not."""
-    from analytic.window import impulse_totals
+    from analytic.operator.window import impulse_totals
 
     covered = GOOD.replace("start = 0.0", "start = 2.0").replace("count = 40", "count = 7")    # the light's bins
     plain = load_scene(write_scene(tmp_path, covered, name="plain.toml"))
@@ -229,9 +229,9 @@ def test_a_render_whose_counts_could_pass_a_poissons_limit_is_refused_before_any
 
 
 def test_a_relay_wall_capture_gets_counts_in_tal_nlos_layout(tmp_path):
-    from analytic.detector import Detector
-    from analytic.relay_wall import RelayWallScene, Scan
-    from analytic.scene import Sampling
+    from analytic.measurement.detector import Detector
+    from analytic.scenes.relay_wall import RelayWallScene, Scan
+    from analytic.scenes.common import Sampling
     from scene_files import write_relay_wall_file
 
     scene = RelayWallScene(name="nlos", pixels=4, center=(0.1, 0.05, 0.9), u=(0.8, 0.0, 0.0), v=(0.0, -0.7, 0.0),

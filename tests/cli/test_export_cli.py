@@ -4,10 +4,10 @@ warnings about the scene's window."""
 import numpy as np
 import pytest
 
-from analytic.scene_file import load_scene
-from analytic.system import forward
+from analytic.scenes.scene_file import load_scene
+from analytic.operator.system import forward
 from scene_files import GOOD, write_scene
-from transient.export import MITRANSIENT_IMPULSE_ONLY
+from interop.mitransient.export import MITRANSIENT_IMPULSE_ONLY
 from validation.cli import main
 
 REFUSAL = ('diffuse-imaging: error: illumination.waveform: mitransient renders the impulse response only; export '
@@ -27,7 +27,7 @@ def test_export_for_mitransient_refuses_a_pulse_in_one_stable_line(tmp_path, cap
     assert main(["export", str(path), "--format", "mitsuba", "--out", str(tmp_path / "ours"), "--quiet"]) == 0
 
 
-@pytest.mark.filterwarnings("default::analytic.window.WindowWarning")
+@pytest.mark.filterwarnings("default::analytic.operator.window.WindowWarning")
 def test_check_warns_when_the_window_is_mostly_empty(tmp_path, capsys, rng):
     # GOOD's window is [0, 4) m and its light spans about [2.0, 2.7] m: the model plus its stated noise agrees
     path = write_scene(tmp_path, GOOD)

@@ -38,7 +38,7 @@ def test_missing_scene_file_exits_2(tmp_path, capsys):
     assert len(capsys.readouterr().err.strip().splitlines()) == 1
 
 
-@pytest.mark.filterwarnings("default::analytic.window.WindowWarning")     # GOOD's window is mostly empty
+@pytest.mark.filterwarnings("default::analytic.operator.window.WindowWarning")     # GOOD's window is mostly empty
 def test_forward_writes_the_contract_files(tmp_path, capsys):
     text = GOOD + "\n[noise]\nsigma = 0.1\nseed = 3\n"
     path = write_scene(tmp_path, text)
@@ -68,7 +68,7 @@ def test_forward_writes_the_contract_files(tmp_path, capsys):
     assert abs(residual.std() - 0.1) < 4 * 0.1 / math.sqrt(2 * residual.size)
 
 
-@pytest.mark.filterwarnings("default::analytic.window.WindowWarning")
+@pytest.mark.filterwarnings("default::analytic.operator.window.WindowWarning")
 def test_a_window_that_cuts_the_response_warns_in_one_line(tmp_path, capsys):
     path = write_scene(tmp_path, GOOD.replace("start = 0.0\ncount = 40", "start = 1.9\ncount = 3"))
     assert main(["forward", str(path), "--out", str(tmp_path / "out"), "--quiet"]) == 0
@@ -77,7 +77,7 @@ def test_a_window_that_cuts_the_response_warns_in_one_line(tmp_path, capsys):
     assert json.loads((tmp_path / "out" / "meta.json").read_text())["window_share"] < 0.999
 
 
-@pytest.mark.filterwarnings("default::analytic.window.WindowWarning")
+@pytest.mark.filterwarnings("default::analytic.operator.window.WindowWarning")
 def test_a_mostly_empty_window_warns_in_one_line_with_the_covering_window(tmp_path, capsys):
     # GOOD's window is [0, 4) m; its light spans about [2.0, 2.7] m: 33 of its 40 bins receive none
     path = write_scene(tmp_path, GOOD)
@@ -91,7 +91,7 @@ def test_a_mostly_empty_window_warns_in_one_line_with_the_covering_window(tmp_pa
     assert (lit[0], lit[-1]) == (20, 26)
 
 
-@pytest.mark.filterwarnings("default::analytic.window.WindowWarning")
+@pytest.mark.filterwarnings("default::analytic.operator.window.WindowWarning")
 def test_window_auto_takes_the_bins_that_hold_all_the_light(tmp_path, capsys):
     path = write_scene(tmp_path, GOOD)
     # the same period with the auto window: every bin that receives light, and no other

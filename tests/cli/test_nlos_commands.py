@@ -11,10 +11,10 @@ import pytest
 from relay_wall_reference import brute_force_path_range, reference_bin
 
 from analytic.files import read_transient
-from analytic.scene_file import load_scene
-from analytic.system import forward
+from analytic.scenes.scene_file import load_scene
+from analytic.operator.system import forward
 from validation.cli import main
-from validation.compare import compare_transients
+from validation.judging.compare import compare_transients
 
 # reconstruct and run show the inversion's warnings (a λ at the end of its grid, rank deficiency) on stderr
 pytestmark = pytest.mark.filterwarnings("default::analytic.inversion.RegularizationWarning",

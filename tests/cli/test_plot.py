@@ -7,9 +7,9 @@ import h5py
 import numpy as np
 import pytest
 
-from analytic.files import capture as capture_module
-from analytic.scene_file import load_scene
-from analytic.system import forward
+from interop.tal import capture as capture_module
+from analytic.scenes.scene_file import load_scene
+from analytic.operator.system import forward
 from scene_files import write_scene
 from validation.cli import main
 from validation.cli.plot import read_for_plot

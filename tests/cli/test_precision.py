@@ -14,7 +14,7 @@ import warnings
 import numpy as np
 import pytest
 
-from analytic.files import read_capture
+from interop.tal import read_capture
 from validation.cli import main
 
 SCENE = """

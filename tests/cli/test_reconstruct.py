@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from analytic.files import read_transient, save_npy
-from analytic.noise import add_noise
-from analytic.scene_file import load_scene
-from analytic.system import forward
+from analytic.measurement.noise import add_noise
+from analytic.scenes.scene_file import load_scene
+from analytic.operator.system import forward
 from validation.cli import main
 
 # reconstruct shows the inversion's warnings (a λ at the end of its grid, rank deficiency) on stderr
@@ -195,7 +195,7 @@ def test_reconstruct_reports_what_the_data_fix_at_their_noise(tmp_path, capsys):
     """One sensor, 70 bins, 16 pixels: A has full rank, yet at a σ above most of its singular values the data
     fix few of the image's numbers. The report, metrics and summary line say how many (the singular values
     above σ, counted here by NumPy on the assembled A), and a warning says so when they are at most half."""
-    from analytic.system import system_matrix
+    from analytic.operator.system import system_matrix
 
     scene_path = tmp_path / "one.toml"
     scene_path.write_text(ONE_SENSOR.format(sigma=1e-9))

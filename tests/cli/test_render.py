@@ -12,9 +12,9 @@ import time
 import numpy as np
 import pytest
 
-from analytic.scene import default_scene
-from analytic.system import forward
-from validation.compare import compare_transients
+from analytic.scenes.common import default_scene
+from analytic.operator.system import forward
+from validation.judging.compare import compare_transients
 
 SCENE = """
 [plane]
@@ -75,7 +75,7 @@ def test_terminated_render_saves_its_own_state_and_says_how_to_resume(tmp_path):
     given), no complete-looking output, and a state equal to the one the same render stopped after as many
     samples keeps. 2^40 samples cannot finish before the signal (hours at any speed this code reaches), so
     the interruption is always what is tested."""
-    from analytic.scene_file import load_scene
+    from analytic.scenes.scene_file import load_scene
     from transient.render import RenderInterrupted, render
 
     scene_path = tmp_path / "scene.toml"
@@ -137,7 +137,7 @@ def test_resume_alone_finishes_a_render_to_the_same_numbers(tmp_path, capsys):
 
 def _interrupted_render(tmp_path):
     """A render folder holding a state after its first chunks (seed 4, 2^22 samples)."""
-    from analytic.scene_file import load_scene
+    from analytic.scenes.scene_file import load_scene
     from transient.render import RenderInterrupted, render
 
     scene_path = tmp_path / "scene.toml"
@@ -179,7 +179,7 @@ def test_resume_with_too_few_samples_names_the_samples_not_a_scene(tmp_path):
 
 def test_a_new_render_into_a_finished_folder_leaves_no_complete_looking_files_until_done(tmp_path):
     """An earlier render's results beside a new, unfinished render's state would look like its own."""
-    from analytic.scene_file import load_scene
+    from analytic.scenes.scene_file import load_scene
     from transient.render import RenderInterrupted, render
 
     scene_path = tmp_path / "scene.toml"
@@ -198,8 +198,8 @@ def test_a_new_render_into_a_finished_folder_leaves_no_complete_looking_files_un
 
 
 def test_window_auto_renders_the_covering_bins_and_a_resume_keeps_them(tmp_path, capsys):
-    from analytic.scene_file import load_scene
-    from analytic.window import covering_sampling
+    from analytic.scenes.scene_file import load_scene
+    from analytic.operator.window import covering_sampling
 
     scene_path = tmp_path / "scene.toml"
     scene_path.write_text(SCENE.replace("start = 1.0\ncount = 30", "start = 0.0\ncount = 80"))

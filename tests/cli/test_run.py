@@ -26,8 +26,8 @@ def run_folder(tmp_path_factory):
 def test_run_states_what_the_data_fix_on_the_letters_scene(run_folder):
     """The built-in scene's A has rank 124 (192 rows for 50² pixels); at σ = 0.1 the data fix the singular
     values of A above it, counted here by NumPy on the assembled A; the report's sentence says both."""
-    from analytic.scene import default_scene
-    from analytic.system import system_matrix
+    from analytic.scenes.common import default_scene
+    from analytic.operator.system import system_matrix
 
     values = np.linalg.svd(system_matrix(default_scene()).toarray(), compute_uv=False)
     information = json.loads((run_folder / "metrics.json").read_text())["reconstruction"]["information"]
@@ -96,7 +96,7 @@ def test_the_metadata_schema_is_the_same_for_every_command(run_folder, tmp_path)
 
 
 def test_intensity_scales_the_render_exactly(tmp_path):
-    from analytic.scene import default_scene
+    from analytic.scenes.common import default_scene
     from transient.render import render
 
     scene = default_scene(pixels=8)
@@ -162,13 +162,13 @@ def test_reconstruct_shows_its_warnings_on_stderr_and_in_its_report(tmp_path, on
         assert f"- **{name}**: " in report, name
 
 
-@pytest.mark.filterwarnings("default::analytic.window.WindowWarning",
+@pytest.mark.filterwarnings("default::analytic.operator.window.WindowWarning",
                             "default::analytic.inversion.RankDeficiencyWarning",
                             "default::analytic.inversion.RegularizationWarning")
 def test_run_window_auto_states_and_records_the_covering_window(tmp_path, capsys):
     # in-process (not a subprocess): each run saves ~5 s of imports; the lines are the CLI's own stderr
-    from analytic.scene_file import load_scene
-    from analytic.window import covering_sampling
+    from analytic.scenes.scene_file import load_scene
+    from analytic.operator.window import covering_sampling
 
     scene_path = tmp_path / "wide.toml"
     scene_path.write_text(ONE_SENSOR.replace("start = 1.9\ncount = 12", "start = 0\ncount = 40"))

@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 from scene_files import write_relay_wall_file, write_scene_file
 
-from analytic.relay_wall import Scan, default_relay_wall_scene
-from analytic.scene import Sampling, default_scene
+from analytic.scenes.relay_wall import Scan, default_relay_wall_scene
+from analytic.scenes.common import Sampling, default_scene
 from validation.cli import main
-from validation.harness import imaging_problem, refuse_dark
+from validation.runs.harness import imaging_problem, refuse_dark
 
 DARK = {
     "black plane": (default_scene(pixels=8, reflectance=0.0, noise=None), "plane.reflectance: the plane is black"),
@@ -84,10 +84,10 @@ def test_run_refuses_lambda_options_for_a_scene_it_does_not_reconstruct(tmp_path
 
 
 def test_validate_refuses_a_dark_scene_before_rendering_the_others(tmp_path, capsys, monkeypatch):
-    import validation.harness
+    import validation.runs.harness
 
     lit = write_scene_file(tmp_path, default_scene(pixels=8, noise=None), name="lit.toml")
     dark = write_scene_file(tmp_path, default_scene(pixels=8, noise=None, reflectance=0.0), name="dark.toml")
-    monkeypatch.setattr(validation.harness, "check_scene", lambda *a, **k: pytest.fail("rendered first"))
+    monkeypatch.setattr(validation.runs.harness, "check_scene", lambda *a, **k: pytest.fail("rendered first"))
     assert main(["validate", str(lit), str(dark), "--out", str(tmp_path / "out"), "--spp", "4096"]) == 2
     assert "plane.reflectance: the plane is black" in capsys.readouterr().err

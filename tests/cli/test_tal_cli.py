@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 import yaml
 
-from analytic.files import read_capture
-from analytic.scene_file import load_scene
-from analytic.tal_config import TalConfigWarning
+from interop.tal import read_capture
+from analytic.scenes.scene_file import load_scene
+from interop.tal.config import TalConfigWarning
 from scene_files import write_relay_wall_file
 from validation.cli import main
 
@@ -28,7 +28,7 @@ CONFIG = {
 }
 
 
-@pytest.mark.filterwarnings("default::analytic.tal_config.TalConfigWarning")   # shown as the CLI shows it
+@pytest.mark.filterwarnings("default::interop.tal.config.TalConfigWarning")   # shown as the CLI shows it
 def test_forward_of_a_tal_configuration_and_check_of_its_capture(tmp_path, capsys):
     scene_file = tmp_path / "tiny.yaml"
     scene_file.write_text(yaml.safe_dump(CONFIG))
@@ -77,7 +77,7 @@ def test_a_refused_configuration_is_one_line_and_writes_nothing(tmp_path, capsys
     assert not out.exists()
 
 
-@pytest.mark.filterwarnings("default::analytic.tal_config.TalConfigWarning")   # shown as the CLI shows it
+@pytest.mark.filterwarnings("default::interop.tal.config.TalConfigWarning")   # shown as the CLI shows it
 @pytest.mark.parametrize("command", [
     ["forward", "--window", "auto"],                          # refused by its window, after the scene's checks
     ["check", "--data", "missing.npy"],                       # refused by its data

@@ -1,7 +1,7 @@
 """A non-rectangular planar polygon in a tal configuration: its bounding rectangle with the polygon's
 indicator image as the reflectance, exact when its sides lie on the pixel grid; refused otherwise.
 
-The expected values are built here without analytic.tal_mesh: the L's pose by SciPy's extrinsic x-y-z
+The expected values are built here without interop.tal.mesh: the L's pose by SciPy's extrinsic x-y-z
 rotation (tal's T Rz Ry Rx S), its indicator by mapping each pixel centre back into the OBJ's own
 coordinates, and, independently of any indicator, as the sum of the two rectangles the L is made of,
 each its own RelayWallScene.
@@ -15,9 +15,9 @@ import yaml
 from scipy.spatial.transform import Rotation
 
 import analytic
-from analytic.relay_wall import RelayWallScene
-from analytic.scene_file import load_scene
-from analytic.tal_config import TalConfigWarning
+from analytic.scenes.relay_wall import RelayWallScene
+from analytic.scenes.scene_file import load_scene
+from interop.tal.config import TalConfigWarning
 from validation.cli import main
 
 # an L in the OBJ's plane z = 0, lit side +z (counter-clockwise), as four triangles from (0, 0)

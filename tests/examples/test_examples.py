@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 import analytic
-from analytic.window import FULL_SHARE, window_share
+from analytic.operator.window import FULL_SHARE, window_share
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLES = ROOT / "examples"

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from analytic.scene import Sampling, Scene
+from analytic.scenes.common import Sampling, Scene
 from render_checks import general_path_dict
 from transient import backend
 from transient.render import render

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from analytic.scene import Illumination, Sampling
+from analytic.scenes.common import Illumination, Sampling
 from analytic.kernels.pieces import cumulative_scalar
 from analytic.waveforms import make_waveform
 from compiled_kernels import compiled_kernels

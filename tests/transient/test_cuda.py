@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from analytic.scene import Illumination
+from analytic.scenes.common import Illumination
 from render_checks import agreement, model
 from transient import backend
 from transient.render import render
@@ -73,9 +73,9 @@ def test_cuda_sums_equal_cpu_sums(scene, waveform):
 
 def _relay_wall_case():
     """An off-centre, tilted hidden rectangle, a Butterworth pulse, a single scan: every factor of the third bounce."""
-    from analytic.relay_wall import RelayWallScene, Scan
-    from analytic.scene import Sampling
-    from analytic.window import pairs_range
+    from analytic.scenes.relay_wall import RelayWallScene, Scan
+    from analytic.scenes.common import Sampling
+    from analytic.operator.window import pairs_range
 
     scene = RelayWallScene(pixels=6, reflectance=np.linspace(0.1, 1.0, 36).reshape(6, 6), center=(0.2, 0.1, 1.1),
                            u=(0.7, 0.0, 0.3), v=(0.0, -0.8, 0.0),

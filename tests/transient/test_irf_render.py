@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from render_checks import agreement, model
 
-from analytic.scene import Illumination
+from analytic.scenes.common import Illumination
 from analytic.kernels.pieces import cumulative_scalar
 from analytic.waveforms import make_waveform
 from analytic.waveforms.pieces import kernel_array

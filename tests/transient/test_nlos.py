@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 from render_checks import agreement
 
-from analytic.relay_wall import RelayWallScene, Scan, default_relay_wall_scene
-from analytic.scene import Illumination, Sampling
-from analytic.system import system_matrix
-from analytic.window import pairs_range
+from analytic.scenes.relay_wall import RelayWallScene, Scan, default_relay_wall_scene
+from analytic.scenes.common import Illumination, Sampling
+from analytic.operator.system import system_matrix
+from analytic.operator.window import pairs_range
 
 
 def _covering(scene, period=0.02):
@@ -89,7 +89,7 @@ def test_a_wrong_model_fails():
     replicas = _render(scene, 2**18, seed=4)
     rectangle, pairs = scene.geometry()
     from analytic.geometry import PointPairs
-    from analytic.system import rectangle_matrix
+    from analytic.operator.system import rectangle_matrix
     from analytic.waveforms import make_waveform
 
     wrong_pairs = PointPairs(pairs.sources, pairs.sensors, source_normals=pairs.source_normals,

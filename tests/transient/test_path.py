@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 from scipy import stats
 
-from analytic.scene import Sampling, Scene
+from analytic.scenes.common import Sampling, Scene
 from render_checks import FALSE_ALARM, agreement, model, render_dict
-from validation.compare import combined_dof
+from validation.judging.compare import combined_dof
 
 
 CORNER_SOURCE = np.array([0.6, 0.4, 0.7])

@@ -7,11 +7,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from analytic.scene import Illumination, Sampling, Scene
-from analytic.system import forward, system_matrix
+from analytic.scenes.common import Illumination, Sampling, Scene
+from analytic.operator.system import forward, system_matrix
 from render_checks import agreement, model, render_dict
 from transient.render import render, render_loaded
-from validation.suite import hard_cases, validation_suite
+from validation.runs.suite import hard_cases, validation_suite
 
 
 def test_render_agrees_with_model(scene, rendered):

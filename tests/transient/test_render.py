@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import stats
 
-from analytic.scene import Sampling, Scene
+from analytic.scenes.common import Sampling, Scene
 from render_checks import FALSE_ALARM, model
 from transient.render import render
 

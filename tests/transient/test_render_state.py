@@ -20,7 +20,7 @@ import time
 import numpy as np
 import pytest
 
-from analytic.scene import Sampling, Scene
+from analytic.scenes.common import Sampling, Scene
 from transient.render import PARTIAL_FOLDER, REPLICAS_FILE, RenderInterrupted, render, resume
 from transient.render_state import SCENE_FILE, STATE_FILE, RenderStateError, read_saved_render, scene_fingerprint
 
@@ -152,7 +152,7 @@ def test_sigterm_keeps_finished_chunks(scene, straight, tmp_path):
 _KILLED = r"""
 import sys
 import numpy as np
-from analytic.scene import Sampling, Scene
+from analytic.scenes.common import Sampling, Scene
 from transient.render import render
 image = np.random.default_rng(7).uniform(0.1, 0.9, (6, 6))
 scene = Scene(size=1.0, pixels=6, reflectance=image, source=(0.4, 0.6, 0.7),
@@ -322,8 +322,8 @@ def test_fingerprint_covers_scene_and_estimator(scene):
 def test_a_relay_wall_fingerprint_covers_what_the_renderer_reads():
     """A capture through a relay wall: every key of its wall, hidden rectangle, laser, sensor, scan and image
     changes the fingerprint; its name, tolerance and noise do not."""
-    from analytic.relay_wall import RelayWallScene, Scan
-    from analytic.scene import Noise
+    from analytic.scenes.relay_wall import RelayWallScene, Scan
+    from analytic.scenes.common import Noise
 
     image = np.random.default_rng(3).uniform(0.1, 0.9, (4, 4))
     scene = RelayWallScene(pixels=4, reflectance=image, scan=Scan(type="single", grid=(2, 2)))
@@ -342,7 +342,7 @@ def test_a_relay_wall_fingerprint_covers_what_the_renderer_reads():
 
 def test_a_relay_wall_render_folder_holds_its_scene(tmp_path):
     """The saved scene of a capture reads back to the same fingerprint, its image bit for bit."""
-    from analytic.relay_wall import RelayWallScene, Scan
+    from analytic.scenes.relay_wall import RelayWallScene, Scan
     from transient.render_state import save_scene, _load_saved_scene
 
     image = np.random.default_rng(5).uniform(0.1, 0.9, (4, 4))

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import json
 
-from validation.agreement import INDEPENDENT, SIGN_FLIP, null_note
-from validation.compare import compare_transients
+from validation.judging.agreement import INDEPENDENT, SIGN_FLIP, null_note
+from validation.judging.compare import compare_transients
 
 
 def test_the_summary_and_the_record_name_the_verdict_the_null_and_the_worst_bin(rng):

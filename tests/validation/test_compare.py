@@ -5,7 +5,7 @@ import pytest
 from scipy import stats
 
 from analytic.errors import DataError
-from validation.compare import (CorrelationWarning, combined_dof, compare_transients,
+from validation.judging.compare import (CorrelationWarning, combined_dof, compare_transients,
                                 normal_scores)
 
 
@@ -230,8 +230,8 @@ def test_combined_degrees_of_freedom():
 
 def test_real_renders_keep_the_stated_false_alarm_rate():
     """Many seeds of a cheap scene against the exact model: failures at about the stated rate."""
-    from analytic.scene import Sampling, Scene
-    from analytic.system import forward
+    from analytic.scenes.common import Sampling, Scene
+    from analytic.operator.system import forward
     from transient.render import render
 
     scene = Scene(size=1.0, pixels=4, reflectance=np.random.default_rng(5).uniform(0.2, 0.9, (4, 4)),
@@ -256,7 +256,7 @@ def test_real_renders_keep_the_stated_false_alarm_rate():
 
 def _repro_scene(**changes):
     """A plane of 8 x 8 pixels, one sensor, 12 bins of 0.1 m from 1.9 m (the issue's repro scene)."""
-    from analytic.scene import Sampling, Scene
+    from analytic.scenes.common import Sampling, Scene
 
     values = dict(size=1.0, pixels=8, reflectance=0.5, source=(0.5, 0.5, 1.0), sensors=[(0.2, 0.7, 1.0)],
                   sampling=Sampling(bin_width_opl=0.1, start_opl=1.9, count=12))
@@ -264,7 +264,7 @@ def _repro_scene(**changes):
 
 
 def _pulse_scene(pulse: str):
-    from analytic.scene import Illumination, Sampling
+    from analytic.scenes.common import Illumination, Sampling
 
     if pulse == "impulse":
         return _repro_scene()
@@ -282,7 +282,7 @@ def test_renders_with_correlated_bins_keep_the_stated_false_alarm_rate(pulse):
     """100 seeds against the exact model, judged with their replicas' sign flips: each test fails at
     its share α/2, within binomial error; a wide pulse makes the bins move together, and the
     independent-bins limits then fail far more often than α."""
-    from analytic.system import forward
+    from analytic.operator.system import forward
     from transient.render import render
 
     scene = _pulse_scene(pulse)
@@ -318,7 +318,7 @@ def _compound_poisson(rng, hits, replicas, weight_spread):
     return values.reshape(counts.shape)
 
 
-@pytest.mark.filterwarnings("ignore::validation.compare.CorrelationWarning")
+@pytest.mark.filterwarnings("ignore::validation.judging.compare.CorrelationWarning")
 @pytest.mark.parametrize("replicas, spread", [(3, 0.01), (4, 0.1)])
 def test_sparse_bins_keep_the_stated_false_alarm_rate(rng, replicas, spread):
     """A response from 0.3 to 300 samples per bin and replica, a handful of replicas: bins where every
@@ -335,7 +335,7 @@ def test_sparse_bins_keep_the_stated_false_alarm_rate(rng, replicas, spread):
     assert fails <= alpha * trials + 3 * np.sqrt(trials * alpha * (1 - alpha)), fails
 
 
-@pytest.mark.filterwarnings("ignore::validation.compare.CorrelationWarning")
+@pytest.mark.filterwarnings("ignore::validation.judging.compare.CorrelationWarning")
 def test_bins_are_not_chosen_by_their_own_spread(rng):
     """Gaussian replicas, three of them, on a response whose relative error crosses 0.1: selecting bins by
     their own small spread selects large |t| (χ² failed 8 x as often as stated); by the samples they hold,

@@ -1,6 +1,6 @@
 """The corner: outside the one-bounce model, so the harness reports the share of further bounces."""
 
-from validation.corner import check_corner
+from validation.runs.corner import check_corner
 
 
 def test_corner_reports_further_bounces_instead_of_agreement():

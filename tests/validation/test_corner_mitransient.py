@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from transient import backend
-from validation.compare import combined_dof, compare_transients
-from validation.corner import corner_against_mitransient, default_corner, render_corner
+from validation.judging.compare import combined_dof, compare_transients
+from validation.runs.corner import corner_against_mitransient, default_corner, render_corner
 
 
 def test_irradiancemeter_offset_uses_mitsubas_ray_epsilon():

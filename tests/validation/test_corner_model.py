@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from analytic.errors import SceneError
-from analytic.scene import Illumination, Sampling, Scene
-from analytic.system import forward, rectangle_matrix
+from analytic.scenes.common import Illumination, Sampling, Scene
+from analytic.operator.system import forward, rectangle_matrix
 from analytic.waveforms import make_waveform
-from validation.corner import Corner, corner_model, corner_pairs, corner_rectangles, default_corner
+from validation.runs.corner import Corner, corner_model, corner_pairs, corner_rectangles, default_corner
 
 # A sensor near the wall and one near the floor: the attenuation peaks sharply under both.
 NEAR_CORNER = Corner(name="near", source=(0.35, 0.8, 0.25), sensors=((0.12, 0.3, 0.6), (0.7, 0.55, 0.15)),

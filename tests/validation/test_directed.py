@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from analytic.system import forward
+from analytic.operator.system import forward
 from check_cases import WIDTH, shifted, small_scene
-from validation.compare import compare_transients
+from validation.judging.compare import compare_transients
 
 ALPHA = 0.1           # large, so that each test's share α/4 is seen often enough to count
 

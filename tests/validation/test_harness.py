@@ -5,12 +5,12 @@ import re
 import numpy as np
 import pytest
 
-from analytic.system import forward
+from analytic.operator.system import forward
 from transient.render import render
-from validation.compare import compare_transients
-from analytic.response import binned_contour_model
-from validation.harness import check_scene, data_driven_rule, imaging_problem
-from validation.suite import hard_cases, validation_suite
+from validation.judging.compare import compare_transients
+from analytic.operator.response import binned_contour_model
+from validation.runs.harness import check_scene, data_driven_rule, imaging_problem
+from validation.runs.suite import hard_cases, validation_suite
 
 SPP = dict((scene.name, spp) for scene, spp in validation_suite())["outside"]   # the suite's count
 
@@ -87,7 +87,7 @@ def test_check_scene_reports_every_figure():
 
 def test_data_driven_rule_uses_sigma_when_the_scene_knows_it():
     from analytic.errors import SceneError
-    from analytic.scene import Noise, default_scene
+    from analytic.scenes.common import Noise, default_scene
 
     assert data_driven_rule(default_scene()) == ("discrepancy", 0.1)
     assert data_driven_rule(default_scene(noise=None)) == ("gcv", None)
@@ -99,8 +99,8 @@ def test_data_driven_rule_uses_sigma_when_the_scene_knows_it():
 
 def test_a_render_more_precise_than_the_scenes_tolerance_is_judged_against_a_tighter_model():
     """A 1 mm hidden square renders to ~1e-12 of its value: judged against the 1e-6 model it failed (χ²/dof 240)."""
-    from analytic.relay_wall import RelayWallScene, Scan
-    from analytic.scene import Sampling
+    from analytic.scenes.relay_wall import RelayWallScene, Scan
+    from analytic.scenes.common import Sampling
 
     scene = RelayWallScene(name="tiny", pixels=1, reflectance=0.5, center=(0.0, 0.0, 1.0), u=(0.001, 0.0, 0.0),
                            v=(0.0, -0.001, 0.0), scan=Scan(type="single", grid=(2, 2)),

@@ -2,9 +2,9 @@
 
 import numpy as np
 
-from analytic.relay_wall import Scan, default_relay_wall_scene
-from analytic.scene import Sampling, default_scene
-from analytic.system import system_matrix
+from analytic.scenes.relay_wall import Scan, default_relay_wall_scene
+from analytic.scenes.common import Sampling, default_scene
+from analytic.operator.system import system_matrix
 from validation.model_blocks import system_matrix_on_dask
 from validation.sweep.driver import sweep_client
 

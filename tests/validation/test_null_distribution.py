@@ -8,7 +8,7 @@ import itertools
 import numpy as np
 from scipy import stats
 
-from validation.null_distribution import flip_count, independent_limits, replica_limits
+from validation.judging.null_distribution import flip_count, independent_limits, replica_limits
 
 
 def test_independent_limits_hold_the_stated_tails_of_independent_normal_bins(rng):

@@ -5,10 +5,10 @@ import json
 import numpy as np
 import pytest
 
-from analytic.scene import Illumination
+from analytic.scenes.common import Illumination
 from analytic.waveforms import make_waveform
 from validation.cli import main
-from validation.paper import SPEED_OF_LIGHT, device_figures, poisson_cases
+from validation.runs.paper import SPEED_OF_LIGHT, device_figures, poisson_cases
 
 
 def test_device_figures_follow_the_stated_mapping():

@@ -7,7 +7,7 @@ import types
 import numpy as np
 import pytest
 
-from analytic.scene import Sampling
+from analytic.scenes.common import Sampling
 from validation import plots
 from validation.plots import save_figure, transients_figure, z_map_figure
 from validation.plots.axes import power_of_ten, round_origin
@@ -140,8 +140,8 @@ def test_criterion_over_the_whole_float_range_is_drawn():
 
 @pytest.fixture(scope="module")
 def check_result():
-    from analytic.scene import Scene
-    from analytic.system import forward
+    from analytic.scenes.common import Scene
+    from analytic.operator.system import forward
     from validation.check import check_transient
 
     scene = Scene(pixels=6, source=(0.5, 0.5, 1.0), sensors=[(0.2, 0.7, 1.0), (0.6, 0.3, 0.8), (0.5, 0.5, 0.5)],

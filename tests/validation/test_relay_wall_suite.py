@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 
 from analytic.geometry import PointPairs
-from analytic.relay_wall import RelayWallScene
-from analytic.system import forward, rectangle_matrix
+from analytic.scenes.relay_wall import RelayWallScene
+from analytic.operator.system import forward, rectangle_matrix
 from analytic.waveforms import make_waveform
 from transient.render import render
-from validation.compare import MIN_CHECK_SAMPLES, compare_transients
-from validation.suite import MINIMUM_SAMPLES, RELAY_WALL_SAMPLES, relay_wall_cases, validation_suite
+from validation.judging.compare import MIN_CHECK_SAMPLES, compare_transients
+from validation.runs.suite import MINIMUM_SAMPLES, RELAY_WALL_SAMPLES, relay_wall_cases, validation_suite
 
 CASES = relay_wall_cases()
 

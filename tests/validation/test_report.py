@@ -6,10 +6,10 @@ import re
 import numpy as np
 import pytest
 
-from analytic.scene import Sampling, Scene
-from validation.compare import compare_transients
-from validation.harness import SceneCheck
-from validation.report import MAX_FOLDER_NAME, RESERVED_NAMES, scene_folder_names, write_report
+from analytic.scenes.common import Sampling, Scene
+from validation.judging.compare import compare_transients
+from validation.runs.harness import SceneCheck
+from validation.runs.report import MAX_FOLDER_NAME, RESERVED_NAMES, scene_folder_names, write_report
 
 SAMPLING = Sampling(bin_width_opl=0.1, start_opl=1.9, count=6)
 

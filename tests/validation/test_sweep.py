@@ -21,8 +21,8 @@ import numpy as np
 import pytest
 
 from analytic.errors import ResourceError, SceneError
-from analytic.scene import default_scene
-from analytic.scene_file import scene_from_dict
+from analytic.scenes.common import default_scene
+from analytic.scenes.scene_file import scene_from_dict
 from transient.chunks import ChunkPlan, ReplicaAccumulator, ReplicaLayout
 from transient.render import render
 from transient.render_state import scene_fingerprint

@@ -15,7 +15,6 @@ One job per module:
 - :mod:`.assertion`: :func:`assert_agrees`, a renderer's regression test;
 - :mod:`.report`: report.md, metrics.json and the figures;
 - :mod:`.scan_figure`: a relay-wall capture's z over pairs x bins and on its scan grid;
-- :mod:`.mitransient_nlos`: what mitransient's NLOS integrator renders (the model plus its ray offsets).
 
 Names are loaded on first use (``lazy_loader``); ``__all__`` lists the
 public API.
@@ -34,6 +33,4 @@ __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "assertion": ["assert_agrees"],
     "report": ["write_check_report"],
     "scan_figure": ["scan_z_figure", "summed_z"],
-    "mitransient_nlos": ["emulated_estimates", "spawn_offset_difference", "moved_read_points", "offset_model",
-                         "transient_nlos_path", "EMULATED_SAMPLES", "EDGE_POINTS"],
 })

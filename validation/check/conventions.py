@@ -19,8 +19,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from analytic.errors import OptionError
-from analytic.relay_wall import RelayWallScene
-from analytic.scene import Scene
+from analytic.scenes.relay_wall import RelayWallScene
+from analytic.scenes.common import Scene
 # Mitsuba's ``math::RayEpsilon`` in single-precision variants (1500 x 2⁻²⁴ m): an irradiancemeter starts its
 # rays this far off its sphere (mitransient runs float32 variants). One definition, the renderer's.
 from transient.constants import RAY_EPSILON as RAY_EPSILON_FLOAT32
@@ -66,7 +66,7 @@ class Convention:
     added : numpy.ndarray or None
         ``(K, N)`` a stated difference added to the scaled, shifted model
         (units of y), derived without reference to the data (e.g.
-        :func:`~validation.check.mitransient_nlos.transient_nlos_path`); None for none.
+        :func:`~interop.mitransient.nlos.transient_nlos_path`); None for none.
     """
 
     scale: float
@@ -214,18 +214,18 @@ def convention(expect, scene, radius, words, *, model=None) -> Convention | None
     """The :class:`Convention` that ``expect`` states for ``scene`` (checked by :func:`check_expect`).
 
     ``"irradiancemeter"``: :func:`irradiancemeter` with ``radius`` (default
-    the export's, :data:`transient.export.RADIUS`); ``"transient_nlos_path"``:
-    :func:`validation.check.transient_nlos_path` (``model``: the scene's, if
+    the export's, :data:`interop.mitransient.export.RADIUS`); ``"transient_nlos_path"``:
+    :func:`interop.mitransient.transient_nlos_path` (``model``: the scene's, if
     computed); a Convention as itself; None for None.
     """
     check_expect(expect, scene, radius, words)
     if expect is None or isinstance(expect, Convention):
         return expect
     if expect == "transient_nlos_path":
-        from .mitransient_nlos import transient_nlos_path
+        from interop.mitransient.nlos import transient_nlos_path
 
         return transient_nlos_path(scene, model=model)
-    from transient.export import RADIUS
+    from interop.mitransient.export import RADIUS
 
     try:
         return irradiancemeter(scene, RADIUS if radius is None else radius)

@@ -2,7 +2,7 @@
 
 A histogram of counts c (``(K, N)``, or any shape ending in the bins) is
 judged against the expected histogram μ of the scene's model through its
-detector (:func:`analytic.detector.expected_counts`) by the likelihood-ratio
+detector (:func:`analytic.measurement.detector.expected_counts`) by the likelihood-ratio
 statistic, the deviance against the saturated model:
 
 - ``dead_time = "none"``: counts are independent Poisson(μ_n),
@@ -37,7 +37,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from analytic.detector import Detector, detection_probabilities, expected_counts, rates
+from analytic.measurement.detector import Detector, detection_probabilities, expected_counts, rates
 from analytic.errors import DataError
 
 __all__ = ["CountsVerdict", "IrfFit", "SceneModel", "deviance", "null_deviances", "judge_counts", "fit_counts",
@@ -171,7 +171,7 @@ def judge_counts(counts, expected, detector: Detector, *, false_alarm: float = D
         ``(..., N)`` the capture's counts (a draw, a measurement).
     expected : array_like
         ``(..., N)`` the model's expected counts
-        (:func:`analytic.detector.expected_counts`).
+        (:func:`analytic.measurement.detector.expected_counts`).
     detector : Detector
     false_alarm : float
         α in (0, 0.5]: the probability that counts drawn from ``expected``
@@ -241,8 +241,8 @@ class SceneModel:
         self.cache: dict = {}
 
     def __call__(self, offset_opl: float = 0.0, fwhm: float | None = None, tail: float | None = None) -> np.ndarray:
-        from analytic.scene import Illumination, Sampling
-        from analytic.system import forward     # Numba: loaded when a model is first needed
+        from analytic.scenes.common import Illumination, Sampling
+        from analytic.operator.system import forward     # Numba: loaded when a model is first needed
 
         key = (float(offset_opl), fwhm, tail)
         if key not in self.cache:

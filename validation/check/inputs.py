@@ -32,8 +32,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from analytic.errors import DataError, OptionError
-from analytic.relay_wall import RelayWallScene
-from validation.arrays import real_array
+from analytic.scenes.relay_wall import RelayWallScene
+from validation.judging.arrays import real_array
 
 from .readers import (checked_transient, film_transient, read_data, read_stderr, replicas_beside, scene_of,
                       stderr_beside)

@@ -24,11 +24,11 @@ from pathlib import Path
 import numpy as np
 
 from analytic.errors import DataError, OptionError
-from analytic.files import (CaptureError, TRANSIENT_FILES, read_capture, read_exr, read_exr_channels, read_npy,
-                            transient_format, transient_in_folder)
-from analytic.relay_wall import RelayWallScene
-from analytic.scene import Sampling, Scene
-from analytic.scene_file import load_scene
+from analytic.files import TRANSIENT_FILES, read_exr, read_exr_channels, read_npy, transient_format, transient_in_folder
+from interop.tal import CaptureError, read_capture
+from analytic.scenes.relay_wall import RelayWallScene
+from analytic.scenes.common import Sampling, Scene
+from analytic.scenes.scene_file import load_scene
 
 __all__ = ["read_data", "scene_of", "read_stderr", "stderr_beside", "replicas_beside", "film_transient", "checked_transient"]
 
@@ -195,7 +195,7 @@ def _relay_wall_capture(path: Path, scene: RelayWallScene) -> np.ndarray:
     """A tal capture of a relay-wall scene, its columns matched to the scene's pairs by their points."""
     capture = _read_capture(path, scene.sampling)
     flag = scene.scan.account_first_and_last_bounces
-    # a tal configuration's capture states the YAML's flag, which tal 0.20 does not render (analytic.tal_config)
+    # a tal configuration's capture states the YAML's flag, which tal 0.20 does not render (interop.tal.config)
     stated = getattr(scene, "capture_accounts_flag", flag)
     if capture.accounts_first_and_last_bounces is not None and capture.accounts_first_and_last_bounces != stated:
         counts = "count" if capture.accounts_first_and_last_bounces else "do not count"

@@ -6,12 +6,12 @@ from pathlib import Path
 
 from analytic.files import json_ready, save_json, staged_writes
 from validation.plots import check_transients_figure, check_z_figure, save_figure
-from validation.report import write_markdown
+from validation.runs.report import write_markdown
 
-from analytic.relay_wall import RelayWallScene
+from analytic.scenes.relay_wall import RelayWallScene
 
 from .scan_figure import scan_z_figure
-from validation.agreement import detectable_text
+from validation.judging.agreement import detectable_text
 
 from .result import CheckResult, expected_sentence
 

@@ -7,8 +7,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from validation.agreement import Agreement, detectable_text
-from validation.compare import tighter_model_note
+from validation.judging.agreement import Agreement, detectable_text
+from validation.judging.compare import tighter_model_note
 
 from .conventions import Convention
 from .fit import Fit
@@ -75,7 +75,7 @@ class CheckResult:
     model_tolerance : float or None
         The tolerance the model was evaluated at when the data's errors
         needed a tighter one than the scene's
-        (:func:`validation.compare.model_tolerance_for`); None: the scene's.
+        (:func:`validation.judging.compare.model_tolerance_for`); None: the scene's.
     scene_tolerance : float or None
         The scene's own tolerance.
     replica_data : numpy.ndarray or None

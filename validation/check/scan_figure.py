@@ -60,7 +60,7 @@ def scan_z_figure(result, scene):
     ----------
     result : CheckResult
         Judged with errors (not by shape only) and with a fit.
-    scene : analytic.relay_wall.RelayWallScene
+    scene : analytic.scenes.relay_wall.RelayWallScene
         The capture's scene (its scan grid and pair order).
 
     Returns

@@ -1,11 +1,11 @@
 """The verdict of ``check``: a transient from any tool judged against the exact model, as given and after a fit.
 
 ``check_transient(scene, data, ...)`` compares y from anywhere (our render,
-another renderer, a measurement) with ``analytic.system.forward(scene)``
+another renderer, a measurement) with ``analytic.operator.system.forward(scene)``
 in two steps:
 
 1. **As given.** z = (y_data - y_model) / se per bin, judged by
-   :func:`validation.compare.compare_transients` (docs/design.md section 6).
+   :func:`validation.judging.compare.compare_transients` (docs/design.md section 6).
    The per-bin error se comes from ``stderr`` for one transient, or from R
    independent replicas (mean and standard error of the mean; z then
    follows Student's t with R - 1 degrees of freedom, and the limits of χ²
@@ -36,9 +36,9 @@ import numbers
 import numpy as np
 
 from analytic.errors import DataError, OptionError
-from analytic.scene import Scene
-from validation.arrays import false_alarm_rate, real_array
-from validation.compare import Agreement, compare_transients, judged_bins, model_tolerance_for
+from analytic.scenes.common import Scene
+from validation.judging.arrays import false_alarm_rate, real_array
+from validation.judging.compare import Agreement, compare_transients, judged_bins, model_tolerance_for
 
 from .conventions import Convention, check_expect, convention, diagnose
 from .fit import ShiftedModel, fit_scale_offset
@@ -90,7 +90,7 @@ def _checked_data(data: np.ndarray, words: Words) -> np.ndarray:
 
 
 def _judged_bins(data, error, replica_data, words: Words) -> np.ndarray:
-    """The bins judged (:func:`validation.compare.judged_bins`); refuse when none."""
+    """The bins judged (:func:`validation.judging.compare.judged_bins`); refuse when none."""
     positive = error > 0
     if not np.any(positive):
         if replica_data is not None:
@@ -140,7 +140,7 @@ def check_transient(scene, data, *, stderr=None, dof: int | None = None, shape_o
         files (replicas). Units of y. With replicas the per-bin error comes
         from their spread, and the limits of χ² and max |z| from their sign
         flips when R is large enough
-        (:func:`validation.compare.replica_null_resolves`), which holds
+        (:func:`validation.judging.compare.replica_null_resolves`), which holds
         whatever the correlation between bins.
     stderr : array_like, str or Path, optional
         ``(K, N)`` standard error of a single transient (units of y), or
@@ -171,10 +171,10 @@ def check_transient(scene, data, *, stderr=None, dof: int | None = None, shape_o
         (:attr:`CheckResult.agrees_as_expected`, :attr:`CheckResult.verdict`).
     radius : float, optional
         ``expect="irradiancemeter"``: the spheres' radius, metres (default
-        the export's, :data:`transient.export.RADIUS`).
+        the export's, :data:`interop.mitransient.export.RADIUS`).
     evaluate : callable, optional
         scene -> ``(K, N)``: judge and fit against this instead of the model
-        (:class:`ShiftedModel`; e.g. :func:`validation.check.offset_model`,
+        (:class:`ShiftedModel`; e.g. :func:`interop.mitransient.offset_model`,
         mitransient's estimator in closed form).
 
     Returns
@@ -199,14 +199,14 @@ def check_transient(scene, data, *, stderr=None, dof: int | None = None, shape_o
     Replicas y_r: mean ȳ = Σ y_r / R, standard error
     se = sqrt(Σ (y_r - ȳ)² / (R (R - 1))), and z = (ȳ - y_model) / se follows
     Student's t with R - 1 degrees of freedom, which
-    :func:`validation.compare.compare_transients` judges (so its limits
+    :func:`validation.judging.compare.compare_transients` judges (so its limits
     keep their false-alarm rate α). The fit minimises
     Σ ((y_data - s y_model(t0 + δ)) / σ)² over the judged bins
     (:func:`fit_scale_offset`), and needs :data:`FIT_BINS` of them: with
     fewer (a one-bin scene) the data are judged as given only, and the
     result says so. The verdicts as given and as stated also test the
     data's scale and offset against the stated ones along the model's
-    derivatives (:mod:`validation.directed`: their power is
+    derivatives (:mod:`validation.judging.directed`: their power is
     :attr:`CheckResult.detectable`); the verdict after the fit uses the
     same limits (two fitted parameters against D judged bins: a 2/D
     effect).
@@ -246,7 +246,7 @@ def judge(scene, data, *, stderr=None, dof=None, shape_only=False, model=None, f
 
 
 def _precise_model(scene, data, error, model_at: ShiftedModel) -> tuple[ShiftedModel, float | None]:
-    """The model at the tolerance the data's errors need (:func:`validation.compare.model_tolerance_for`)
+    """The model at the tolerance the data's errors need (:func:`validation.judging.compare.model_tolerance_for`)
     and that tolerance, or ``model_at`` and None when the scene's serves."""
     tolerance = model_tolerance_for(scene.tolerance, data, error, MAX_RELATIVE_STDERR)
     if tolerance is None:

@@ -10,7 +10,7 @@ __all__ = ["add_commands", "command_bench"]
 def command_bench(args) -> int:
     """Run the speed-against-error comparison; exit status 0."""
     from analytic.files import output_folder
-    from validation.bench import speed_against_error
+    from validation.runs.bench import speed_against_error
 
     release_warnings()
     with output_folder(args.out) as out:

@@ -29,10 +29,10 @@ def _suite_samples(requested: int | None) -> list:
     ------
     UsageError
         When ``--spp`` is below what some suite scene needs for any of its
-        bins to be judged (:data:`validation.suite.MINIMUM_SAMPLES`), naming
+        bins to be judged (:data:`validation.runs.suite.MINIMUM_SAMPLES`), naming
         those scenes, before any work.
     """
-    from validation.suite import MINIMUM_SAMPLES, validation_suite
+    from validation.runs.suite import MINIMUM_SAMPLES, validation_suite
 
     suite = validation_suite()
     if requested is None:
@@ -56,15 +56,15 @@ def command_validate(args) -> int:
     Exit status 0 when every scene agrees, 1 when any disagrees (named on stderr).
     A user error met while checking a scene (one that cannot be judged at
     ``--spp``, say) names that scene. Each scene's figures are in a folder
-    named by :func:`validation.report.scene_folder_names`.
+    named by :func:`validation.runs.report.scene_folder_names`.
     """
-    from analytic.cost import refuse_impractical_illumination
+    from analytic.operator.cost import refuse_impractical_illumination
     from analytic.errors import UserError
     from analytic.files import output_folder, staged_writes
-    from analytic.window import window_share
-    from validation.corner import check_corner
-    from validation.harness import check_scene, refuse_dark
-    from validation.report import write_report
+    from analytic.operator.window import window_share
+    from validation.runs.corner import check_corner
+    from validation.runs.harness import check_scene, refuse_dark
+    from validation.runs.report import write_report
 
     if args.scene:
         suite = [(load_scene_argument(path), args.spp or DEFAULT_SAMPLES) for path in args.scene]
@@ -133,11 +133,11 @@ def command_run(args) -> int:
 
     Exit status 0 when the render agrees with the model, 1 when not. Its
     figures lie beside report.md in ``--out`` (one scene: no folder of its
-    own; :mod:`validation.report`).
+    own; :mod:`validation.runs.report`).
     """
-    from analytic.cost import refuse_impractical_illumination
-    from analytic.window import window_share
-    from validation.harness import data_driven_rule, imaging_problem, refuse_dark
+    from analytic.operator.cost import refuse_impractical_illumination
+    from analytic.operator.window import window_share
+    from validation.runs.harness import data_driven_rule, imaging_problem, refuse_dark
     from validation.plots.worker import FigureWorker
 
     from .reconstruct import lambda_grid_of
@@ -171,8 +171,8 @@ def command_run(args) -> int:
 def _run(args, scene, share: float, grid, drawer):
     """``run``'s work once its inputs are accepted: the check, then its files, all or none."""
     from analytic.files import build_meta, output_folder, staged_writes, write_transient
-    from validation.harness import check_scene
-    from validation.report import write_report
+    from validation.runs.harness import check_scene
+    from validation.runs.report import write_report
 
     with output_folder(args.out) as out:
         announce_window(args, scene, share)       # check_scene's own warning of a cut window is the same line
@@ -199,7 +199,7 @@ def _run(args, scene, share: float, grid, drawer):
 def show_reconstruction_warnings(reconstructions: dict) -> None:
     """Each warning of ``run``'s reconstructions again, naming the data it came from, for the one-line policy.
 
-    ``reconstructions`` is :func:`validation.harness.reconstruct_from_noisy_data`'s
+    ``reconstructions`` is :func:`validation.runs.harness.reconstruct_from_noisy_data`'s
     result; its ``warnings`` (about A and σ: shown once, "from the scene")
     and its ``model`` and ``render`` entries' ``warnings`` are lists of
     ``{"category": name, "message": text}`` with the category's

@@ -60,7 +60,7 @@ def seed_type(text: str) -> int:
 
 def check_samples_type(text: str) -> int:
     """``--spp`` of a command that cross-checks: at least MIN_CHECK_SAMPLES, so that bins can be judged."""
-    from validation.compare import MIN_CHECK_SAMPLES
+    from validation.judging.compare import MIN_CHECK_SAMPLES
 
     value = samples_type(text)
     if value < MIN_CHECK_SAMPLES:
@@ -102,15 +102,15 @@ def release_warnings() -> None:
 def load_scene_argument(path: str | None):
     """The scene a command was given: a TOML file (a plane or a relay-wall capture), or the built-in
     default scene (a plane scene)."""
-    from analytic.scene import default_scene
-    from analytic.scene_file import load_scene
+    from analytic.scenes.common import default_scene
+    from analytic.scenes.scene_file import load_scene
 
     return default_scene() if path is None else load_scene(path)
 
 
 def rows_text(scene) -> str:
     """A transient's rows in words: "16 sensors", or "64 pairs (confocal scan)" of a relay-wall capture."""
-    from analytic.relay_wall import RelayWallScene
+    from analytic.scenes.relay_wall import RelayWallScene
 
     if isinstance(scene, RelayWallScene):
         return f"{scene.sensor_count} pairs ({scene.scan.type} scan)"
@@ -137,16 +137,16 @@ def add_window_option(parser) -> None:
 
 def apply_window(args, scene):
     """The scene with the window ``--window`` asks for: ``scene`` itself for ``scene``, for ``auto`` its copy
-    with :func:`analytic.window.auto_sampling` (a SceneError when no window of its period covers the light,
+    with :func:`analytic.operator.window.auto_sampling` (a SceneError when no window of its period covers the light,
     a UsageError with the estimate when the pulse is too long for the model over those bins:
-    :func:`analytic.cost.impractical_illumination`).
+    :func:`analytic.operator.cost.impractical_illumination`).
 
     Nothing is printed: :func:`announce_window` states it once the command's inputs are all accepted.
     """
     if getattr(args, "window", "scene") != "auto":
         return scene
-    from analytic.cost import impractical_illumination
-    from analytic.window import auto_sampling
+    from analytic.operator.cost import impractical_illumination
+    from analytic.operator.window import auto_sampling
 
     chosen = scene.replace(sampling=auto_sampling(scene))
     problem = impractical_illumination(chosen)
@@ -172,9 +172,9 @@ def announce_window(args, scene, share: float | None = None) -> float:
     scene : analytic.Scene
         The scene with the window the command uses (:func:`apply_window`).
     share : float, optional
-        The window's share of the light (:func:`analytic.window.window_share`), computed unless given.
+        The window's share of the light (:func:`analytic.operator.window.window_share`), computed unless given.
     """
-    from analytic.window import response_range, warn_if_cut, warn_if_mostly_empty, window_share
+    from analytic.operator.window import response_range, warn_if_cut, warn_if_mostly_empty, window_share
 
     release_warnings()          # the inputs are accepted: the scene's own warnings first
     if getattr(args, "window", "scene") == "auto":

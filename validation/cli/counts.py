@@ -2,8 +2,8 @@
 
 A scene with a ``[detector]`` table makes ``forward``, ``render`` and
 ``run`` write ``counts_expected.npy`` (float64, the expected histogram
-:func:`analytic.detector.expected_counts` of the folder's y) and
-``counts.npy`` (int64, one draw of it, :func:`analytic.detector.draw_counts`
+:func:`analytic.measurement.detector.expected_counts` of the folder's y) and
+``counts.npy`` (int64, one draw of it, :func:`analytic.measurement.detector.draw_counts`
 with the detector's seed) beside ``transient.npy``, the draw again as
 ``counts.h5`` in tal's capture layout (the layout of the folder's
 ``transient.h5``, read by ``tal.io.read_capture``), and the figure
@@ -53,7 +53,7 @@ def draw_scene_counts(scene, y, *, stream: int = 0) -> tuple[np.ndarray, np.ndar
     """
     import numpy as np
 
-    from analytic.detector import draw_counts, expected_counts
+    from analytic.measurement.detector import draw_counts, expected_counts
 
     if scene.detector is None:
         return None
@@ -66,19 +66,19 @@ def refuse_unreachable_counts(scene, *, margin: float = 2.0) -> None:
     """Before a render (``margin`` 2) or a model (1): refuse a ``[detector]`` whose expected counts would pass what a Poisson draw takes.
 
     A render's y is known only at its end, after its files; its counts are drawn then. A cheap
-    bound comes first: :func:`analytic.window.impulse_totals` x (1 for the impulse, else the period
+    bound comes first: :func:`analytic.operator.window.impulse_totals` x (1 for the impulse, else the period
     T: a pulse of unit peak) bounds every bin of y. Only when that bound, with ``margin`` for the
-    estimate's noise, would pass :data:`analytic.detector.MAX_MEAN` is the exact model's y
+    estimate's noise, would pass :data:`analytic.measurement.detector.MAX_MEAN` is the exact model's y
     computed, and the scene refused (``detector.photons``) when its largest bin, with the margin,
     does. The dead-time detector draws multinomially from at most ``cycles``: no limit.
     """
     import numpy as np
 
-    from analytic.detector import MAX_MEAN, excess_key
+    from analytic.measurement.detector import MAX_MEAN, excess_key
     from analytic.errors import SceneError
-    from analytic.system import forward
+    from analytic.operator.system import forward
     from analytic.values import exact
-    from analytic.window import impulse_totals
+    from analytic.operator.window import impulse_totals
 
     detector = scene.detector
     if detector is None or detector.dead_time != "none":
@@ -134,8 +134,8 @@ def _write_counts_capture(path: Path, scene, drawn) -> None:
     """The drawn counts as a tal capture (H = counts, float64), laid out as the folder's transient.h5."""
     import numpy as np
 
-    from analytic.files import write_capture, write_relay_wall_capture
-    from analytic.relay_wall import RelayWallScene
+    from interop.tal import write_capture, write_relay_wall_capture
+    from analytic.scenes.relay_wall import RelayWallScene
 
     sampling = scene.sampling
     info = {"quantity": "photon counts (a draw; counts.npy)", "scene": scene.name,
@@ -323,13 +323,13 @@ def command_check_counts(args, scene) -> int:
     """
     import numpy as np
 
-    from analytic.cost import refuse_impractical_illumination
-    from analytic.detector import expected_counts
+    from analytic.operator.cost import refuse_impractical_illumination
+    from analytic.measurement.detector import expected_counts
     from analytic.files import json_ready, output_folder, save_json, staged_writes
-    from analytic.system import forward
+    from analytic.operator.system import forward
     from validation.check.counts import DEFAULT_FALSE_ALARM, SceneModel, fit_counts, judge_counts
     from validation.plots import save_figure
-    from validation.report import write_markdown
+    from validation.runs.report import write_markdown
 
     from .common import announce_window
 

@@ -36,7 +36,7 @@ def command_check(args) -> int:
     the function under ``validation.check_transient`` and
     ``validation.assert_agrees``, with the command line's words in its messages.
     """
-    from analytic.cost import refuse_impractical_illumination
+    from analytic.operator.cost import refuse_impractical_illumination
     from analytic.files import output_folder
     from validation.check import write_check_report
     from validation.check.inputs import COMMAND_WORDS
@@ -67,9 +67,9 @@ def command_check(args) -> int:
 def command_export(args) -> int:
     """Write the scene as a Mitsuba 3 XML file for our plugins or for mitransient; exit status 0."""
     from analytic.files import output_folder
-    from transient.export import export_scene
+    from interop.mitransient.export import export_scene
 
-    from analytic.relay_wall import RelayWallScene
+    from analytic.scenes.relay_wall import RelayWallScene
 
     scene = load_scene_argument(args.scene)
     if args.format != "mitransient" and (args.radius is not None or args.spp is not None):
@@ -138,7 +138,7 @@ def _finite_float(option: str):
 
 def add_commands(commands) -> None:
     """Add ``check`` and ``export``."""
-    from transient.export import FORMATS, RADIUS, SPP, SPP_RELAY_WALL
+    from interop.mitransient.export import FORMATS, RADIUS, SPP, SPP_RELAY_WALL
 
     check = commands.add_parser(
         "check", help="judge a transient from any tool against the exact model",

@@ -30,10 +30,10 @@ def command_forward(args) -> int:
 
 
 def _forward(args, scene, drawer) -> int:
-    from analytic.cost import refuse_impractical_illumination
+    from analytic.operator.cost import refuse_impractical_illumination
     from analytic.files import build_meta, output_folder, staged_writes, write_transient
-    from analytic.noise import add_noise
-    from analytic.system import forward, system_matrix
+    from analytic.measurement.noise import add_noise
+    from analytic.operator.system import forward, system_matrix
     from validation.plots import scene_transient_figure
 
     scene = apply_window(args, scene)

@@ -79,7 +79,7 @@ def render_title(name: str, *, samples: int, replicas: int, complete: bool = Tru
 def _sampling(start_opl, bin_width_opl, count, source: str):
     """The bins a file states, or a DataError naming the file when they are not bins."""
     from analytic.errors import DataError
-    from analytic.scene import Sampling
+    from analytic.scenes.common import Sampling
 
     try:
         return Sampling(bin_width_opl=float(bin_width_opl), start_opl=float(start_opl), count=int(count))
@@ -186,7 +186,7 @@ def _scan_of(path: Path, meta: dict):
 
 def _capture(path: Path) -> Drawable:
     """tal's HDF5 capture (ours or tal's): its own time axis; ours drawn as a transient, tal's as a map."""
-    from analytic.files import read_capture
+    from interop.tal import read_capture
 
     capture = read_capture(path)
     transient = _finite(path, capture.transient)
@@ -247,7 +247,7 @@ def _header_value(value):
 
 def _with_scene(path: Path, scene) -> Drawable:
     """Anything ``check`` reads, on the scene's time axis (a file that states its own must match it)."""
-    from analytic.relay_wall import RelayWallScene
+    from analytic.scenes.relay_wall import RelayWallScene
     from validation.check import read_data, stderr_beside
     from validation.plots import WallScan
     transient = read_data(path, scene)

@@ -36,7 +36,7 @@ from .common import OneLineParser
 __all__ = ["main", "console", "build_parser", "OWN_PACKAGES"]
 
 #: The packages whose warning classes are this project's own.
-OWN_PACKAGES = ("analytic", "transient", "validation")
+OWN_PACKAGES = ("analytic", "transient", "validation", "interop")
 
 
 def build_parser() -> OneLineParser:

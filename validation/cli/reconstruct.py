@@ -63,15 +63,15 @@ def add_lambda_options(parser, *, default: str) -> None:
 
 def command_reconstruct(args) -> int:
     """Reconstruct the scene's image from a transient; write images, metrics, figures, report."""
-    from analytic.cost import refuse_impractical_illumination
+    from analytic.operator.cost import refuse_impractical_illumination
     from analytic.errors import SceneError
     from analytic.files import (PrecisionWarning, discard, float32_problem, output_folder, reading_folder,
                              save_exr, save_json, save_npy, save_png_image, staged_writes)
     from analytic.inversion import RankDeficiencyWarning, RegularizationWarning, image_metrics, reconstruct
-    from analytic.system import system_matrix
-    from validation.harness import data_driven_rule, noise_sigma
+    from analytic.operator.system import system_matrix
+    from validation.runs.harness import data_driven_rule, noise_sigma
     from validation.plots import criterion_figure, reconstruction_figure, save_figure
-    from validation.report import write_markdown
+    from validation.runs.report import write_markdown
 
     scene = load_scene_argument(args.scene)
     refuse_impractical_illumination(scene)
@@ -246,7 +246,7 @@ def _read_data(path: str, scene) -> np.ndarray:
 def command_reproduce(args) -> int:
     """The paper's Figs. 7 and 8 and Section VII's device figures; exit status 0."""
     from analytic.files import output_folder
-    from validation.paper import reproduce
+    from validation.runs.paper import reproduce
 
     release_warnings()
     with output_folder(args.out) as out:

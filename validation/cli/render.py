@@ -31,7 +31,7 @@ def _resumed_scene(args):
     given = None if args.scene is None else apply_window(args, load_scene_argument(args.scene))
     saved = read_saved_render(args.resume, scene=given, spp=args.spp, seed=args.seed, variant=args.variant)
     if given is None and args.window == "auto":
-        from analytic.window import auto_sampling
+        from analytic.operator.window import auto_sampling
 
         if auto_sampling(saved.scene) != saved.scene.sampling:
             window = saved.scene.sampling

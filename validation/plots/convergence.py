@@ -55,7 +55,7 @@ def speed_against_error_figure(report: dict):
     Parameters
     ----------
     report : dict
-        :func:`validation.bench.speed_against_error`'s report: ``scenes`` ->
+        :func:`validation.runs.bench.speed_against_error`'s report: ``scenes`` ->
         {``ours``, ``mitransient``: rows with ``seconds`` and ``rms_error``},
         and ``device``.
 

@@ -130,7 +130,7 @@ def conditioning_figure(table: list[dict], *, title: str = ""):
     ----------
     table : list of dict
         Rows with ``extent``, ``period``, ``sigma``, ``singular_values`` and
-        ``effective_rank`` (:func:`analytic.conditioning.conditioning_table`).
+        ``effective_rank`` (:func:`analytic.operator.conditioning.conditioning_table`).
 
     Returns
     -------

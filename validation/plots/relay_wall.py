@@ -43,7 +43,7 @@ class WallScan:
 
     @classmethod
     def of_scene(cls, scene) -> "WallScan":
-        """The scan of an :class:`analytic.relay_wall.RelayWallScene`."""
+        """The scan of an :class:`analytic.scenes.relay_wall.RelayWallScene`."""
         scan = scene.scan
         return cls(type=scan.type, grid=tuple(scan.grid), wall_size=tuple(scene.wall_size),
                    laser_point=tuple(float(v) for v in scene.laser_points[0]) if scan.type == "single" else None,
@@ -269,7 +269,7 @@ def scene_transient_figure(scene, y: np.ndarray, *, stderr: np.ndarray | None = 
                            noisy: np.ndarray | None = None, label: str = "model", title: str = ""):
     """A scene's transient as ``forward`` and ``render`` draw it: :func:`relay_wall_figure` for a relay-wall
     capture, :func:`validation.plots.transients.transient_figure` for a plane."""
-    from analytic.relay_wall import RelayWallScene
+    from analytic.scenes.relay_wall import RelayWallScene
 
     from .transients import transient_figure
 

@@ -58,7 +58,7 @@ def transients_figure(sampling, transients: dict[str, np.ndarray], *,
         error bars are too small (or too many) to see; the legend says when.
     z_limit : float, optional
         The largest |z| a bin may have for the data to agree (the Šidák
-        limit of :func:`validation.compare.compare_transients`): drawn in
+        limit of :func:`validation.judging.compare.compare_transients`): drawn in
         each z strip and named in the legend.
     title : str
         Figure title; the sensors drawn are named beneath it.

@@ -3,7 +3,7 @@
 A sweep file names a base scene and a grid of scene keys to vary; every
 combination of the grid's values is one *item*, a scene built by overriding
 the base scene's TOML tables and validated by
-:func:`analytic.scene_file.scene_from_dict`, exactly as a scene file would be.
+:func:`analytic.scenes.scene_file.scene_from_dict`, exactly as a scene file would be.
 
 Each item's render is split into fixed chunks of the sample range,
 ``[first, first + count)``. Sample i's random numbers depend only on

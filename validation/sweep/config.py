@@ -2,7 +2,7 @@
 
 Every combination of the grid's values is one item, a scene built by
 overriding the base scene's TOML tables and validated by
-:func:`analytic.scene_file.scene_from_dict`, exactly as a scene file would be.
+:func:`analytic.scenes.scene_file.scene_from_dict`, exactly as a scene file would be.
 """
 
 from __future__ import annotations
@@ -17,10 +17,10 @@ from pathlib import Path
 from typing import Any
 
 from analytic.errors import SceneError
-from analytic.scene import Scene
-from analytic.scene_file import read_toml, scene_from_dict, scene_to_tables
+from analytic.scenes.common import Scene
+from analytic.scenes.scene_file import read_toml, scene_from_dict, scene_to_tables
 from analytic.waveforms import make_waveform
-from validation.compare import MIN_CHECK_SAMPLES
+from validation.judging.compare import MIN_CHECK_SAMPLES
 
 __all__ = ["Sweep", "SweepItem", "load_sweep", "sweep_from_dict", "default_scene_table",
            "DEFAULT_SWEEP_CHUNK", "MAX_SWEEP_SAMPLES", "MAX_ITEMS"]
@@ -95,13 +95,13 @@ class Sweep:
 
 
 def default_scene_table() -> dict:
-    """The built-in scene (:func:`analytic.scene.default_scene`) as TOML tables.
+    """The built-in scene (:func:`analytic.scenes.common.default_scene`) as TOML tables.
 
     The reflectance is the built-in pattern as an array, regenerated at the
     item's ``plane.pixels`` when a sweep varies the resolution (as
     ``default_scene(pixels=...)`` does).
     """
-    from analytic.scene import DEFAULT_ARRAY, default_scene
+    from analytic.scenes.common import DEFAULT_ARRAY, default_scene
 
     tables = scene_to_tables(default_scene())
     # as a grid, so that a sweep can vary its extent or its centre
@@ -268,7 +268,7 @@ def _override(base: dict, parameters: dict, default: bool) -> dict:
             raise SceneError(section, "expected a table")
         table.setdefault(section, {})[key] = value
     if default and "plane.reflectance" not in parameters and "plane.pixels" in parameters:
-        from analytic.reflectance import builtin_reflectance
+        from analytic.scenes.reflectance import builtin_reflectance
 
         pixels = parameters["plane.pixels"]
         if isinstance(pixels, int) and not isinstance(pixels, bool) and pixels >= 1:

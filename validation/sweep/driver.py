@@ -174,7 +174,7 @@ def _check_variant_on_a_worker(client, variant: str | None) -> None:
 
 def _prepare(sweep: Sweep, out_dir: Path) -> tuple[dict, dict, list]:
     """Finished items' rows, unfinished items' checkpointed states, and the names skipped."""
-    from analytic.window import window_share
+    from analytic.operator.window import window_share
     from transient.render_state import scene_fingerprint
 
     rows, states, skipped = {}, {}, []

@@ -33,7 +33,7 @@ def finished_row(item: SweepItem, folder: Path, sweep: Sweep, fingerprint: str) 
 def finish_item(state: ItemState, sweep: Sweep, out_dir: Path) -> dict:
     """Merge, write the item's files and its ``item.json``; return its index row."""
     from analytic.files import build_meta
-    from validation.compare import compare_transients
+    from validation.judging.compare import compare_transients
 
     scene, item = state.item.scene, state.item
     estimate = state.estimate()

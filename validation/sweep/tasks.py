@@ -11,7 +11,7 @@ from collections import OrderedDict
 
 import numpy as np
 
-from analytic.scene import Scene
+from analytic.scenes.common import Scene
 
 __all__ = ["render_chunk", "model_transient", "WorkerCache"]
 
@@ -106,7 +106,7 @@ def render_chunk(scene: Scene, fingerprint: str, seed: int, layout, chunk,
 
 def model_transient(scene: Scene) -> tuple[np.ndarray, float]:
     """The exact model's noiseless y of a scene (a Dask task); returns (y, seconds)."""
-    from analytic.system import forward
+    from analytic.operator.system import forward
 
     started = time.perf_counter()
     y = forward(scene)

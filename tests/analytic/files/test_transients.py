@@ -8,7 +8,7 @@ import pytest
 from analytic.errors import DataError
 from analytic.files import (PrecisionWarning, build_meta, read_exr, read_transient, save_exr, save_npy,
                             write_transient)
-from analytic.scene import Illumination, default_scene
+from analytic.scenes.common import Illumination, default_scene
 
 SCHEMA = {"kind", "samples", "seed", "scene", "plane_size", "pixels", "source", "intensity",
           "sensor_positions", "attenuation", "illumination", "illumination_parameters", "tolerance",
@@ -34,7 +34,7 @@ def test_one_schema_for_model_and_render(waveform):
 def test_a_relay_wall_capture_has_the_same_keys_and_its_own_tables(tmp_path):
     """One schema: a capture's record has every key a plane's has (those of the other geometry None), and a
     capture's transient is written without a tal file (tal's NLOS layout is wired apart)."""
-    from analytic.relay_wall import RelayWallScene, Scan
+    from analytic.scenes.relay_wall import RelayWallScene, Scan
 
     plane = build_meta(default_scene(pixels=8), kind="model", window_share=1.0)
     capture = RelayWallScene(pixels=4, scan=Scan(type="single", grid=(3, 2), laser_point=(0.2, -0.1, 0.0)),

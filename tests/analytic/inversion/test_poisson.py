@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import scipy.sparse
 
-from analytic.detector import Detector, draw_counts, expected_counts
+from analytic.measurement.detector import Detector, draw_counts, expected_counts
 from analytic.errors import DataError
 from analytic.inversion import image_metrics
 from analytic.inversion.poisson import (compare_to_map, negative_log_likelihood, rate_estimate,

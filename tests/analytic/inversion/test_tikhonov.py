@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from analytic.inversion import RankDeficiencyWarning, reconstruct
-from analytic.scene import Sampling, Scene, sensor_grid
-from analytic.system import system_matrix
+from analytic.scenes.common import Sampling, Scene, sensor_grid
+from analytic.operator.system import system_matrix
 from dense_reference import dense_solution, synthetic_problem
 
 

@@ -2,7 +2,7 @@
 
 import pytest
 
-from analytic.system import forward
+from analytic.operator.system import forward
 from check_cases import small_scene, write_scene_file
 
 

@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from analytic.scene import Sampling
-from analytic.system import forward
+from analytic.scenes.common import Sampling
+from analytic.operator.system import forward
 from check_cases import START, small_scene
 from validation import assert_agrees, check_transient
 from validation.check.conventions import irradiancemeter

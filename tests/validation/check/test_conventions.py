@@ -13,7 +13,7 @@ from validation.check import check_transient, diagnose
 
 # Synthetic replicas are few (6) and independent from bin to bin: the limits' fallback to independent
 # bins, and its warning, are what tests/validation/test_compare.py tests; here they are expected.
-pytestmark = pytest.mark.filterwarnings("ignore::validation.compare.CorrelationWarning")
+pytestmark = pytest.mark.filterwarnings("ignore::validation.judging.compare.CorrelationWarning")
 
 
 def test_diagnosis_of_an_irradiancemeter():

@@ -8,9 +8,9 @@ import math
 import numpy as np
 import pytest
 
-from analytic.detector import Detector, draw_counts, expected_counts
+from analytic.measurement.detector import Detector, draw_counts, expected_counts
 from analytic.errors import DataError
-from analytic.scene import Illumination, Sampling, Scene
+from analytic.scenes.common import Illumination, Sampling, Scene
 from validation.check.counts import SceneModel, deviance, fit_counts, judge_counts
 
 EXPECTED = np.array([[0.5, 3.0, 12.0, 40.0, 55.0, 30.0, 9.0, 2.0, 0.3, 0.0],

@@ -6,13 +6,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from analytic.system import forward
+from analytic.operator.system import forward
 from check_cases import noisy_replicas, shifted, small_scene
 from validation.check import check_transient
 
 # Synthetic replicas are few (6) and independent from bin to bin: the limits' fallback to independent
 # bins, and its warning, are what tests/validation/test_compare.py tests; here they are expected.
-pytestmark = pytest.mark.filterwarnings("ignore::validation.compare.CorrelationWarning")
+pytestmark = pytest.mark.filterwarnings("ignore::validation.judging.compare.CorrelationWarning")
 
 
 def test_known_scale_and_offset_are_recovered(scene, model, rng):
@@ -59,7 +59,7 @@ def test_a_model_rough_below_the_errors_ends_the_fit(scene, model, seed):
     with the offset as roughly): Gauss–Newton's line search then moves by nothing while each new step is
     misled again, and the fit ran 30 iterations of ~12 models each, 'NOT converged' (a relay-wall check took
     217 s). It stops converged, where the exact model's fit is, within 5 % of the standard errors."""
-    from analytic.scene import Sampling
+    from analytic.scenes.common import Sampling
 
     start, quantum, evaluations = scene.sampling.start_opl, 3e-6, []
 
@@ -84,7 +84,7 @@ def test_offsets_of_several_bins_either_way_are_found_for_every_waveform(wavefor
     a nearer local minimum of the bins the data light (a square pulse off by -1.17 bins was fitted at +0.373
     bins and called no convention: the coarse scan compared every χ² with inf - inf and kept δ = 0), and it
     evaluates a bounded number of models."""
-    from analytic.scene import Illumination
+    from analytic.scenes.common import Illumination
     from check_cases import WIDTH
 
     options = {"fwhm": 0.02} if waveform == "gaussian" else {}

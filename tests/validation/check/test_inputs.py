@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 
 from analytic.errors import DataError, OptionError, SceneError, UserError
-from analytic.scene_file import load_scene
+from analytic.scenes.scene_file import load_scene
 from check_cases import noisy_replicas, render_folder, run_check
 import validation
 from validation.check import check_transient
 
-pytestmark = pytest.mark.filterwarnings("ignore::validation.compare.CorrelationWarning")
+pytestmark = pytest.mark.filterwarnings("ignore::validation.judging.compare.CorrelationWarning")
 
 
 @pytest.fixture

@@ -11,15 +11,15 @@ import pytest
 
 from analytic.errors import DataError
 from analytic.files import build_meta, save_exr, write_transient
-from analytic.scene import Sampling
-from analytic.system import forward
+from analytic.scenes.common import Sampling
+from analytic.operator.system import forward
 from check_cases import COUNT, START, WIDTH, noisy_replicas, render_folder, run_check, small_scene
 from validation.check import check_transient, read_data, read_stderr
 from validation.cli import main
 
 # Synthetic replicas are few (6) and independent from bin to bin: the limits' fallback to independent
 # bins, and its warning, are what tests/validation/test_compare.py tests; here they are expected.
-pytestmark = pytest.mark.filterwarnings("ignore::validation.compare.CorrelationWarning")
+pytestmark = pytest.mark.filterwarnings("ignore::validation.judging.compare.CorrelationWarning")
 
 
 @pytest.fixture
@@ -116,7 +116,7 @@ def test_a_capture_with_sensors_sharing_a_point_is_read_in_order(tmp_path):
 def test_check_command_takes_our_renders_own_errors(tmp_path, scene_file):
     """`check` on our render's folder or transient.npy judges with its replicas.npy (sign flips, Student's
     t on R - 1 degrees of freedom), or without them with its stderr.npy and the render's dof."""
-    from analytic.scene_file import load_scene
+    from analytic.scenes.scene_file import load_scene
 
     assert main(["render", str(scene_file), "--spp", str(2**20), "--seed", "5", "--out", str(tmp_path / "r"),
                  "--quiet"]) == 0

@@ -8,14 +8,14 @@ import json
 import numpy as np
 import pytest
 
-from analytic.system import forward
+from analytic.operator.system import forward
 from check_cases import noisy_replicas, one_bin_scene, run_check
 from transient.render import render
 from validation.check import check_transient, write_check_report
 
 # Synthetic replicas are few (6) and independent from bin to bin: the limits' fallback to independent
 # bins, and its warning, are what tests/validation/test_compare.py tests; here they are expected.
-pytestmark = pytest.mark.filterwarnings("ignore::validation.compare.CorrelationWarning")
+pytestmark = pytest.mark.filterwarnings("ignore::validation.judging.compare.CorrelationWarning")
 
 
 def test_check_command_exit_status_and_report(tmp_path, scene_file, scene, model, rng):

@@ -8,7 +8,7 @@ import pytest
 from scipy import stats
 
 from analytic.errors import DataError
-from analytic.system import forward
+from analytic.operator.system import forward
 from check_cases import noisy_replicas, one_bin_scene
 from transient.render import render
 from validation.check import check_transient
@@ -16,7 +16,7 @@ from validation.check.verdict import _agreement
 
 # Synthetic replicas are few (6) and independent from bin to bin: the limits' fallback to independent
 # bins, and its warning, are what tests/validation/test_compare.py tests; here they are expected.
-pytestmark = pytest.mark.filterwarnings("ignore::validation.compare.CorrelationWarning")
+pytestmark = pytest.mark.filterwarnings("ignore::validation.judging.compare.CorrelationWarning")
 
 
 def test_data_without_convention_errors_agree_as_given(scene, model, rng):

@@ -1,0 +1,22 @@
+"""The operator: the system matrix A of a scene, what it costs, the window it sees, and its conditioning.
+
+- :mod:`.system`: A assembled (sparse, exact to the scene's tolerance), y = A f;
+- :mod:`.blocks`: the compiled kernels run block by block on a pool of threads;
+- :mod:`.cost`: what assembling A will cost, and the refusal of an impractical illumination;
+- :mod:`.window`: which path lengths reach the sensors, and the share of the light a window holds;
+- :mod:`.response`: continuous impulse responses g_k(t) from the contour (coarea) form;
+- :mod:`.conditioning`: A's singular values against the array's extent and the period;
+- :mod:`.derivatives`: derivatives of y with respect to the geometry.
+
+The compiled kernels these drive are :mod:`analytic.kernels`. Names are
+loaded on first use (``lazy_loader``); ``__all__`` lists the public API.
+"""
+
+import lazy_loader
+
+__getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
+    "system": ["system_matrix", "rectangle_matrix", "forward", "count_entries", "pair_entries", "QuadratureWarning"],
+    "response": ["impulse_response", "binned_contour_model"],
+    "window": ["response_range", "covering_sampling", "window_share", "WindowWarning"],
+    "conditioning": ["singular_values", "conditioning_summary"],
+})

@@ -7,6 +7,7 @@
 # finds it at run time and refuses, in one line, to run on LLVM <= 15.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+started=$SECONDS
 
 if ! ldconfig -p 2>/dev/null | grep -Eq 'libLLVM(-(1[6-9]|[2-9][0-9])\.so|\.so\.(1[6-9]|[2-9][0-9]))'; then
     sudo=""
@@ -18,6 +19,7 @@ python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ig
 # pip compiles a regular install's modules, not an editable one's: compile them here, so that commands
 # do not recompile them at every start where PYTHONDONTWRITEBYTECODE is set
 python3 -m compileall -q analytic transient validation interop
+installed=$SECONDS
 # A command compiles the model's kernels that its scene needs on their first use (seconds for the
 # built-in scene) and the renderer's on its first render; the tests need every route. Both are compiled
 # and cached here (analytic/kernels/__pycache__, ~/.drjit), each in its own process, while tal's
@@ -32,3 +34,4 @@ bash scripts/setup_interop.sh
 wait "$model"
 wait "$renderer"
 trap - EXIT
+echo "diffuse-imaging: set-up done in $((SECONDS - started)) s (install $((installed - started)) s, then tal and the warm-up $((SECONDS - installed)) s)" >&2

@@ -26,6 +26,10 @@ rules make that cache serve users (docs/benchmarks.md, "Cold start"):
   processes starting together (Dask workers, pytest-xdist workers) compile
   it once and the others load it.
 
+Each stamp gets its own folder under that root (:func:`cache_folder`): the
+caches of other sources (an older release, another checkout) are never
+read, and are left for the user to delete.
+
 Modules that compile kernels take ``njit`` from here, which installs the
 locator and the listener first.
 """
@@ -104,8 +108,18 @@ def _folder(cache_dir: str) -> Path:
 
 
 def cache_folder() -> Path:
-    """The folder the kernels are cached in (see the module docstring)."""
-    return _folder(config.CACHE_DIR or "")
+    """The folder the kernels are cached in: one per :func:`sources_stamp`, under the root the module
+    docstring names.
+
+    One folder per stamp, not Numba's stamp check alone: Numba unpickles a kernel's whole index before it
+    compares the stamp, and an index written by other sources (an older release, another checkout sharing
+    ``NUMBA_CACHE_DIR``) can name modules or record types these sources no longer have
+    (``ModuleNotFoundError`` instead of a recompile).
+    """
+    folder = _folder(config.CACHE_DIR or "") / sources_stamp()[:16]
+    with contextlib.suppress(OSError):
+        folder.mkdir(parents=True, exist_ok=True)
+    return folder
 
 
 class KernelCacheLocator(_CacheLocator):

@@ -82,16 +82,42 @@ def test_an_install_whose_folder_cannot_be_written_keeps_its_kernels_in_the_user
     done = _run("from analytic.kernels.cache import cache_folder; print(cache_folder())",
                 {"PYTHONPATH": str(copy.parent), "XDG_CACHE_HOME": str(tmp_path / "cache")}, tmp_path)
     assert done.returncode == 0, done.stderr
-    assert Path(done.stdout.strip()) == tmp_path / "cache" / "diffuse-imaging" / "kernels"
+    assert Path(done.stdout.strip()).parent == tmp_path / "cache" / "diffuse-imaging" / "kernels"
 
 
 def test_the_cache_folder_is_beside_the_sources_where_they_can_be_written_or_under_numba_cache_dir(tmp_path):
     done = _run("from analytic.kernels.cache import cache_folder; print(cache_folder())",
                 {"PYTHONPATH": str(ROOT)}, tmp_path)
-    assert Path(done.stdout.strip()) == KERNELS / "__pycache__", done.stderr
+    assert Path(done.stdout.strip()).parent == KERNELS / "__pycache__", done.stderr
     done = _run("from analytic.kernels.cache import cache_folder; print(cache_folder())",
                 {"PYTHONPATH": str(ROOT), "NUMBA_CACHE_DIR": str(tmp_path / "numba")}, tmp_path)
-    assert Path(done.stdout.strip()) == tmp_path / "numba" / "diffuse-imaging" / "kernels", done.stderr
+    assert Path(done.stdout.strip()).parent == tmp_path / "numba" / "diffuse-imaging" / "kernels", done.stderr
+
+
+def test_sources_of_another_stamp_never_share_a_cache_folder(tmp_path):
+    """An index written by other sources is never read: here a kernels module that these sources lack.
+
+    Numba unpickles an index before it compares its stamp; the same folder for two versions of the
+    kernels made a user's upgrade (or a second checkout sharing NUMBA_CACHE_DIR) fail with
+    ModuleNotFoundError instead of compiling.
+    """
+    copy = _copy(tmp_path)
+    code = ("from analytic.kernels.bins import TimeAxis, bin_of\n"
+            "print(bin_of(0.35, TimeAxis(0.0, 0.1, 10)))")
+    env = {"PYTHONPATH": str(copy.parent), "NUMBA_CACHE_DIR": str(tmp_path / "numba")}
+    first = _run(code, env, tmp_path)
+    assert first.returncode == 0 and first.stdout.strip() == "3", first.stderr
+    # the other version: a kernels module of its own that an index of these kernels will name
+    (copy / "kernels" / "renamed.py").write_text(
+        "from typing import NamedTuple\nfrom .bins import bin_of  # noqa: F401\n\n\n"
+        "class Axis(NamedTuple):\n    start_opl: float\n    bin_width_opl: float\n    count: int\n")
+    other = ("import analytic.kernels.renamed as renamed\n"          # bin_of's index now names renamed.Axis
+             "print(renamed.bin_of(0.35, renamed.Axis(0.0, 0.1, 10)))")
+    assert _run(other, env, tmp_path).returncode == 0
+    (copy / "kernels" / "renamed.py").unlink()      # back to the first sources: their own folder
+    again = _run(code, env, tmp_path)
+    assert again.returncode == 0 and again.stdout.strip() == "3", again.stderr
+    assert len(list((tmp_path / "numba" / "diffuse-imaging" / "kernels").iterdir())) == 2
 
 
 def test_a_long_compile_says_so_once_on_stderr(tmp_path):

@@ -40,7 +40,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse
 
-from ..measurement.detector import Detector, coates_estimate, detection_probabilities, rates
+from ..measurement.detector import Detector, coates_estimate, detection_probabilities, rates, sums_before
 from ..errors import DataError
 from .laplacian import neumann_laplacian
 from .result import Reconstruction
@@ -71,7 +71,7 @@ def rate_estimate(counts, detector: Detector) -> tuple[np.ndarray, np.ndarray]:
         lam = counts / detector.cycles
         variance = np.maximum(counts, 1.0) / detector.cycles**2
     else:
-        armed = detector.cycles - (np.cumsum(counts, axis=-1) - counts)
+        armed = detector.cycles - sums_before(counts)
         counts = np.minimum(counts, np.maximum(armed - 0.5, 0.0))
         lam, _ = coates_estimate(counts, detector.cycles)
         floored = np.maximum(counts, 1.0)
@@ -159,11 +159,12 @@ def negative_log_likelihood(matrix, counts, detector: Detector, image) -> tuple[
         gradient_lam = detector.cycles * (1.0 - flat / mu)
     else:
         total = np.sum(lam, axis=-1, keepdims=True)
-        before = np.cumsum(lam, axis=-1) - lam
+        before = sums_before(lam)
         missed = detector.cycles - flat.sum(axis=-1, keepdims=True)
         value = float(np.sum(flat * before) - np.sum(flat * np.log(-np.expm1(-lam))) + np.sum(missed * total))
         after = detector.cycles - np.cumsum(flat, axis=-1)          # R_{m+1}
-        gradient_lam = after - flat / np.expm1(lam)
+        # 1 / (e^λ - 1) as e^{-λ} / (1 - e^{-λ}): no overflow for a bin of λ beyond 709
+        gradient_lam = after - flat * np.exp(-lam) / -np.expm1(-lam)
     return value, detector.photons * (matrix.T @ gradient_lam.ravel())
 
 

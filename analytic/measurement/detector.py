@@ -41,7 +41,7 @@ from ..errors import DataError, SceneError
 from ..values import _integer, _number, exact
 
 __all__ = ["Detector", "DEAD_TIMES", "rates", "expected_counts", "detection_probabilities", "draw_counts",
-           "coates_estimate", "excess_key", "MAX_CYCLES", "MAX_MEAN"]
+           "sums_before", "coates_estimate", "excess_key", "MAX_CYCLES", "MAX_MEAN"]
 
 DEAD_TIMES = ("none", "cycle")
 #: Most laser cycles: counts stay exact integers in float64 and int64.
@@ -112,8 +112,13 @@ def rates(y, detector: Detector) -> np.ndarray:
         return detector.photons * np.maximum(y, 0.0) + detector.background
 
 
-def _photons_before(lam: np.ndarray) -> np.ndarray:
-    """Λ_n = Σ_{m<n} λ_m, summed from the start (``cumsum(λ) - λ`` cancels when one λ dwarfs those before it)."""
+def sums_before(values) -> np.ndarray:
+    """Σ_{m<n} values_m along the last axis, summed from the start, ``values.shape``.
+
+    Λ_n of the photons (or counts) before bin n: ``cumsum(λ) - λ`` cancels when one λ dwarfs those before it
+    (λ = 1e20 after λ = 1e-3 gives 0, not 1e-3).
+    """
+    lam = np.asarray(values, dtype=np.float64)
     before = np.zeros_like(lam)
     with np.errstate(over="ignore"):
         np.cumsum(lam[..., :-1], axis=-1, out=before[..., 1:])
@@ -136,7 +141,7 @@ def detection_probabilities(lam) -> tuple[np.ndarray, np.ndarray]:
         ``(...)``, e^{-Λ_N}; Σ p_n + none = 1.
     """
     lam = np.asarray(lam, dtype=np.float64)
-    p = np.exp(-_photons_before(lam)) * -np.expm1(-lam)
+    p = np.exp(-sums_before(lam)) * -np.expm1(-lam)
     with np.errstate(over="ignore"):
         none = np.exp(-np.sum(lam, axis=-1))
     # Σ p_n = 1 - e^{-Λ_N} exactly; the products' rounding (a few ulps each) must not lift it above 1
@@ -261,7 +266,7 @@ def coates_estimate(counts, cycles: float) -> tuple[np.ndarray, np.ndarray]:
         raise DataError("counts must be finite and >= 0")
     if not (math.isfinite(cycles) and cycles > 0):
         raise DataError(f"cycles must be finite and > 0, got {cycles!r}")
-    armed = cycles - _photons_before(counts)
+    armed = cycles - sums_before(counts)
     if np.any(counts > armed):
         raise DataError("more counts than cycles: the histogram cannot come from a first-photon detector")
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -11,6 +11,7 @@ from __future__ import annotations
 import datetime
 import json
 import math
+import os
 import re
 import sys
 import tomllib
@@ -377,6 +378,9 @@ def read_text(path: str | Path, what: str = "scene", *, language: str = "TOML") 
     """
     if isinstance(path, str) and not path:
         raise SceneError(f"{what} file", f"empty path; give a {language} {what} file")
+    if not isinstance(path, (str, os.PathLike)):
+        raise SceneError(f"{what} file", f"expected a path (str or pathlib.Path), got {type(path).__name__} "
+                                         f"{printable(repr(path))[:60]}")
     path = Path(path)
     shown = printable(str(path))
     problem = regular_file_problem(path)

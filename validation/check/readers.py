@@ -58,7 +58,7 @@ def _meta_time_axis(path: Path, sampling: Sampling) -> None:
     if not meta_path.is_file():
         return
     try:
-        meta = json.loads(meta_path.read_text())
+        meta = json.loads(meta_path.read_text(encoding="utf-8-sig"))   # -sig: a byte-order mark is UTF-8 too
     except (OSError, ValueError):   # unreadable, not UTF-8, not JSON, integers beyond Python's digit limit
         return   # not ours: nothing to compare
     if not isinstance(meta, dict):
@@ -435,7 +435,7 @@ def stderr_beside(path: str | Path, scene: Scene) -> tuple[np.ndarray, int | Non
         return None
     dof = None
     try:
-        dof = json.loads((folder / "meta.json").read_text(encoding="utf-8")).get("dof")
+        dof = json.loads((folder / "meta.json").read_text(encoding="utf-8-sig")).get("dof")
     except (OSError, ValueError, AttributeError):
         pass
     return read_stderr(folder / "stderr.npy", scene), dof if isinstance(dof, int) and dof >= 1 else None

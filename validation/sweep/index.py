@@ -21,7 +21,7 @@ def finished_row(item: SweepItem, folder: Path, sweep: Sweep, fingerprint: str) 
     path = folder / ITEM_FILE
     if not path.is_file():
         return None
-    row = json.loads(path.read_text())
+    row = json.loads(path.read_text(encoding="utf-8-sig"))
     identity = state_identity(sweep, fingerprint)
     if any(row.get(key) != value for key, value in identity.items()):
         raise mismatch(path, "scene, seed, sample count or chunking")

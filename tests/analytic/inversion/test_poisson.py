@@ -74,3 +74,17 @@ def test_counts_that_cannot_be_are_refused(problem):
         reconstruct_counts(matrix, np.full((3, 30), 0.5), Detector(photons=1.0), PIXELS)
     with pytest.raises(DataError, match="rows"):
         reconstruct_counts(matrix, np.ones((3, 29)), Detector(photons=1.0), PIXELS)
+
+
+def test_likelihood_keeps_the_photons_before_a_bin_that_dwarfs_them():
+    """Λ_n = Σ_{m<n} λ_m summed from the start: ``cumsum(λ) - λ`` cancelled to 0 in the bin of λ = 1e20 (issue
+    38, cause 1's class). Reference: the multinomial's -log L written here term by term with math.fsum."""
+    import math
+
+    lam = [1e-3, 1e-3, 1e20, 1e-3]
+    counts = np.array([[1.0, 2.0, 97.0, 0.0]])        # every one of the 100 cycles detected: none missed
+    detector = Detector(photons=1.0, background=0.0, cycles=100, dead_time="cycle")
+    value, _ = negative_log_likelihood(scipy.sparse.identity(4, format="csr"), counts, detector, np.array(lam))
+    reference = math.fsum(c * (math.fsum(lam[:n]) - math.log(-math.expm1(-lam[n])))
+                          for n, c in enumerate(counts[0]))
+    assert value == pytest.approx(reference, rel=1e-12)

@@ -213,3 +213,14 @@ def test_a_plane_capture_whose_times_count_the_legs_is_refused(tmp_path, scene, 
         handle["t_accounts_first_and_last_bounces"] = True
     with pytest.raises(DataError, match="t_accounts_first_and_last_bounces is true"):
         read_data(path, scene)
+
+
+def test_a_meta_json_with_a_byte_order_mark_is_read_as_utf8(tmp_path, scene, model):
+    """A meta.json an editor saved with a UTF-8 byte-order mark still states the time axis: it was skipped
+    as "not ours" (json refuses the mark), so a wrong axis went unchecked."""
+    out = tmp_path / "late"
+    late = scene.replace(sampling=Sampling(bin_width_opl=WIDTH, start_opl=START + WIDTH, count=COUNT))
+    write_transient(out, model, build_meta(late, kind="model"))
+    (out / "meta.json").write_bytes(b"\xef\xbb\xbf" + (out / "meta.json").read_bytes())
+    with pytest.raises(DataError, match="time axis"):
+        read_data(out / "transient.npy", scene)

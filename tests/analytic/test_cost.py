@@ -102,9 +102,12 @@ def test_a_response_beyond_the_windows_reach_names_the_span_that_reaches_it():
     assert problem is not None and "keep only the samples in that span" in problem
 
 
-def test_the_python_api_refuses_what_the_commands_refuse():
+def test_the_python_api_refuses_what_the_commands_refuse(monkeypatch):
     """analytic.forward (system_matrix) refuses an impractical illumination up front, in the commands' words."""
     import analytic
+    import analytic.operator.cost as cost
+
+    monkeypatch.setattr(cost, "available_memory", lambda: 16 * 2**30)   # the words name it: one value for both
 
     scene = _plane(Illumination(waveform="sampled", samples=list(np.hanning(100_000)), sample_width=1e-6))
     with pytest.raises(SceneError) as expected:

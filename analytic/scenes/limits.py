@@ -1,0 +1,85 @@
+"""The scene's numeric limits that float64 sets: the smallest height above the plane and the model's tolerance.
+
+Every length is in metres (docs/design.md section 1); :mod:`analytic.scenes.common`
+re-exports these names.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import SceneError
+from ..values import _number, exact
+
+__all__ = ["MIN_HEIGHT_FRACTION", "MIN_TOLERANCE", "MAX_TOLERANCE", "scene_extent", "minimum_height",
+           "check_heights", "check_tolerance"]
+
+#: Smallest height of the source or a sensor, as a fraction of the scene's extent (:func:`check_heights`).
+MIN_HEIGHT_FRACTION = 1e-9
+#: Relative accuracy of A's entries: below MIN_TOLERANCE float64 quadrature stops converging.
+MIN_TOLERANCE = 1e-10
+MAX_TOLERANCE = 0.1
+
+
+def scene_extent(size: float, source, sensors) -> float:
+    """The scene's length scale: the largest of the plane's side and every coordinate's magnitude, metres.
+
+    Plane coordinates and path lengths are as large as this, so it sets the
+    float64 rounding of everything the model computes.
+    """
+    points = np.vstack([np.reshape(np.asarray(source, dtype=np.float64), (1, 3)),
+                        np.reshape(np.asarray(sensors, dtype=np.float64), (-1, 3))])
+    return float(max(abs(float(size)), float(np.max(np.abs(points)))))
+
+
+def minimum_height(size: float, source, sensors) -> float:
+    """Smallest supported height of the source and the sensors, metres: MIN_HEIGHT_FRACTION x extent."""
+    return MIN_HEIGHT_FRACTION * scene_extent(size, source, sensors)
+
+
+def check_heights(size: float, source, sensors) -> None:
+    """Refuse a source or sensor too close to the plane for float64 to resolve its response.
+
+    Parameters
+    ----------
+    size : float
+        Plane side L, metres.
+    source : array_like
+        (x, y, z), metres.
+    sensors : array_like
+        ``(K, 3)``, metres.
+
+    Raises
+    ------
+    SceneError
+        Naming ``source.position`` or ``sensors.positions[k]`` and the
+        smallest height supported.
+
+    Notes
+    -----
+    Criterion: h >= MIN_HEIGHT_FRACTION x extent (:func:`scene_extent`). The
+    attenuation's peak under a point at height h has width h; below the
+    criterion it spans fewer than ~10⁶ roundings of the plane coordinates
+    and path lengths, and the quadrature can no longer find it (at 1e-300
+    it would silently return ~0 instead of the finite limit).
+    """
+    floor = minimum_height(size, source, sensors)
+    checks = [("source.position", np.asarray(source, dtype=np.float64))]
+    checks += [(f"sensors.positions[{k}]", p) for k, p in
+               enumerate(np.reshape(np.asarray(sensors, dtype=np.float64), (-1, 3)))]
+    for key, point in checks:
+        if not point[2] >= floor:
+            raise SceneError(key, f"height {exact(point[2])} m is below the smallest height supported, "
+                             f"{exact(floor)} m ({MIN_HEIGHT_FRACTION:g} of the scene's extent "
+                             f"{floor / MIN_HEIGHT_FRACTION:.6g} m): float64 cannot resolve the light "
+                             f"under a point that low; raise it to at least {exact(floor)} m")
+
+
+def check_tolerance(tolerance: float) -> float:
+    """The tolerance as a float, or SceneError("model.tolerance") outside [MIN_TOLERANCE, MAX_TOLERANCE)."""
+    tolerance = _number("model.tolerance", tolerance, positive=True)
+    if not MIN_TOLERANCE <= tolerance < MAX_TOLERANCE:
+        raise SceneError("model.tolerance", f"must be in [{MIN_TOLERANCE:g}, {MAX_TOLERANCE:g}), got "
+                         f"{exact(tolerance)}: below {MIN_TOLERANCE:g} float64 quadrature stops converging "
+                         f"(1e-12 already takes ~60 times as long as the default 1e-6)")
+    return tolerance

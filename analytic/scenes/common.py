@@ -33,8 +33,8 @@ from ..measurement.detector import Detector
 from ..errors import SceneError
 from ..geometry import ATTENUATIONS, plane_geometry
 from .kinds import register_scene_kind
-from .limits import (MAX_TOLERANCE, MIN_HEIGHT_FRACTION, MIN_TOLERANCE, check_heights, check_tolerance,
-                     minimum_height, scene_extent)
+from .limits import (MAX_TOLERANCE, MIN_HEIGHT_FRACTION, MIN_TOLERANCE, check_tolerance, minimum_height,
+                     scene_extent)
 from .reflectance import builtin_reflectance, reflectance_image
 from ..resources import require_memory
 from ..values import MAX_LENGTH, MIN_LENGTH, _integer, _number, exact
@@ -68,6 +68,44 @@ def _point(key: str, value: Any) -> np.ndarray:
     if not point[2] > 0.0:
         raise SceneError(key, f"z = {point[2]} must be > 0 (strictly above the plane)")
     return point
+
+
+def check_heights(size: float, source, sensors) -> None:
+    """Refuse a source or sensor too close to the plane for float64 to resolve its response.
+
+    Parameters
+    ----------
+    size : float
+        Plane side L, metres.
+    source : array_like
+        (x, y, z), metres.
+    sensors : array_like
+        ``(K, 3)``, metres.
+
+    Raises
+    ------
+    SceneError
+        Naming ``source.position`` or ``sensors.positions[k]`` and the
+        smallest height supported.
+
+    Notes
+    -----
+    Criterion: h >= MIN_HEIGHT_FRACTION x extent (:func:`scene_extent`). The
+    attenuation's peak under a point at height h has width h; below the
+    criterion it spans fewer than ~10⁶ roundings of the plane coordinates
+    and path lengths, and the quadrature can no longer find it (at 1e-300
+    it would silently return ~0 instead of the finite limit).
+    """
+    floor = minimum_height(size, source, sensors)
+    checks = [("source.position", np.asarray(source, dtype=np.float64))]
+    checks += [(f"sensors.positions[{k}]", p) for k, p in
+               enumerate(np.reshape(np.asarray(sensors, dtype=np.float64), (-1, 3)))]
+    for key, point in checks:
+        if not point[2] >= floor:
+            raise SceneError(key, f"height {exact(point[2])} m is below the smallest height supported, "
+                             f"{exact(floor)} m ({MIN_HEIGHT_FRACTION:g} of the scene's extent "
+                             f"{floor / MIN_HEIGHT_FRACTION:.6g} m): float64 cannot resolve the light "
+                             f"under a point that low; raise it to at least {exact(floor)} m")
 
 
 def _choice(key: str, value: Any, options: tuple[str, ...]) -> str:

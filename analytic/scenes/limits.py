@@ -1,7 +1,7 @@
 """The scene's numeric limits that float64 sets: the smallest height above the plane and the model's tolerance.
 
 Every length is in metres (docs/design.md section 1); :mod:`analytic.scenes.common`
-re-exports these names.
+re-exports these names and checks heights with them (:func:`analytic.scenes.common.check_heights`).
 """
 
 from __future__ import annotations
@@ -12,9 +12,10 @@ from ..errors import SceneError
 from ..values import _number, exact
 
 __all__ = ["MIN_HEIGHT_FRACTION", "MIN_TOLERANCE", "MAX_TOLERANCE", "scene_extent", "minimum_height",
-           "check_heights", "check_tolerance"]
+           "check_tolerance"]
 
-#: Smallest height of the source or a sensor, as a fraction of the scene's extent (:func:`check_heights`).
+#: Smallest height of the source or a sensor, as a fraction of the scene's extent
+#: (:func:`analytic.scenes.common.check_heights`).
 MIN_HEIGHT_FRACTION = 1e-9
 #: Relative accuracy of A's entries: below MIN_TOLERANCE float64 quadrature stops converging.
 MIN_TOLERANCE = 1e-10
@@ -35,44 +36,6 @@ def scene_extent(size: float, source, sensors) -> float:
 def minimum_height(size: float, source, sensors) -> float:
     """Smallest supported height of the source and the sensors, metres: MIN_HEIGHT_FRACTION x extent."""
     return MIN_HEIGHT_FRACTION * scene_extent(size, source, sensors)
-
-
-def check_heights(size: float, source, sensors) -> None:
-    """Refuse a source or sensor too close to the plane for float64 to resolve its response.
-
-    Parameters
-    ----------
-    size : float
-        Plane side L, metres.
-    source : array_like
-        (x, y, z), metres.
-    sensors : array_like
-        ``(K, 3)``, metres.
-
-    Raises
-    ------
-    SceneError
-        Naming ``source.position`` or ``sensors.positions[k]`` and the
-        smallest height supported.
-
-    Notes
-    -----
-    Criterion: h >= MIN_HEIGHT_FRACTION x extent (:func:`scene_extent`). The
-    attenuation's peak under a point at height h has width h; below the
-    criterion it spans fewer than ~10⁶ roundings of the plane coordinates
-    and path lengths, and the quadrature can no longer find it (at 1e-300
-    it would silently return ~0 instead of the finite limit).
-    """
-    floor = minimum_height(size, source, sensors)
-    checks = [("source.position", np.asarray(source, dtype=np.float64))]
-    checks += [(f"sensors.positions[{k}]", p) for k, p in
-               enumerate(np.reshape(np.asarray(sensors, dtype=np.float64), (-1, 3)))]
-    for key, point in checks:
-        if not point[2] >= floor:
-            raise SceneError(key, f"height {exact(point[2])} m is below the smallest height supported, "
-                             f"{exact(floor)} m ({MIN_HEIGHT_FRACTION:g} of the scene's extent "
-                             f"{floor / MIN_HEIGHT_FRACTION:.6g} m): float64 cannot resolve the light "
-                             f"under a point that low; raise it to at least {exact(floor)} m")
 
 
 def check_tolerance(tolerance: float) -> float:

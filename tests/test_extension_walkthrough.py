@@ -190,6 +190,24 @@ def test_layers_written_per_kind_refuse_the_toy_kind_in_one_line(tile_kind, tmp_
         _load(tile, {})
 
 
+def test_registry_refuses_a_kind_that_misses_part_of_the_protocol_or_takes_a_name_twice():
+    """What the protocol asks is checked where a kind registers, naming what is missing."""
+
+    class Sketch:
+        kind = "walkthrough_sketch"
+
+    with pytest.raises(TypeError, match=r"Sketch: a scene kind needs darkness, describe, detector, geometry"):
+        register_scene_kind(Sketch)
+
+    @dataclass(frozen=True, kw_only=True, eq=False)
+    class Twin(Tile):
+        kind: ClassVar[str] = "plane"
+
+    with pytest.raises(ValueError, match="scene kind 'plane' is registered already"):
+        register_scene_kind(Twin)
+    assert "walkthrough_sketch" not in SCENE_KINDS and SCENE_KINDS["plane"].__name__ == "Scene"
+
+
 #: The project's packages (tests may test classes freely).
 PACKAGES = ("analytic", "transient", "validation", "interop", "benchmarks", "scripts")
 #: Names whose isinstance test asks a scene's kind: the kinds' classes, and the registry's own.

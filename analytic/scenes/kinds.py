@@ -26,7 +26,7 @@ from typing import Any, Callable, ClassVar, Mapping, Protocol, TypeVar
 
 from ..errors import OptionError
 
-__all__ = ["SceneKind", "SCENE_KINDS", "register_scene_kind", "is_scene", "for_kind", "SceneKindError"]
+__all__ = ["SceneKind", "MEMBERS", "SCENE_KINDS", "register_scene_kind", "is_scene", "for_kind", "SceneKindError"]
 
 Handler = TypeVar("Handler")
 
@@ -96,11 +96,29 @@ class SceneKind(Protocol):
 SCENE_KINDS: dict[str, type] = {}
 
 
+#: Every member the protocol asks of a kind (a class attribute, a property, a method or a dataclass field).
+MEMBERS = tuple(sorted(set(SceneKind.__annotations__) | {
+    name for name, value in vars(SceneKind).items() if callable(value) or isinstance(value, property)}
+    - {"__init__", "__subclasshook__", "_is_protocol", "__class_getitem__", "__init_subclass__"}))
+
+
 def register_scene_kind(cls: type) -> type:
-    """Register a scene kind under ``cls.kind`` (a class decorator); a name registered twice is refused."""
+    """Register a scene kind under ``cls.kind`` (a class decorator).
+
+    Raises
+    ------
+    TypeError
+        A class without its own ``kind`` name, or without a member of :class:`SceneKind` (named).
+    ValueError
+        A name registered already by another class.
+    """
     name = cls.__dict__.get("kind")
     if not isinstance(name, str) or not name:
         raise TypeError(f"{cls.__name__}: a scene kind states its name as a class attribute `kind`")
+    fields = getattr(cls, "__dataclass_fields__", {})
+    missing = [member for member in MEMBERS if not (hasattr(cls, member) or member in fields)]
+    if missing:
+        raise TypeError(f"{cls.__name__}: a scene kind needs {', '.join(missing)} (analytic.scenes.kinds.SceneKind)")
     if SCENE_KINDS.get(name, cls) is not cls:
         raise ValueError(f"scene kind {name!r} is registered already ({SCENE_KINDS[name].__name__})")
     SCENE_KINDS[name] = cls

@@ -57,6 +57,7 @@ from analytic.errors import OptionError
 from analytic.files import build_meta, discard, save_npy, staged_writes, write_transient
 from analytic.resources import require_memory
 from analytic.scenes.common import Scene
+from analytic.scenes.kinds import for_kind
 from analytic.operator.window import window_share
 
 from .chunks import MAX_SAMPLES, Chunk, ReplicaAccumulator, ReplicaLayout, render_memory_bytes
@@ -324,17 +325,27 @@ class _Outputs:
             _remove_partial(self.folder)
 
 
-def _load(scene, estimator: dict):
-    """The loaded Mitsuba scene of a plane (``transient_opl``) or a relay-wall capture (``transient_opl_nlos``)."""
+def _load_plane(scene, estimator: dict):
     from .mitsuba_scene import load_scene
 
-    if isinstance(scene, Scene):
-        return load_scene(scene, **estimator)
+    return load_scene(scene, **estimator)
+
+
+def _load_relay_wall(scene, estimator: dict):
     import mitsuba as mi
 
     from .mitsuba_scene import relay_wall_scene_dict
 
     return mi.load_dict(relay_wall_scene_dict(scene, **estimator))
+
+
+#: The Mitsuba scene of each scene kind: a plane (``transient_opl``), a relay-wall capture (``transient_opl_nlos``).
+_LOADERS = {"plane": _load_plane, "relay_wall": _load_relay_wall}
+
+
+def _load(scene, estimator: dict):
+    """The loaded Mitsuba scene of ``scene`` (its kind's loader, :data:`_LOADERS`)."""
+    return for_kind(_LOADERS, scene, "render")(scene, estimator)
 
 
 def render(scene: Scene, *, spp: int, seed: int = 0, out_dir: str | Path | None = None,

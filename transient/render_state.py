@@ -24,6 +24,7 @@ import numpy as np
 from analytic.errors import UserError
 from analytic.files import atomic_write
 from analytic.scenes.common import Scene
+from analytic.scenes.kinds import for_kind
 from analytic.waveforms import make_waveform
 
 from .chunks import ReplicaAccumulator, ReplicaLayout
@@ -59,26 +60,33 @@ def scene_fingerprint(scene: Scene, estimator: dict | None = None) -> str:
     sensor, scan, sampling, illumination) and its hidden image.
     """
     waveform = make_waveform(scene.illumination, scene.sampling.bin_width_opl)
-    if not isinstance(scene, Scene):
-        description = {"geometry": "relay_wall", "tables": _renderer_tables(scene),
-                       "waveform": waveform.description, "estimator": _estimator_record(estimator)}
-        digest = hashlib.sha256(json.dumps(description, sort_keys=True, default=_python_number).encode())
-        digest.update(np.ascontiguousarray(scene.reflectance, dtype=np.float64).tobytes())
-        return digest.hexdigest()
-    description = {
+    description = {**for_kind(_DESCRIPTIONS, scene, "render", default=_tables_description)(scene),
+                   "waveform": waveform.description, "estimator": _estimator_record(estimator)}
+    digest = hashlib.sha256(json.dumps(description, sort_keys=True, default=_python_number).encode())
+    digest.update(np.ascontiguousarray(scene.reflectance, dtype=np.float64).tobytes())
+    return digest.hexdigest()
+
+
+def _tables_description(scene) -> dict:
+    """What the renderer reads of any scene kind: its kind and scene-file tables (:func:`_renderer_tables`)."""
+    return {"geometry": scene.kind, "tables": _renderer_tables(scene)}
+
+
+def _plane_description(scene) -> dict:
+    """A plane's fields as render states have always recorded them (so that earlier renders still resume)."""
+    return {
         "size": repr(float(scene.size)), "pixels": int(scene.pixels),
         "source": [repr(float(v)) for v in scene.source],
         "intensity": repr(float(scene.intensity)),
         "sensors": [[repr(float(v)) for v in p] for p in scene.sensors],
         "sampling": [repr(float(scene.sampling.bin_width_opl)), repr(float(scene.sampling.start_opl)),
                      int(scene.sampling.count)],
-        "waveform": waveform.description,
         "attenuation": scene.attenuation,
-        "estimator": _estimator_record(estimator),
     }
-    digest = hashlib.sha256(json.dumps(description, sort_keys=True).encode())
-    digest.update(np.ascontiguousarray(scene.reflectance, dtype=np.float64).tobytes())
-    return digest.hexdigest()
+
+
+#: A kind's own description in the fingerprint; every other kind is described by :func:`_tables_description`.
+_DESCRIPTIONS = {"plane": _plane_description}
 
 
 #: Scene-file keys the renderer does not read: (table, key); a whole table when key is None.
@@ -96,10 +104,15 @@ def _renderer_tables(scene) -> dict:
             tables.pop(table, None)
         elif isinstance(tables.get(table), dict):
             tables[table].pop(key, None)
-    image_table = tables[_image_table(tables)]
+    image_table = tables[_image_table_of(scene)]
     if isinstance(image_table.get("reflectance"), np.ndarray):
         image_table["reflectance"] = "image"
     return tables
+
+
+def _image_table_of(scene) -> str:
+    """The table of ``scene``'s tables that holds its reflectance image (its kind's ``image_key``)."""
+    return scene.image_key.split(".")[0]
 
 
 def _image_table(tables: dict) -> str:
@@ -119,7 +132,7 @@ def save_scene(folder: Path, scene: Scene) -> None:
     from analytic.scenes.scene_file import scene_to_tables
 
     tables = scene_to_tables(scene)
-    image = _image_table(tables)
+    image = _image_table_of(scene)
     tables[image] = {key: value for key, value in tables[image].items() if key != "reflectance"}
     # JSON writes a float's repr: the scene reads back bit for bit.
     text = json.dumps(tables, sort_keys=True, allow_nan=False, default=_python_number)
@@ -298,14 +311,19 @@ class SavedRender:
     planned: int
 
 
+#: How a refused resume names a scene kind.
+_KIND_NAMES = {"relay_wall": "a relay-wall capture", "plane": "a plane scene"}
+
+
 def _scene_differences(started: Scene, given: Scene) -> list[str]:
     """The scene keys ("[sampling] start", ...) in which ``given`` differs from the scene a render was
     started with, among those the renderer reads (not its name, noise or tolerance)."""
     old, new = _renderer_tables(started), _renderer_tables(given)
-    if ("relay_wall" in old) != ("relay_wall" in new):
-        kinds = {True: "a relay-wall capture", False: "a plane scene"}
-        return [f"its kind ({kinds['relay_wall' in new]}; the state's: {kinds['relay_wall' in old]})"]
-    image = _image_table(old)
+    if started.kind != given.kind:
+        def named(kind):
+            return _KIND_NAMES.get(kind, f"a {kind} scene")
+        return [f"its kind ({named(given.kind)}; the state's: {named(started.kind)})"]
+    image = _image_table_of(started)
     found = []
     for table in sorted(set(old) | set(new)):
         first, second = old.get(table, {}), new.get(table, {})

@@ -25,6 +25,7 @@ __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "locks": ["output_folder", "reading_folder", "LOCK_FILE", "LOCK_WAIT_SECONDS"],
     "formats": ["save_npy", "read_npy", "save_json", "save_text", "json_ready", "json_default", "save_exr",
                 "read_exr", "read_exr_channels", "save_png_image", "float32_problem", "PrecisionWarning"],
-    "transients": ["build_meta", "relay_wall_meta", "write_transient", "read_transient", "transient_format",
-                   "transient_in_folder", "UNITS", "RELAY_WALL_UNITS", "RELAY_WALL_KEYS", "TRANSIENT_FILES"],
+    "transients": ["build_meta", "write_transient", "read_transient", "transient_format",
+                   "transient_in_folder", "UNITS", "RELAY_WALL_UNITS", "RELAY_WALL_KEYS", "KIND_KEYS",
+                   "TRANSIENT_FILES"],
 })

@@ -18,6 +18,8 @@ from typing import Any
 import numpy as np
 
 from analytic.errors import DataError
+from analytic.scenes.common import Scene
+from analytic.scenes.relay_wall import RelayWallScene
 
 from .atomic import discard, staged_writes
 from interop.tal.capture import read_capture, write_capture
@@ -25,14 +27,17 @@ from interop.tal.relay_wall_capture import write_relay_wall_capture
 from .formats import (PrecisionWarning, float32_problem, json_ready, read_exr, read_npy, save_exr, save_json,
                       save_npy)
 
-__all__ = ["build_meta", "relay_wall_meta", "write_transient", "read_transient", "transient_format",
-           "transient_in_folder", "UNITS", "RELAY_WALL_UNITS", "RELAY_WALL_KEYS", "TRANSIENT_FILES"]
+__all__ = ["build_meta", "write_transient", "read_transient", "transient_format",
+           "transient_in_folder", "UNITS", "RELAY_WALL_UNITS", "RELAY_WALL_KEYS", "KIND_KEYS",
+           "TRANSIENT_FILES"]
 
-#: How y's units follow from the source's intensity (docs/design.md section 1).
-UNITS = ("lengths in metres; time as optical path length in metres (c = 1); y in W/sr x m^-2 x m "
-         "of path length: the source's peak radiant intensity I (W/sr) times the pulse's "
-         "integral over the bin (m of path length) times the attenuation (m^-4) times area (m^2); "
-         "noise sigma in the units of y")
+#: How y's units follow from each kind's intensity (docs/design.md sections 1 and 7), as meta.json states them.
+UNITS, RELAY_WALL_UNITS = Scene.units, RelayWallScene.units
+
+#: meta.json's keys that a scene kind fills (:meth:`analytic.scenes.kinds.SceneKind.meta_fields`); None where
+#: a kind has not the key (a plane has no relay wall, a relay-wall capture no plane, point source or sensor array).
+RELAY_WALL_KEYS = ("relay_wall", "hidden", "laser", "sensor", "scan")
+KIND_KEYS = ("geometry", "plane_size", "source", "sensor_positions", "attenuation", "units", *RELAY_WALL_KEYS)
 
 
 def build_meta(scene, *, kind: str, samples: int = 0, seed: int | None = None,
@@ -69,33 +74,33 @@ def build_meta(scene, *, kind: str, samples: int = 0, seed: int | None = None,
         ``bins``, ``sensors`` (the transient's rows: sensors, or the
         capture's (laser point, read point) pairs), ``units``, and the
         relay-wall tables ``relay_wall``, ``hidden``, ``laser``, ``sensor``
-        and ``scan`` (:func:`relay_wall_meta`). The keys of the other
+        and ``scan`` (:meth:`analytic.scenes.relay_wall.RelayWallScene.meta_fields`). The keys of the other
         geometry are None: a plane has no relay wall, and a relay-wall
         capture has no plane, point source or sensor array (its hidden
         image's M is ``pixels``, its laser's I ``intensity``, and its
         third bounce is Lambertian at every vertex: ``attenuation`` is
         ``lambertian``).
     """
-    from analytic.scenes.relay_wall import RelayWallScene
     from analytic.waveforms import make_waveform   # here: the waveforms load Numba, files need not
 
     if kind not in ("model", "render"):
         raise ValueError(f"kind: 'model' or 'render', got {kind!r}")
     waveform = make_waveform(scene.illumination, scene.sampling.bin_width_opl)
     noise = scene.noise
-    relay_wall = isinstance(scene, RelayWallScene)
+    own = scene.meta_fields()
+    fields = {key: own.pop(key, None) for key in KIND_KEYS}
     meta = {
         "kind": kind,
         "samples": int(samples),
         "seed": None if seed is None else int(seed),
         "scene": scene.name,
-        "geometry": "relay_wall" if relay_wall else "plane",
-        "plane_size": None if relay_wall else float(scene.size),
+        "geometry": fields["geometry"],
+        "plane_size": fields["plane_size"],
         "pixels": int(scene.pixels),
-        "source": None if relay_wall else [float(v) for v in scene.source],
+        "source": fields["source"],
         "intensity": float(scene.intensity),
-        "sensor_positions": None if relay_wall else np.asarray(scene.sensors, dtype=np.float64).tolist(),
-        "attenuation": "lambertian" if relay_wall else scene.attenuation,
+        "sensor_positions": fields["sensor_positions"],
+        "attenuation": fields["attenuation"],
         "illumination": waveform.name,
         "illumination_parameters": dict(waveform.parameters),
         "tolerance": float(scene.tolerance) if kind == "model" else None,
@@ -107,68 +112,15 @@ def build_meta(scene, *, kind: str, samples: int = 0, seed: int | None = None,
         "bin_width_opl": float(scene.sampling.bin_width_opl),
         "bins": int(scene.sampling.count),
         "sensors": int(scene.sensor_count),
-        "units": RELAY_WALL_UNITS if relay_wall else UNITS,
-        **(relay_wall_meta(scene) if relay_wall else dict.fromkeys(RELAY_WALL_KEYS)),
+        "units": fields["units"],
+        **{key: fields[key] for key in RELAY_WALL_KEYS},
+        **own,                     # a kind's keys beyond the schema's
     }
     clash = sorted(set(extra) & set(meta))
     if clash:
         raise ValueError(f"extra: {', '.join(clash)} are schema keys")
     meta.update(extra)
     return meta
-
-
-#: The relay-wall tables of the metadata (docs/design.md section 7), None for a plane.
-RELAY_WALL_KEYS = ("relay_wall", "hidden", "laser", "sensor", "scan")
-
-#: A relay-wall capture's units (docs/design.md section 7: mitransient's).
-RELAY_WALL_UNITS = ("lengths in metres; time as optical path length in metres (c = 1); each row a (laser point, "
-                    "read point) pair; H(l, s)[n] is the radiance leaving the read point s toward the sensor "
-                    "(W sr^-1 m^-2) integrated over the bin (m of path length), for the laser's radiant "
-                    "intensity I (W/sr) toward the wall: W sr^-1 m^-1, mitransient's nlos_capture_meter units; "
-                    "noise sigma in the units of H")
-
-
-def relay_wall_meta(scene) -> dict:
-    """A relay-wall capture's tables in the metadata, named as in its scene file (docs/design.md section 7).
-
-    Returns
-    -------
-    dict
-        ``relay_wall``: {``size`` (metres along x and y), ``reflectance`` (ρ_w)};
-        ``hidden``: {``center``, ``u``, ``v`` (metres), ``pixels`` (M),
-        ``reflectance`` (ρ_h when uniform, else None: an image),
-        ``reflectance_mean``}; ``laser``: {``position`` (o_l), ``intensity``
-        (I, W/sr)}; ``sensor``: {``position`` (o_s)}; ``scan``: {``type``,
-        ``grid`` ([W, H] read points), ``laser_point`` (single: l),
-        ``laser_grid`` (exhaustive: the lit points' [W, H]),
-        ``account_first_and_last_bounces``, ``pairs`` (P)}. A key of another
-        scan type is None.
-    """
-    scan = scene.scan
-    image = np.asarray(scene.reflectance, dtype=np.float64)
-    uniform = bool(np.all(image == image.flat[0]))
-    laser_point = None
-    if scan.type == "single":
-        laser_point = [float(v) for v in scene.laser_points[0]]
-    laser_grid = None
-    if scan.type == "exhaustive":
-        laser_grid = [int(g) for g in (scan.laser_grid or scan.grid)]
-
-    def vector(value):
-        return [float(v) for v in value]
-
-    return {
-        "relay_wall": {"size": vector(scene.wall_size), "reflectance": float(scene.wall_reflectance)},
-        "hidden": {"center": vector(scene.center), "u": vector(scene.u), "v": vector(scene.v),
-                   "pixels": int(scene.pixels), "reflectance": float(image.flat[0]) if uniform else None,
-                   "reflectance_mean": float(image.mean())},
-        "laser": {"position": vector(scene.laser_position), "intensity": float(scene.intensity)},
-        "sensor": {"position": vector(scene.sensor_position)},
-        "scan": {"type": scan.type, "grid": [int(g) for g in scan.grid], "laser_point": laser_point,
-                 "laser_grid": laser_grid,
-                 "account_first_and_last_bounces": bool(scan.account_first_and_last_bounces),
-                 "pairs": int(scene.sensor_count)},
-    }
 
 
 #: meta.json's ``exr`` when transient.exr is written.

@@ -71,7 +71,7 @@ def _contour(scene, frame, source, sensor, t, coarea, unit_nodes, unit_weights, 
     cx, cy, a, b, *_ = ellipse(frame, t)
     e1, e2 = frame.axis_x, frame.axis_y
     size, pixels = scene.size, scene.pixels
-    delta = scene.pixel_size
+    delta = scene.pixel_size[0]     # the plane's pixels are square: (Δ, Δ)
     lines = np.arange(pixels + 1) * delta
     # x(φ) = cx + R1 cos(φ + ψ1), y(φ) = cy + R2 cos(φ - ψ2)
     r1, psi1 = np.hypot(a * e1, b * e2), np.arctan2(b * e2, a * e1)

@@ -25,13 +25,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
 from ..measurement.detector import Detector
 from ..errors import SceneError
 from ..geometry import ATTENUATIONS, plane_geometry
+from .kinds import register_scene_kind
+from .limits import (MAX_TOLERANCE, MIN_HEIGHT_FRACTION, MIN_TOLERANCE, check_tolerance, minimum_height,
+                     scene_extent)
 from .reflectance import builtin_reflectance, reflectance_image
 from ..resources import require_memory
 from ..values import MAX_LENGTH, MIN_LENGTH, _integer, _number, exact
@@ -44,13 +47,8 @@ __all__ = ["SceneError", "Illumination", "Sampling", "Noise", "Scene", "default_
 WAVEFORMS = ("impulse", "square", "butterworth", "gaussian", "emg", "sampled")
 NOISE_KINDS = ("gaussian", "poisson")
 
-#: Smallest height of the source or a sensor, as a fraction of the scene's extent (:func:`check_heights`).
-MIN_HEIGHT_FRACTION = 1e-9
 #: Largest Gaussian noise σ: m σ² (the discrepancy rule's target) stays finite.
 MAX_SIGMA = 1e150
-#: Relative accuracy of A's entries: below MIN_TOLERANCE float64 quadrature stops converging.
-MIN_TOLERANCE = 1e-10
-MAX_TOLERANCE = 0.1
 #: Largest source intensity, W/sr: y (and the squares the λ rules form) stay finite.
 MAX_INTENSITY = 1e30
 #: Most sensors a scene may have.
@@ -70,22 +68,6 @@ def _point(key: str, value: Any) -> np.ndarray:
     if not point[2] > 0.0:
         raise SceneError(key, f"z = {point[2]} must be > 0 (strictly above the plane)")
     return point
-
-
-def scene_extent(size: float, source, sensors) -> float:
-    """The scene's length scale: the largest of the plane's side and every coordinate's magnitude, metres.
-
-    Plane coordinates and path lengths are as large as this, so it sets the
-    float64 rounding of everything the model computes.
-    """
-    points = np.vstack([np.reshape(np.asarray(source, dtype=np.float64), (1, 3)),
-                        np.reshape(np.asarray(sensors, dtype=np.float64), (-1, 3))])
-    return float(max(abs(float(size)), float(np.max(np.abs(points)))))
-
-
-def minimum_height(size: float, source, sensors) -> float:
-    """Smallest supported height of the source and the sensors, metres: MIN_HEIGHT_FRACTION x extent."""
-    return MIN_HEIGHT_FRACTION * scene_extent(size, source, sensors)
 
 
 def check_heights(size: float, source, sensors) -> None:
@@ -124,16 +106,6 @@ def check_heights(size: float, source, sensors) -> None:
                              f"{exact(floor)} m ({MIN_HEIGHT_FRACTION:g} of the scene's extent "
                              f"{floor / MIN_HEIGHT_FRACTION:.6g} m): float64 cannot resolve the light "
                              f"under a point that low; raise it to at least {exact(floor)} m")
-
-
-def check_tolerance(tolerance: float) -> float:
-    """The tolerance as a float, or SceneError("model.tolerance") outside [MIN_TOLERANCE, MAX_TOLERANCE)."""
-    tolerance = _number("model.tolerance", tolerance, positive=True)
-    if not MIN_TOLERANCE <= tolerance < MAX_TOLERANCE:
-        raise SceneError("model.tolerance", f"must be in [{MIN_TOLERANCE:g}, {MAX_TOLERANCE:g}), got "
-                         f"{exact(tolerance)}: below {MIN_TOLERANCE:g} float64 quadrature stops converging "
-                         f"(1e-12 already takes ~60 times as long as the default 1e-6)")
-    return tolerance
 
 
 def _choice(key: str, value: Any, options: tuple[str, ...]) -> str:
@@ -338,9 +310,10 @@ class Noise:
                                                   maximum=_SEED_LIMIT - 1))
 
 
+@register_scene_kind
 @dataclass(frozen=True, kw_only=True, eq=False)
 class Scene:
-    """A Lambertian plane, one point source, K point sensors, sampling.
+    """A Lambertian plane, one point source, K point sensors, sampling (the scene kind ``plane``).
 
     Parameters
     ----------
@@ -390,6 +363,17 @@ class Scene:
     noise: Noise | None = None
     detector: Detector | None = None
     name: str = "scene"
+
+    #: The scene kind's name, its rows and its image's key (:class:`analytic.scenes.kinds.SceneKind`).
+    kind: ClassVar[str] = "plane"
+    row_noun: ClassVar[str] = "sensor"
+    image_key: ClassVar[str] = "plane.reflectance"
+    #: How y's units follow from the source's intensity (docs/design.md section 1), as meta.json states them.
+    units: ClassVar[str] = (
+        "lengths in metres; time as optical path length in metres (c = 1); y in W/sr x m^-2 x m "
+        "of path length: the source's peak radiant intensity I (W/sr) times the pulse's "
+        "integral over the bin (m of path length) times the attenuation (m^-4) times area (m^2); "
+        "noise sigma in the units of y")
 
     def __post_init__(self):
         size = _number("plane.size", self.size, positive=True, length=True)
@@ -442,9 +426,9 @@ class Scene:
                                      f"format character, or a separator other than the space); use printable text")
 
     @property
-    def pixel_size(self) -> float:
-        """Pixel side Δ = L / M, metres."""
-        return self.size / self.pixels
+    def pixel_size(self) -> tuple[float, float]:
+        """Pixel sides (Δ, Δ) along x and y, Δ = L / M, metres."""
+        return self.size / self.pixels, self.size / self.pixels
 
     @property
     def sensor_count(self) -> int:
@@ -458,6 +442,33 @@ class Scene:
     def geometry(self):
         """The plane as the model's rectangle and point pairs (:func:`analytic.geometry.plane_geometry`)."""
         return plane_geometry(self)
+
+    def describe(self) -> str:
+        """The transient's rows in words: "16 sensors"."""
+        return f"{self.sensor_count} sensors"
+
+    def darkness(self) -> tuple[str, str] | None:
+        """("plane.reflectance", why) when the plane is black everywhere, else None."""
+        if np.any(np.asarray(self.reflectance) > 0):
+            return None
+        return "plane.reflectance", "the plane is black (reflectance 0 everywhere)"
+
+    def meta_fields(self) -> dict:
+        """meta.json's ``geometry``, ``plane_size``, ``source``, ``sensor_positions``, ``attenuation``, ``units``."""
+        return {"geometry": self.kind, "plane_size": float(self.size), "source": [float(v) for v in self.source],
+                "sensor_positions": np.asarray(self.sensors, dtype=np.float64).tolist(),
+                "attenuation": self.attenuation, "units": self.units}
+
+    def to_tables(self, shared: dict) -> dict:
+        """``[plane]``, ``[source]``, ``[sensors]``, ``shared``, ``[model]`` (the image inline, or its constant)."""
+        image = self.reflectance
+        uniform = bool(np.all(image == image.flat[0]))
+        return {"plane": {"size": self.size, "pixels": self.pixels,
+                          "reflectance": float(image.flat[0]) if uniform else np.array(image)},
+                "source": {"position": self.source.tolist(), "intensity": self.intensity},
+                "sensors": {"positions": self.sensors.tolist()},
+                **shared,
+                "model": {"attenuation": self.attenuation, "tolerance": self.tolerance}}
 
 
 def sensor_grid(shape: tuple[int, int], extent: float, center) -> np.ndarray:

@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -39,6 +39,7 @@ from ..measurement.detector import Detector
 from ..errors import SceneError
 from ..geometry import PointPairs, Rectangle
 from ..resources import require_memory
+from .kinds import register_scene_kind
 from .reflectance import reflectance_image
 from .common import (MAX_INTENSITY, MAX_LENGTH, MIN_LENGTH, Illumination, Noise, Sampling, _choice, _integer, _number,
                     check_tolerance)
@@ -183,9 +184,10 @@ class Scan:
         return pairs
 
 
+@register_scene_kind
 @dataclass(frozen=True, kw_only=True, eq=False)
 class RelayWallScene:
-    """A capture through a relay wall: the scene file's ``[relay_wall]``, ``[hidden]``, ``[laser]``,
+    """A capture through a relay wall (the scene kind ``relay_wall``): the scene file's ``[relay_wall]``, ``[hidden]``, ``[laser]``,
     ``[sensor]`` and ``[scan]`` tables (docs/design.md section 7), with the plane scene's
     ``[illumination]``, ``[sampling]``, ``[model] tolerance``, ``[noise]`` and ``[detector]``.
 
@@ -229,6 +231,18 @@ class RelayWallScene:
     noise: Noise | None = None
     detector: Detector | None = None
     name: str = "relay-wall"
+
+    #: The scene kind's name, its rows and its image's key (:class:`analytic.scenes.kinds.SceneKind`).
+    kind: ClassVar[str] = "relay_wall"
+    row_noun: ClassVar[str] = "pair"
+    image_key: ClassVar[str] = "hidden.reflectance"
+    #: mitransient's units (docs/design.md section 7), as meta.json states them.
+    units: ClassVar[str] = (
+        "lengths in metres; time as optical path length in metres (c = 1); each row a (laser point, "
+        "read point) pair; H(l, s)[n] is the radiance leaving the read point s toward the sensor "
+        "(W sr^-1 m^-2) integrated over the bin (m of path length), for the laser's radiant "
+        "intensity I (W/sr) toward the wall: W sr^-1 m^-1, mitransient's nlos_capture_meter units; "
+        "noise sigma in the units of H")
 
     def __post_init__(self):
         object.__setattr__(self, "wall_size", _pair("relay_wall.size", self.wall_size, whole=False))
@@ -328,7 +342,7 @@ class RelayWallScene:
 
     @property
     def pixel_size(self) -> tuple[float, float]:
-        """The hidden image's pixel sides along u and v, metres."""
+        """The hidden image's pixel sides (du, dv) along u and v, metres."""
         return float(np.linalg.norm(self.u)) / self.pixels, float(np.linalg.norm(self.v)) / self.pixels
 
     # -- the model's geometry -----------------------------------------------------
@@ -395,6 +409,77 @@ class RelayWallScene:
     def replace(self, **changes) -> "RelayWallScene":
         """A copy with some fields changed (validated again)."""
         return replace(self, **changes)
+
+    # -- what files and reports need (analytic.scenes.kinds.SceneKind) --------------
+
+    def describe(self) -> str:
+        """The transient's rows in words: "64 pairs (confocal scan)"."""
+        return f"{self.sensor_count} pairs ({self.scan.type} scan)"
+
+    def darkness(self) -> tuple[str, str] | None:
+        """(key, why) when the relay wall or the hidden rectangle is black everywhere, else None."""
+        if self.wall_reflectance == 0:
+            return "relay_wall.reflectance", "the relay wall is black"
+        if not np.any(np.asarray(self.reflectance) > 0):
+            return "hidden.reflectance", "the hidden rectangle is black (reflectance 0 everywhere)"
+        return None
+
+    def meta_fields(self) -> dict:
+        """meta.json's ``geometry``, ``attenuation``, ``units`` and the tables of docs/design.md section 7.
+
+        ``relay_wall``: {``size`` (metres along x and y), ``reflectance`` (ρ_w)};
+        ``hidden``: {``center``, ``u``, ``v`` (metres), ``pixels`` (M),
+        ``reflectance`` (ρ_h when uniform, else None: an image),
+        ``reflectance_mean``}; ``laser``: {``position`` (o_l), ``intensity``
+        (I, W/sr)}; ``sensor``: {``position`` (o_s)}; ``scan``: {``type``,
+        ``grid`` ([W, H] read points), ``laser_point`` (single: l),
+        ``laser_grid`` (exhaustive: the lit points' [W, H]),
+        ``account_first_and_last_bounces``, ``pairs`` (P)}. A key of another
+        scan type is None. The third bounce is Lambertian at every vertex.
+        """
+        scan = self.scan
+        image = np.asarray(self.reflectance, dtype=np.float64)
+        uniform = bool(np.all(image == image.flat[0]))
+        laser_point = [float(v) for v in self.laser_points[0]] if scan.type == "single" else None
+        laser_grid = [int(g) for g in (scan.laser_grid or scan.grid)] if scan.type == "exhaustive" else None
+
+        def vector(value):
+            return [float(v) for v in value]
+
+        return {
+            "geometry": self.kind, "attenuation": "lambertian", "units": self.units,
+            "relay_wall": {"size": vector(self.wall_size), "reflectance": float(self.wall_reflectance)},
+            "hidden": {"center": vector(self.center), "u": vector(self.u), "v": vector(self.v),
+                       "pixels": int(self.pixels), "reflectance": float(image.flat[0]) if uniform else None,
+                       "reflectance_mean": float(image.mean())},
+            "laser": {"position": vector(self.laser_position), "intensity": float(self.intensity)},
+            "sensor": {"position": vector(self.sensor_position)},
+            "scan": {"type": scan.type, "grid": [int(g) for g in scan.grid], "laser_point": laser_point,
+                     "laser_grid": laser_grid,
+                     "account_first_and_last_bounces": bool(scan.account_first_and_last_bounces),
+                     "pairs": int(self.sensor_count)},
+        }
+
+    def to_tables(self, shared: dict) -> dict:
+        """``[relay_wall]``, ``[hidden]``, ``[laser]``, ``[sensor]``, ``[scan]``, ``[model]``, then ``shared``."""
+        image = self.reflectance
+        uniform = bool(np.all(image == image.flat[0]))
+        scan = {"type": self.scan.type, "grid": list(self.scan.grid),
+                "account_first_and_last_bounces": bool(self.scan.account_first_and_last_bounces)}
+        if self.scan.laser_point is not None:
+            scan["laser_point"] = np.asarray(self.scan.laser_point).tolist()
+        if self.scan.laser_grid is not None:
+            scan["laser_grid"] = list(self.scan.laser_grid)
+        return {
+            "relay_wall": {"size": list(self.wall_size), "reflectance": self.wall_reflectance},
+            "hidden": {"center": self.center.tolist(), "u": self.u.tolist(), "v": self.v.tolist(),
+                       "pixels": self.pixels, "reflectance": float(image.flat[0]) if uniform else np.array(image)},
+            "laser": {"position": self.laser_position.tolist(), "intensity": self.intensity},
+            "sensor": {"position": self.sensor_position.tolist()},
+            "scan": scan,
+            "model": {"tolerance": self.tolerance},
+            **shared,
+        }
 
 
 def default_relay_wall_scene(**changes) -> RelayWallScene:

@@ -290,26 +290,6 @@ def _relay_wall_scene(data: dict, base_dir, name: str):
     )
 
 
-def _relay_wall_tables(scene) -> dict:
-    image = scene.reflectance
-    uniform = bool(np.all(image == image.flat[0]))
-    scan = {"type": scene.scan.type, "grid": list(scene.scan.grid),
-            "account_first_and_last_bounces": bool(scene.scan.account_first_and_last_bounces)}
-    if scene.scan.laser_point is not None:
-        scan["laser_point"] = np.asarray(scene.scan.laser_point).tolist()
-    if scene.scan.laser_grid is not None:
-        scan["laser_grid"] = list(scene.scan.laser_grid)
-    return {
-        "relay_wall": {"size": list(scene.wall_size), "reflectance": scene.wall_reflectance},
-        "hidden": {"center": scene.center.tolist(), "u": scene.u.tolist(), "v": scene.v.tolist(),
-                   "pixels": scene.pixels, "reflectance": float(image.flat[0]) if uniform else np.array(image)},
-        "laser": {"position": scene.laser_position.tolist(), "intensity": scene.intensity},
-        "sensor": {"position": scene.sensor_position.tolist()},
-        "scan": scan,
-        "model": {"tolerance": scene.tolerance},
-    }
-
-
 def scene_to_tables(scene: Scene) -> dict:
     """The scene as TOML tables that :func:`scene_from_dict` reads back to an equal scene.
 
@@ -323,20 +303,7 @@ def scene_to_tables(scene: Scene) -> dict:
     common = {"illumination": {"waveform": scene.illumination.waveform, **illumination},
               "sampling": {"period": scene.sampling.bin_width_opl, "start": scene.sampling.start_opl,
                            "count": scene.sampling.count}}
-    if not isinstance(scene, Scene):
-        tables = {"name": scene.name, **_relay_wall_tables(scene), **common}
-    else:
-        image = scene.reflectance
-        uniform = bool(np.all(image == image.flat[0]))
-        tables = {
-            "name": scene.name,
-            "plane": {"size": scene.size, "pixels": scene.pixels,
-                      "reflectance": float(image.flat[0]) if uniform else np.array(image)},
-            "source": {"position": scene.source.tolist(), "intensity": scene.intensity},
-            "sensors": {"positions": scene.sensors.tolist()},
-            **common,
-            "model": {"attenuation": scene.attenuation, "tolerance": scene.tolerance},
-        }
+    tables = {"name": scene.name, **scene.to_tables(common)}
     if scene.noise is not None:
         noise = scene.noise
         own = {"sigma": noise.sigma} if noise.kind == "gaussian" else {"photons": noise.photons}

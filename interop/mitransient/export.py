@@ -47,8 +47,8 @@ from pathlib import Path
 import numpy as np
 
 from analytic.files import float32_problem
-from analytic.scenes.relay_wall import RelayWallScene
 from analytic.scenes.common import Scene, SceneError
+from analytic.scenes.kinds import for_kind
 from analytic.values import exact
 
 from transient.intensity import emitter_intensity
@@ -278,24 +278,44 @@ def export_scene(scene: Scene, out_dir: str | Path, format: str, *, radius: floa
     character XML cannot hold as ``\\uXXXX``, "--" split), and
     ``scene.xml`` is parsed back before it is renamed into place.
     """
+    check_export_options(scene, format, radius=radius, spp=spp)
+    return for_kind(_EXPORTERS, scene, "export")(scene, out_dir, format, radius=radius, spp=spp)
+
+
+def check_export_options(scene, format: str, *, radius: float | None = None, spp: int | None = None) -> None:
+    """Refuse a format or an option that ``scene``'s kind does not take (ValueError naming it), before
+    anything is written; the values are checked further by the kind's exporter."""
     if format not in FORMATS:
         raise ValueError(f"format: must be one of {', '.join(FORMATS)}, got {format!r}")
-    if isinstance(scene, RelayWallScene):
-        from .export_relay_wall import export_relay_wall
+    for_kind(_OPTION_CHECKS, scene, "export")(format, radius, spp)
 
-        if radius is not None:
-            raise ValueError("radius: applies to a plane scene's irradiancemeter spheres; a relay-wall scene's "
-                             "nlos_capture_meter reads wall points")
-        if format == "mitsuba" and spp is not None:
-            raise ValueError("spp: applies to format 'mitransient' only (render_chunk_per_unit_intensity takes "
-                             "the sample count)")
-        spp = SPP_RELAY_WALL if spp is None else int(spp)
-        if spp < 1:
-            raise ValueError(f"spp: must be >= 1, got {spp}")
-        return export_relay_wall(scene, out_dir, format, spp=spp)
+
+def _plane_options(format: str, radius, spp) -> None:
     if format == "mitsuba" and (radius is not None or spp is not None):
         raise ValueError("radius, spp: apply to format 'mitransient' only (our omni_point sensors are "
                          "points; render_loaded takes the sample count)")
+
+
+def _relay_wall_options(format: str, radius, spp) -> None:
+    if radius is not None:
+        raise ValueError("radius: applies to a plane scene's irradiancemeter spheres; a relay-wall scene's "
+                         "nlos_capture_meter reads wall points")
+    if format == "mitsuba" and spp is not None:
+        raise ValueError("spp: applies to format 'mitransient' only (render_chunk_per_unit_intensity takes "
+                         "the sample count)")
+
+
+def _export_relay_wall(scene, out_dir: str | Path, format: str, *, radius, spp) -> dict[str, Path]:
+    from .export_relay_wall import export_relay_wall
+
+    spp = SPP_RELAY_WALL if spp is None else int(spp)
+    if spp < 1:
+        raise ValueError(f"spp: must be >= 1, got {spp}")
+    return export_relay_wall(scene, out_dir, format, spp=spp)
+
+
+def _export_plane(scene: Scene, out_dir: str | Path, format: str, *, radius, spp) -> dict[str, Path]:
+    """A plane scene's files (see :func:`export_scene`)."""
     radius = RADIUS if radius is None else float(radius)
     spp = SPP if spp is None else int(spp)
     if format == "mitransient":
@@ -330,3 +350,8 @@ def export_scene(scene: Scene, out_dir: str | Path, format: str, *, radius: floa
                                     offset=2 * radius / 3 + 1500 * 2.0**-24, two_thirds=2 * radius / 3)
     # Image row 0 is the top (y = L); a bitmap's row 0 is v = 0 (y = 0): write_scene_files flips it.
     return write_scene_files(out_dir, scene.reflectance, text, readme)
+
+
+#: Each scene kind's option check and exporter.
+_OPTION_CHECKS = {"plane": _plane_options, "relay_wall": _relay_wall_options}
+_EXPORTERS = {"plane": _export_plane, "relay_wall": _export_relay_wall}

@@ -77,7 +77,7 @@ def _clear_of_feet_and_birth(scene, sensor, pixel):
     for point in (scene.source, scene.sensors[sensor]):
         dx = max(x0 - point[0], 0.0, point[0] - x1)
         dy = max(y0 - point[1], 0.0, point[1] - y1)
-        if dx * dx + dy * dy + point[2] ** 2 < scene.pixel_size**2:
+        if dx * dx + dy * dy + point[2] ** 2 < scene.pixel_size[0] ** 2:
             return False
     xs, ys = first_arrival_point(make_frame(np.asarray(scene.source, float),
                                             np.asarray(scene.sensors[sensor], float), 0))

@@ -51,7 +51,7 @@ def _pairs(rng, count):
 
 def _clear_of_feet_and_birth(scene, sensor, pixel):
     """Whether the (τ, φ) tensor rule applies: no foot within a pixel side, x* outside the pixel."""
-    delta = scene.pixel_size
+    delta, _ = scene.pixel_size
     r, c = divmod(pixel, scene.pixels)
     x0, x1, y0, y1 = c * delta, (c + 1) * delta, scene.size - (r + 1) * delta, scene.size - r * delta
     for point in (scene.source, scene.sensors[sensor]):

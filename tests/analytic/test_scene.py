@@ -75,3 +75,12 @@ def _refusal(make):
 def test_a_value_just_past_its_bound_is_shown_with_every_digit(make, value):
     # the value as Python's repr writes it (the shortest text that reads back as the same float64; whole)
     assert repr(value).removesuffix(".0") in _refusal(make)
+
+
+def test_pixel_size_is_du_dv_in_metres_for_every_kind():
+    """One type for every scene kind: the image's pixel sides (du, dv) along its columns and rows, metres."""
+    from analytic.scenes.relay_wall import default_relay_wall_scene
+
+    assert default_scene(size=2.0, pixels=8).pixel_size == (0.25, 0.25)
+    wall = default_relay_wall_scene(u=(1.5, 0.0, 0.0), v=(0.0, -0.5, 0.0), pixels=10)
+    assert wall.pixel_size == pytest.approx((0.15, 0.05), rel=1e-15)

@@ -19,7 +19,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from analytic.errors import OptionError
-from analytic.scenes.relay_wall import RelayWallScene
 from analytic.scenes.common import Scene
 # Mitsuba's ``math::RayEpsilon`` in single-precision variants (1500 x 2⁻²⁴ m): an irradiancemeter starts its
 # rays this far off its sphere (mitransient runs float32 variants). One definition, the renderer's.
@@ -32,6 +31,15 @@ __all__ = ["Convention", "irradiancemeter", "convention", "check_expect", "diagn
 
 #: The conventions stated by name (``check --expect NAME``, ``expect="NAME"``).
 CONVENTIONS = ("irradiancemeter", "transient_nlos_path")
+
+#: The scene kind each named convention describes, and why it describes no other.
+_CONVENTION_KINDS = {
+    "irradiancemeter": ("plane", "states mitransient's irradiancemeter spheres of a plane scene; a relay-wall "
+                                 "scene's nlos_capture_meter reads the model's own units (judge it as given, or "
+                                 "state transient_nlos_path or a scale and offset)"),
+    "transient_nlos_path": ("relay_wall", "states mitransient's NLOS integrator, for a relay-wall scene; a plane "
+                                          "scene's mitransient renders are irradiancemeter"),
+}
 
 # Relative accuracy of the model (the system matrix's default tolerance): a
 # fitted scale within it of 1, or an offset within it of a bin of 0, is none.
@@ -189,7 +197,6 @@ def check_expect(expect, scene, radius, words) -> None:
         An unknown name, a convention for the other kind of scene, a radius
         without ``irradiancemeter``.
     """
-    relay_wall = isinstance(scene, RelayWallScene)
     if radius is not None and expect != "irradiancemeter":
         raise OptionError(f"{words.radius}: applies to {words.expect} irradiancemeter only")
     if expect is None or isinstance(expect, Convention):
@@ -197,14 +204,10 @@ def check_expect(expect, scene, radius, words) -> None:
     if not isinstance(expect, str) or expect not in CONVENTIONS:
         raise OptionError(f"{words.expect}: {expect!r} is no convention; give one of {', '.join(CONVENTIONS)} or a "
                           f"Convention(scale, offset_opl, name)")
-    if expect == "irradiancemeter" and relay_wall:
-        raise OptionError(f"{words.expect} irradiancemeter: states mitransient's irradiancemeter spheres of a plane "
-                          f"scene; a relay-wall scene's nlos_capture_meter reads the model's own units (judge it as "
-                          f"given, or state transient_nlos_path or a scale and offset)")
+    kind, why = _CONVENTION_KINDS[expect]
+    if scene.kind != kind:
+        raise OptionError(f"{words.expect} {expect}: {why}")
     if expect == "transient_nlos_path":
-        if not relay_wall:
-            raise OptionError(f"{words.expect} transient_nlos_path: states mitransient's NLOS integrator, for a "
-                              f"relay-wall scene; a plane scene's mitransient renders are irradiancemeter")
         if scene.illumination.waveform != "impulse":
             raise OptionError(f"{words.expect} transient_nlos_path: mitransient renders the impulse response only; "
                               f"give the scene with waveform = \"impulse\"")

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from analytic.errors import DataError, OptionError
-from analytic.scenes.relay_wall import RelayWallScene
+from analytic.scenes.kinds import for_kind
 from validation.judging.arrays import real_array
 
 from .readers import (checked_transient, film_transient, read_data, read_stderr, replicas_beside, scene_of,
@@ -84,33 +84,47 @@ def _is_path(value) -> bool:
     return isinstance(value, (str, os.PathLike))
 
 
-def _film_ndim(scene) -> int:
-    """Dimensions of one mitransient film of ``scene``: (1, 1, N, C), (H, W, T, C) or (H, W, Lh, Lw, T, C)."""
-    return 6 if isinstance(scene, RelayWallScene) and scene.scan.type == "exhaustive" else 4
+def _relay_wall_films(name: str, array: np.ndarray, scene, listed: bool) -> np.ndarray | None:
+    """nlos_capture_meter films: one (H, W, T, C) or (H, W, Lh, Lw, T, C) film, or replicas of them stacked."""
+    film = 6 if scene.scan.type == "exhaustive" else 4
+    if array.ndim == film:
+        return film_transient(name, array, scene)
+    if array.ndim == film + 1:
+        return np.stack([film_transient(f"{name}[{r}]", one, scene) for r, one in enumerate(array)])
+    return None
+
+
+def _plane_films(name: str, array: np.ndarray, scene, listed: bool) -> np.ndarray | None:
+    """irradiancemeter films: one sensor's (1, 1, N, C), the K sensors' stacked, or replicas of those."""
+    if array.ndim == 4 and scene.sensor_count > 1:      # one sensor's film
+        if not listed:
+            raise DataError(f"{name}: one sensor's film {array.shape} for the scene's {scene.sensor_count} "
+                            f"sensors; give the films of all of them, stacked (K, 1, 1, N, C) or as a list")
+        return film_transient(name, array, scene, sensors=1)
+    if array.ndim in (4, 5):                # one sensor's film, or the K sensors' stacked
+        return film_transient(name, array, scene)
+    if array.ndim == 6:                     # replicas of stacked films
+        return np.stack([film_transient(f"{name}[{r}]", one, scene) for r, one in enumerate(array)])
+    return None
+
+
+def _no_films(name, array, scene, listed) -> None:
+    """A kind mitransient has no film of."""
+    return None
+
+
+#: How mitransient's films of each scene kind come as arrays (None: not a film of the scene).
+_FILMS = {"plane": _plane_films, "relay_wall": _relay_wall_films}
 
 
 def _array_transients(name: str, array: np.ndarray, scene, *, listed: bool = False) -> np.ndarray:
     """An array given as data: ``(K, N)`` or ``(R, K, N)``, films and stacks of films undone; in a list
     (``listed``), one sensor's film ``(1, 1, N, C)`` is its ``(1, N)`` row."""
-    film = _film_ndim(scene)
-    relay_wall = isinstance(scene, RelayWallScene)
     if array.ndim <= 3:
         return array
-    if relay_wall:
-        if array.ndim == film:
-            return film_transient(name, array, scene)
-        if array.ndim == film + 1:
-            return np.stack([film_transient(f"{name}[{r}]", one, scene) for r, one in enumerate(array)])
-    else:
-        if array.ndim == 4 and scene.sensor_count > 1:      # one sensor's film
-            if not listed:
-                raise DataError(f"{name}: one sensor's film {array.shape} for the scene's {scene.sensor_count} "
-                                f"sensors; give the films of all of them, stacked (K, 1, 1, N, C) or as a list")
-            return film_transient(name, array, scene, sensors=1)
-        if array.ndim in (4, 5):                # one sensor's film, or the K sensors' stacked
-            return film_transient(name, array, scene)
-        if array.ndim == 6:                     # replicas of stacked films
-            return np.stack([film_transient(f"{name}[{r}]", one, scene) for r, one in enumerate(array)])
+    films = for_kind(_FILMS, scene, "mitransient films", default=_no_films)(name, array, scene, listed)
+    if films is not None:
+        return films
     raise DataError(f"{name}: an array of shape {array.shape} is no transient of the scene: give (K, N) = "
                     f"({scene.sensor_count}, {scene.sampling.count}), (R, K, N) replicas, or mitransient's films "
                     f"as np.array(film) gives them")

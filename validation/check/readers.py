@@ -19,15 +19,17 @@ import json
 import math
 import os
 import re
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
 from analytic.errors import DataError, OptionError
 from analytic.files import TRANSIENT_FILES, read_exr, read_exr_channels, read_npy, transient_format, transient_in_folder
 from interop.tal import CaptureError, read_capture
-from analytic.scenes.relay_wall import RelayWallScene
 from analytic.scenes.common import Sampling, Scene
+from analytic.scenes.kinds import is_scene, for_kind
 from analytic.scenes.scene_file import load_scene
 
 __all__ = ["read_data", "scene_of", "read_stderr", "stderr_beside", "replicas_beside", "film_transient", "checked_transient"]
@@ -182,7 +184,7 @@ def _capture(path: Path, scene: Scene) -> np.ndarray:
     return transient[order]
 
 
-def _pairs_text(scene: RelayWallScene) -> str:
+def _pairs_text(scene) -> str:
     scan = scene.scan
     text = f"{scan.type} scan of {scan.grid[0]} x {scan.grid[1]} read points"
     if scan.type == "exhaustive":
@@ -191,7 +193,7 @@ def _pairs_text(scene: RelayWallScene) -> str:
     return f"{scene.sensor_count} pairs ({text})"
 
 
-def _relay_wall_capture(path: Path, scene: RelayWallScene) -> np.ndarray:
+def _relay_wall_capture(path: Path, scene) -> np.ndarray:
     """A tal capture of a relay-wall scene, its columns matched to the scene's pairs by their points."""
     capture = _read_capture(path, scene.sampling)
     flag = scene.scan.account_first_and_last_bounces
@@ -238,7 +240,7 @@ def _relay_wall_capture(path: Path, scene: RelayWallScene) -> np.ndarray:
     return capture.transient[order]
 
 
-def _relay_wall_film(name: str, array: np.ndarray, scene: RelayWallScene) -> np.ndarray:
+def _relay_wall_film(name: str, array: np.ndarray, scene) -> np.ndarray:
     """mitransient's developed NLOS film -> ``(P, N)`` in the scene's pair order.
 
     ``np.array(film)`` of an ``nlos_capture_meter``'s ``transient_hdr_film``
@@ -270,6 +272,49 @@ def _relay_wall_film(name: str, array: np.ndarray, scene: RelayWallScene) -> np.
     return values.reshape(height * width, bins)
 
 
+@dataclass(frozen=True)
+class _Layout:
+    """How other tools' files hold a scene kind's transient.
+
+    Attributes
+    ----------
+    capture : callable
+        (path, scene) -> ``(rows, N)``: tal's HDF5 capture, matched to the scene's rows.
+    film : callable
+        (name, array, scene, sensors) -> ``(rows, N)``: mitransient's developed film(s).
+    is_film : callable
+        ndim -> whether a ``.npy`` of that many dimensions is a film of the kind.
+    no_frames : str or None
+        Why a folder of ``save_frames`` images cannot hold the kind's transient; None when it can.
+    """
+
+    capture: Callable
+    film: Callable
+    is_film: Callable[[int], bool]
+    no_frames: str | None
+
+
+def _plane_film(name: str, array: np.ndarray, scene, sensors: int | None) -> np.ndarray:
+    return _film_tensor(name, array, scene.sensor_count if sensors is None else sensors)
+
+
+def _relay_wall_films(name: str, array: np.ndarray, scene, sensors: int | None) -> np.ndarray:
+    return _relay_wall_film(name, array, scene)
+
+
+#: Each scene kind's layout in tal's captures and mitransient's films.
+_LAYOUTS = {
+    "plane": _Layout(_capture, _plane_film, lambda ndim: ndim in (4, 5), None),
+    "relay_wall": _Layout(_relay_wall_capture, _relay_wall_films, lambda ndim: ndim >= 4,
+                          "a folder of save_frames images holds no scan grid; save the NLOS film with "
+                          "np.save(file, np.array(film)) instead, one file per render"),
+}
+
+
+def _layout(scene) -> _Layout:
+    return for_kind(_LAYOUTS, scene, "reading another tool's captures and films")
+
+
 def scene_of(scene):
     """A scene object, loaded when given as a path (TOML or tal YAML, as ``check``'s SCENE).
 
@@ -280,7 +325,7 @@ def scene_of(scene):
     OptionError
         Neither a scene nor a path.
     """
-    if isinstance(scene, (Scene, RelayWallScene)):
+    if is_scene(scene):
         return scene
     if isinstance(scene, (str, os.PathLike)):
         return load_scene(scene)
@@ -346,7 +391,6 @@ def read_data(path: str | Path, scene: Scene) -> np.ndarray:
     scene = scene_of(scene)
     path = Path(path)
     sensors, bins = scene.sensor_count, scene.sampling.count
-    relay_wall = isinstance(scene, RelayWallScene)
     if not path.exists():
         raise DataError(f"{path}: no such file or folder")
     name = str(path)
@@ -362,15 +406,15 @@ def read_data(path: str | Path, scene: Scene) -> np.ndarray:
         if not frames:
             raise DataError(f"{path}: a folder with neither {' nor '.join(TRANSIENT_FILES)} nor 000.exr "
                             f"frames; give the data file itself")
-        if relay_wall:
-            raise DataError(f"{path}: a folder of save_frames images holds no scan grid; save the NLOS film with "
-                            f"np.save(file, np.array(film)) instead, one file per render")
+        no_frames = _layout(scene).no_frames
+        if no_frames is not None:
+            raise DataError(f"{path}: {no_frames}")
         data = _frames(path, frames, sensors)
     elif kind == "capture":
-        data = _relay_wall_capture(path, scene) if relay_wall else _capture(path, scene)
+        data = _layout(scene).capture(path, scene)
     elif kind == "npy":
         array = read_npy(path)
-        if array.ndim >= 4 and (relay_wall or array.ndim in (4, 5)):
+        if array.ndim >= 4 and _layout(scene).is_film(array.ndim):
             data = film_transient(name, array, scene)
         else:
             _meta_time_axis(path, scene.sampling)
@@ -387,9 +431,7 @@ def film_transient(name: str, array: np.ndarray, scene: Scene, *, sensors: int |
     """mitransient's developed film(s) of ``scene`` -> ``(K, N)``: a plane scene's irradiancemeter film
     ``(1, 1, N, C)`` or the K sensors' stacked ``(K, 1, 1, N, C)`` (``sensors`` of them, default the
     scene's); a relay wall's nlos_capture_meter film (see :func:`read_data`)."""
-    if isinstance(scene, RelayWallScene):
-        return _relay_wall_film(name, array, scene)
-    return _film_tensor(name, array, scene.sensor_count if sensors is None else sensors)
+    return _layout(scene).film(name, array, scene, sensors)
 
 
 def checked_transient(name: str, data: np.ndarray, scene: Scene) -> np.ndarray:
@@ -397,7 +439,7 @@ def checked_transient(name: str, data: np.ndarray, scene: Scene) -> np.ndarray:
     ``name`` and what the shape looks like (transposed, a stack of replicas)."""
     sensors, bins = scene.sensor_count, scene.sampling.count
     if data.shape != (sensors, bins):
-        rows = "pairs" if isinstance(scene, RelayWallScene) else "sensors"
+        rows = f"{scene.row_noun}s"
         if data.shape == (bins, sensors):
             hint = f"it looks transposed: save ({rows}, bins)"
         elif data.ndim == 3 and data.shape[1:] == (sensors, bins):

@@ -5,10 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 
 from analytic.files import json_ready, save_json, staged_writes
-from validation.plots import check_transients_figure, check_z_figure, save_figure
+from validation.plots import WallScan, check_transients_figure, check_z_figure, save_figure
 from validation.runs.report import write_markdown
 
-from analytic.scenes.relay_wall import RelayWallScene
 
 from .scan_figure import scan_z_figure
 from validation.judging.agreement import detectable_text
@@ -33,7 +32,7 @@ def write_check_report(out: str | Path, result: CheckResult, *, scene_name: str 
     data_paths : sequence of str
         The files judged, listed in the report.
     scene : Scene or RelayWallScene, optional
-        The scene judged against: a relay-wall scene adds ``check_scan_z.png``
+        The scene judged against: a scene with a scan grid (a relay-wall capture) adds ``check_scan_z.png``
         (z over pairs x bins and on the scan grid, :func:`.scan_figure.scan_z_figure`).
 
     Returns
@@ -63,7 +62,7 @@ def write_check_report(out: str | Path, result: CheckResult, *, scene_name: str 
             if result.as_given is not None:
                 save_figure(check_z_figure(result), out / "check_z.png")
                 lines += ["![z by bin, as given and after the fit](check_z.png)", ""]
-                if isinstance(scene, RelayWallScene):
+                if scene is not None and WallScan.for_scene(scene) is not None:     # a scan grid to draw z on
                     save_figure(scan_z_figure(result, scene), out / "check_scan_z.png")
                     lines += ["![z over pairs x bins and on the scan grid](check_scan_z.png)", ""]
         write_markdown(out / "report.md", lines)

@@ -110,11 +110,7 @@ def load_scene_argument(path: str | None):
 
 def rows_text(scene) -> str:
     """A transient's rows in words: "16 sensors", or "64 pairs (confocal scan)" of a relay-wall capture."""
-    from analytic.scenes.relay_wall import RelayWallScene
-
-    if isinstance(scene, RelayWallScene):
-        return f"{scene.sensor_count} pairs ({scene.scan.type} scan)"
-    return f"{scene.sensor_count} sensors"
+    return scene.describe()
 
 
 def show_progress(args) -> bool:

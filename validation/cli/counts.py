@@ -134,20 +134,13 @@ def _write_counts_capture(path: Path, scene, drawn) -> None:
     """The drawn counts as a tal capture (H = counts, float64), laid out as the folder's transient.h5."""
     import numpy as np
 
-    from interop.tal import write_capture, write_relay_wall_capture
-    from analytic.scenes.relay_wall import RelayWallScene
+    from interop.tal import write_scene_capture
 
     sampling = scene.sampling
     info = {"quantity": "photon counts (a draw; counts.npy)", "scene": scene.name,
             "detector": scene.detector.as_dict(), "start_opl": sampling.start_opl,
             "bin_width_opl": sampling.bin_width_opl}
-    counts = np.asarray(drawn, dtype=np.float64)
-    if isinstance(scene, RelayWallScene):
-        write_relay_wall_capture(path, counts, scene, scene_info=info)
-    else:
-        write_capture(path, counts, start_opl=sampling.start_opl, bin_width_opl=sampling.bin_width_opl,
-                      source=[float(v) for v in scene.source],
-                      sensors=np.asarray(scene.sensors, dtype=np.float64).tolist(), scene_info=info)
+    write_scene_capture(path, np.asarray(drawn, dtype=np.float64), scene, scene_info=info)
 
 
 def discard_counts(out: str | Path) -> None:
@@ -204,7 +197,7 @@ def counts_figure(scene, expected, drawn, *, fitted=None, title: str = "", expec
         axes.set_xlim(edges[max(lit[0] - pad, 0)], edges[min(lit[-1] + 1 + pad, len(edges) - 1)])
     axes.set_xlabel("path length (m)")
     axes.set_ylabel("counts per bin")
-    rows = "pair" if getattr(scene, "scan", None) is not None else "sensor"
+    rows = scene.row_noun
     axes.set_title(plain_text(f"{title} ({rows} {row}; {detector.cycles:g} cycles, dead time "
                               f"{detector.dead_time})"), fontsize=9)
     axes.legend(frameon=False, fontsize=8)

@@ -66,17 +66,19 @@ def command_check(args) -> int:
 
 def command_export(args) -> int:
     """Write the scene as a Mitsuba 3 XML file for our plugins or for mitransient; exit status 0."""
+    from analytic.errors import UserError
     from analytic.files import output_folder
-    from interop.mitransient.export import export_scene
-
-    from analytic.scenes.relay_wall import RelayWallScene
+    from interop.mitransient.export import check_export_options, export_scene
 
     scene = load_scene_argument(args.scene)
     if args.format != "mitransient" and (args.radius is not None or args.spp is not None):
         raise UsageError("--radius/--spp: apply to --format mitransient only")
-    if isinstance(scene, RelayWallScene) and args.radius is not None:
-        raise UsageError("--radius: sizes a plane scene's irradiancemeter spheres; a relay-wall scene's "
-                         "nlos_capture_meter reads wall points")
+    try:
+        check_export_options(scene, args.format, radius=args.radius, spp=args.spp)   # before the folder is made
+    except UserError:
+        raise
+    except ValueError as error:
+        raise UsageError(f"--{error}") from None
     if args.spp is not None and not 1 <= args.spp <= 2**31:
         raise UsageError(f"--spp: must be in [1, 2^31], got {args.spp}")
     from analytic.errors import SceneError

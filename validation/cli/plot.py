@@ -247,14 +247,13 @@ def _header_value(value):
 
 def _with_scene(path: Path, scene) -> Drawable:
     """Anything ``check`` reads, on the scene's time axis (a file that states its own must match it)."""
-    from analytic.scenes.relay_wall import RelayWallScene
     from validation.check import read_data, stderr_beside
     from validation.plots import WallScan
     transient = read_data(path, scene)
     beside = stderr_beside(path, scene)
     stderr = beside[0] if beside is not None else None
     label = "render" if stderr is not None else "data"
-    scan = WallScan.of_scene(scene) if isinstance(scene, RelayWallScene) else None
+    scan = WallScan.for_scene(scene)
     return Drawable(transient, scene.sampling, label, f"{scene.name}: {path.name}", stderr=stderr, scan=scan)
 
 

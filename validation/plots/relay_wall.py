@@ -42,16 +42,17 @@ class WallScan:
     laser_grid: tuple | None = None
 
     @classmethod
-    def of_scene(cls, scene) -> "WallScan":
-        """The scan of an :class:`analytic.scenes.relay_wall.RelayWallScene`."""
-        scan = scene.scan
-        return cls(type=scan.type, grid=tuple(scan.grid), wall_size=tuple(scene.wall_size),
-                   laser_point=tuple(float(v) for v in scene.laser_points[0]) if scan.type == "single" else None,
-                   laser_grid=tuple(scan.laser_grid or scan.grid) if scan.type == "exhaustive" else None)
+    def for_scene(cls, scene) -> "WallScan | None":
+        """The scan of a scene whose kind records one (a relay-wall capture: its ``meta_fields`` hold ``scan``
+        and ``relay_wall``), else None."""
+        fields = scene.meta_fields()
+        if fields.get("scan") is None:
+            return None
+        return cls.of_meta({**fields, "sensors": scene.sensor_count})
 
     @classmethod
     def of_meta(cls, meta: dict) -> "WallScan":
-        """The scan our ``meta.json`` records (:func:`analytic.files.relay_wall_meta`).
+        """The scan our ``meta.json`` records (:meth:`analytic.scenes.relay_wall.RelayWallScene.meta_fields`).
 
         Raises
         ------
@@ -197,7 +198,7 @@ def relay_wall_figure(sampling, y: np.ndarray, scan: WallScan, *, stderr: np.nda
     y : ndarray
         ``(P, N)`` H in W sr⁻¹ m⁻¹ for I in W/sr.
     scan : WallScan
-        Where the pairs lie (:meth:`WallScan.of_scene`, :meth:`WallScan.of_meta`).
+        Where the pairs lie (:meth:`WallScan.for_scene`, :meth:`WallScan.of_meta`).
     stderr : ndarray, optional
         ``(P, N)`` standard error of ``y`` (a render's).
     noisy : ndarray, optional
@@ -269,11 +270,9 @@ def scene_transient_figure(scene, y: np.ndarray, *, stderr: np.ndarray | None = 
                            noisy: np.ndarray | None = None, label: str = "model", title: str = ""):
     """A scene's transient as ``forward`` and ``render`` draw it: :func:`relay_wall_figure` for a relay-wall
     capture, :func:`validation.plots.transients.transient_figure` for a plane."""
-    from analytic.scenes.relay_wall import RelayWallScene
-
     from .transients import transient_figure
 
-    if isinstance(scene, RelayWallScene):
-        return relay_wall_figure(scene.sampling, y, WallScan.of_scene(scene), stderr=stderr, noisy=noisy,
-                                 label=label, title=title)
+    scan = WallScan.for_scene(scene)
+    if scan is not None:
+        return relay_wall_figure(scene.sampling, y, scan, stderr=stderr, noisy=noisy, label=label, title=title)
     return transient_figure(scene.sampling, y, stderr=stderr, noisy=noisy, label=label, title=title)

@@ -36,6 +36,7 @@ import numpy as np
 from analytic.errors import SceneError
 from analytic.operator.response import impulse_response
 from analytic.scenes.common import Scene
+from analytic.scenes.kinds import for_kind
 from analytic.operator.system import QuadratureWarning, forward, system_matrix
 from validation.check.fit import ShiftedModel
 from validation.check.readers import scene_of
@@ -282,13 +283,20 @@ def imaging_problem(scene) -> str | None:
     noiseless data (the spad example read 235 dB from the model's data and
     -26 dB from the render's).
     """
-    from analytic.scenes.relay_wall import RelayWallScene
-
     if scene.sensor_count >= 2:
         return None
-    return (f"one {'pair' if isinstance(scene, RelayWallScene) else 'sensor'} sees only path lengths (each bin "
+    return (f"one {scene.row_noun} sees only path lengths (each bin "
             f"is an elliptical annulus of the surface), which no image can be recovered from; give two or more "
             f"to reconstruct")
+
+
+def _no_simplifications(scene, y) -> None:
+    """A kind the paper's eq. (1) and eq. (3) do not describe: nothing to measure."""
+    return None
+
+
+#: The costs of the paper's simplifications, for the kinds its equations describe (the plane).
+_SIMPLIFICATIONS = {"plane": simplification_costs}
 
 
 def refuse_dark(scene, share: float) -> None:
@@ -297,15 +305,9 @@ def refuse_dark(scene, share: float) -> None:
 
     ``share`` is the window's share of the light (:func:`analytic.operator.window.window_share`).
     """
-    from analytic.scenes.relay_wall import RelayWallScene
-
-    relay_wall = isinstance(scene, RelayWallScene)
-    if relay_wall and scene.wall_reflectance == 0:
-        key, why, fix = "relay_wall.reflectance", "the relay wall is black", "a reflectance above 0"
-    elif not np.any(np.asarray(scene.reflectance) > 0):
-        key = "hidden.reflectance" if relay_wall else "plane.reflectance"
-        why = f"the {'hidden rectangle' if relay_wall else 'plane'} is black (reflectance 0 everywhere)"
-        fix = "a reflectance above 0"
+    dark = scene.darkness()
+    if dark is not None:
+        (key, why), fix = dark, "a reflectance above 0"
     elif share == 0:
         key, why, fix = "sampling", "the window holds none of the light", "a window that holds it (--window auto)"
     else:
@@ -394,8 +396,10 @@ def check_scene(scene: Scene, *, spp: int, seed: int = 0, convergence: bool = Tr
         check.metrics["render_slope"] = float(np.polyfit(x, y, 1)[0])
         check.metrics["model_convergence"] = check.model_convergence
         check.metrics["render_convergence"] = rows
-    if isinstance(scene, Scene):
-        check.metrics["simplifications"] = simplification_costs(scene, model)
+    simplifications = for_kind(_SIMPLIFICATIONS, scene, "simplifications", default=_no_simplifications)
+    costs = simplifications(scene, model)
+    if costs is not None:
+        check.metrics["simplifications"] = costs
     unimageable = imaging_problem(scene) if reconstruction else None
     if unimageable is not None:
         check.metrics["reconstruction"] = {"skipped": unimageable}

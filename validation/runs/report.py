@@ -29,7 +29,6 @@ from pathlib import Path
 
 from analytic.files import save_json, save_text
 from analytic.operator.window import FULL_SHARE
-from analytic.scenes.relay_wall import RelayWallScene
 from validation.plots import (WallScan, convergence_figure, reconstructions_figure, relay_wall_figure, save_figure,
                               transients_figure, z_map_figure)
 from validation.plots.worker import FigureWorker
@@ -199,8 +198,7 @@ def _draw_scene(check, folder: Path, link: str, heading: str, drawer: FigureWork
     """
     sampling = check.scene.sampling
     agreement = check.agreement
-    relay_wall = isinstance(check.scene, RelayWallScene)
-    row_kind = "pair" if relay_wall else "sensor"      # what the transient's rows are
+    row_kind = check.scene.row_noun      # what the transient's rows are
     drawer.draw(transients_figure, sampling, {"model": check.model, "render": check.render},
                 errors={"render": check.stderr}, z_limit=agreement.z_threshold,
                 title=f"{check.name}: the model (steps) against the render (points)", row_kind=row_kind)
@@ -210,9 +208,9 @@ def _draw_scene(check, folder: Path, link: str, heading: str, drawer: FigureWork
              f"Transients of up to 8 {row_kind}s (named in the figure) with z below each; the z map shows "
              f"every {row_kind}.", "",
              f"![transients]({link}transients.png)", "", f"![z map]({link}z_map.png)"]
-    if relay_wall:
-        scan = check.scene.scan
-        save_figure(relay_wall_figure(sampling, check.model, WallScan.of_scene(check.scene),
+    scan = WallScan.for_scene(check.scene)
+    if scan is not None:
+        save_figure(relay_wall_figure(sampling, check.model, scan,
                                       title=f"{check.name}: {scan.type} scan through a relay wall, the model"),
                     folder / "wall.png")
         lines += ["", f"The model's transient of every (laser point, read point) pair as an image (time "

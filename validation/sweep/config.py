@@ -34,6 +34,9 @@ MAX_SWEEP_SAMPLES = 2**40
 #: Most items per sweep.
 MAX_ITEMS = 100_000
 
+#: The scene kinds a sweep runs (its harness judges and reconstructs a plane's sensors), and how others are named.
+SWEPT_KINDS = ("plane",)
+_KIND_WORDS = {"relay_wall": "relay-wall (NLOS) capture"}
 _SWEEP_KEYS = ("scene", "samples", "seed", "chunk", "cross_check", "variant", "grid")
 _IMAGE_SUFFIXES = (".png", ".exr")
 
@@ -239,14 +242,15 @@ def sweep_from_dict(data: dict, base_dir: str | Path = ".") -> Sweep:
         name = _folder_name(index, parameters)
         try:
             scene = scene_from_dict(table, scene_dir, name=name)
-            if isinstance(scene, Scene):
+            if scene.kind in SWEPT_KINDS:
                 # a waveform's own keys are checked when it is built (e.g. a gaussian's fwhm), not by the scene
                 make_waveform(scene.illumination, scene.sampling.bin_width_opl)
         except SceneError as error:
             key = f"grid.{error.key}" if error.key in grid else error.key
             raise SceneError(key, f"{error.problem} (item {name})") from None
-        if not isinstance(scene, Scene):
-            raise SceneError("relay_wall", "a relay-wall (NLOS) capture cannot be swept yet; sweep plane scenes")
+        if scene.kind not in SWEPT_KINDS:
+            raise SceneError(scene.kind, f"a {_KIND_WORDS.get(scene.kind, scene.kind + ' scene')} cannot be swept "
+                                         f"yet; sweep plane scenes")
         items.append(SweepItem(index=index, name=name, parameters=parameters, scene=scene))
     return Sweep(items=tuple(items), samples=samples, seed=seed, chunk_size=chunk_size,
                  cross_check=cross_check, variant=variant, grid=grid, base=base)

@@ -24,14 +24,17 @@ installed=$SECONDS
 # built-in scene) and the renderer's on its first render; the tests need every route. Both are compiled
 # and cached here (analytic/kernels/__pycache__, ~/.drjit), each in its own process, while tal's
 # environment installs beside them.
-python3 scripts/warm_kernels.py &
-model=$!
+python3 scripts/warm_kernels.py --waveform impulse &
+steps=$!
+python3 scripts/warm_kernels.py --waveform square &
+moments=$!
 python3 scripts/warm_kernels.py --renderer &
 renderer=$!
-trap 'kill "$model" "$renderer" 2>/dev/null || true' EXIT      # a failed step leaves no compile running
+trap 'kill "$steps" "$moments" "$renderer" 2>/dev/null || true' EXIT   # a failed step leaves no compile running
 # tal (y-tal) pins numpy < 2: it gets its own environment, used by the tests that read our HDF5 with it
 bash scripts/setup_interop.sh
-wait "$model"
+wait "$steps"
+wait "$moments"
 wait "$renderer"
 trap - EXIT
 echo "diffuse-imaging: set-up done in $((SECONDS - started)) s (install $((installed - started)) s, then tal and the warm-up $((SECONDS - installed)) s)" >&2

@@ -2,7 +2,8 @@
 
 A command compiles only what its scene needs, once (``analytic.kernels.cache``); the tests need every
 route. ``scripts/setup.sh`` runs this beside the renderer's warm-up so that the two use both cores and no
-test pays a compile. With ``--renderer`` it renders the built-in scene instead (Dr.Jit's kernels, cached in
+test pays a compile. ``--waveform impulse`` or ``--waveform square`` compiles one kind's kernels (the set-up runs the two in
+processes of their own, side by side). With ``--renderer`` it renders the built-in scene instead (Dr.Jit's kernels, cached in
 ``~/.drjit``) and imports matplotlib (which builds its font cache on its first import). The values
 computed are discarded.
 """
@@ -16,7 +17,7 @@ import warnings
 import numpy as np
 
 
-def model() -> None:
+def model(waveforms: tuple[str, ...] = ("impulse", "square")) -> None:
     from analytic.operator.response import impulse_response
     from analytic.scenes.common import Illumination, Sampling, Scene
     from analytic.operator.system import METHODS, pair_entries, system_matrix
@@ -25,7 +26,7 @@ def model() -> None:
     # a sensor near the plane (the cut route by its foot), bins finer than the pixels (strips), a far sensor
     scene = Scene(pixels=6, reflectance=1.0, source=(0.3, 0.6, 0.4), sensors=[(0.7, 0.2, 0.5), (0.5, 0.5, 0.02)],
                   sampling=Sampling(bin_width_opl=0.03, start_opl=0.4, count=90), noise=None)
-    for waveform in ("impulse", "square"):       # a step function's first pass, and the moments' one
+    for waveform in waveforms:                   # impulse: a step function's first pass; square: the moments'
         shaped = scene.replace(illumination=Illumination(waveform=waveform))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -35,7 +36,8 @@ def model() -> None:
                 for taylor in (True, False):
                     with contextlib.suppress(ValueError):     # a route that does not apply is compiled anyway
                         pair_entries(shaped, 1, 14, method=method, taylor=taylor)
-    impulse_response(scene, 0, [1.2, 1.3])
+    if "impulse" in waveforms:
+        impulse_response(scene, 0, [1.2, 1.3])
 
 
 def renderer() -> None:
@@ -48,4 +50,9 @@ def renderer() -> None:
 
 if __name__ == "__main__":
     np.seterr(all="ignore")
-    (renderer if sys.argv[1:] == ["--renderer"] else model)()
+    if sys.argv[1:] == ["--renderer"]:
+        renderer()
+    elif sys.argv[1:2] == ["--waveform"]:       # one kind per process: setup.sh compiles the two side by side
+        model(tuple(sys.argv[2:]))
+    else:
+        model()

@@ -1,5 +1,6 @@
 import os
 import sys
+from pathlib import Path
 
 
 def _one_share_of_the_cores_per_worker():
@@ -76,3 +77,21 @@ def figures_drawn_once():
         patch.setattr(worker.FigureWorker, "__init__", without_a_worker)
         patch.setattr(worker.FigureWorker, "png", once)
         yield
+
+
+SLOW_CASES = Path(__file__).with_name("slow_cases.txt")
+
+
+@pytest.hookimpl(tryfirst=True)   # before -m deselects by mark
+def pytest_collection_modifyitems(config, items):
+    """Mark slow the cases listed in tests/slow_cases.txt (see its header)."""
+    listed = {line.strip() for line in SLOW_CASES.read_text(encoding="utf-8").splitlines()
+              if line.strip() and not line.startswith("#")}
+    found = set()
+    for item in items:
+        if item.nodeid in listed:
+            item.add_marker(pytest.mark.slow)
+            found.add(item.nodeid)
+    whole_run = not config.args or config.args == [str(config.rootpath / "tests")] or config.args == ["tests"]
+    if whole_run and listed - found:
+        raise pytest.UsageError(f"{SLOW_CASES.name} lists cases that do not exist: {sorted(listed - found)[:3]}")

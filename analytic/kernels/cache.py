@@ -22,7 +22,7 @@ rules make that cache serve users (docs/benchmarks.md, "Cold start"):
   events: a compile of this sub-package's kernels still running after
   :data:`NOTICE_SECONDS` prints one line on stderr (what is compiled, that
   it happens once, where it is kept). :func:`compiled` compiles an entry
-  point for given arguments under a lock file in the cache folder, so that
+  point for given arguments under its lock file in the cache folder, so that
   processes starting together (Dask workers, pytest-xdist workers) compile
   it once and the others load it.
 
@@ -209,15 +209,19 @@ _NOTICE = _CompileNotice()
 
 
 @contextlib.contextmanager
-def _compile_lock():
-    """An exclusive lock file in the cache folder while a kernel is compiled or loaded (POSIX; else no lock)."""
+def _compile_lock(name: str):
+    """An exclusive lock file in the cache folder while kernel ``name`` is compiled or loaded (POSIX; else none).
+
+    One lock per entry point and argument types: processes compiling different ones (the set-up's warm-ups)
+    run side by side.
+    """
     try:
         import fcntl
     except ImportError:       # not POSIX: each process compiles for itself
         yield
         return
     try:
-        handle = open(cache_folder() / ".compile.lock", "a")
+        handle = open(cache_folder() / f".{name}.lock", "a")
     except OSError:
         yield
         return
@@ -232,14 +236,15 @@ def _compile_lock():
 def compiled(kernel, *args):
     """``kernel`` (a Numba dispatcher) compiled or loaded for ``args``' types, once per process.
 
-    The first time, under the lock file of :func:`cache_folder`: a second process starting at the same
+    The first time, under a lock file in :func:`cache_folder` (one per kernel and types): a second process starting at the same
     time waits for the first one's compile and then loads it from the cache instead of compiling it again.
     Returns ``kernel``.
     """
     signature = tuple(kernel.typeof_pyval(argument) for argument in args)
     if signature in kernel.overloads:
         return kernel
-    with _compile_lock():
+    typed = hashlib.sha256(str(signature).encode()).hexdigest()[:12]
+    with _compile_lock(f"{kernel.py_func.__qualname__}-{typed}"):
         kernel.compile(signature)
     return kernel
 

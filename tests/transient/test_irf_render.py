@@ -13,10 +13,10 @@ import pytest
 from render_checks import agreement, model
 
 from analytic.scenes.common import Illumination
-from analytic.kernels.pieces import cumulative_scalar
 from analytic.waveforms import make_waveform
 from analytic.waveforms.pieces import kernel_array
-from compiled_kernels import compiled_kernels
+from compiled_kernels import compiled_cumulative, compiled_kernels
+from deposited_kernels import deposited_kernels, traced_cumulative
 from transient.render import render
 
 RNG_SAMPLES = np.random.default_rng(4).uniform(0.0, 1.0, 24) * np.hanning(24)      # > 8 pieces: the gather path
@@ -30,26 +30,25 @@ ILLUMINATIONS = {
 
 @pytest.mark.parametrize("name", list(ILLUMINATIONS))
 def test_cumulative_and_kernels_agree_in_numpy_numba_and_drjit(mitsuba, rng, name):
-    from transient.common import cumulative, kernel_between
-
     waveform = make_waveform(ILLUMINATIONS[name], 0.05)
     terms = waveform.terms
     span = waveform.duration - waveform.lead
     u = np.concatenate([rng.uniform(waveform.lead - 0.2 * span, waveform.duration + 0.2 * span, 3000),
                         np.asarray(terms.starts), [0.0, -0.0, 1e-300]])
     expected = waveform.cumulative(u)
-    compiled = np.array([cumulative_scalar(terms, float(x)) for x in u])
-    traced = np.array(cumulative(terms, mitsuba.Float64(u)), dtype=np.float64)
+    compiled = compiled_cumulative(terms, u)
+    traced = traced_cumulative(mitsuba, terms, u)
     area = waveform.energy
     assert np.max(np.abs(compiled - expected)) <= 1e-14 * area
     assert np.max(np.abs(traced - expected)) <= 1e-14 * area
-    upper = u + rng.uniform(0.0, 0.1 * span, u.size)
-    kernels = kernel_array(terms, u, upper)
-    compiled = compiled_kernels(terms, u, upper)
-    traced = np.array(kernel_between(terms, mitsuba.Float64(u), mitsuba.Float64(upper)), dtype=np.float64)
     floor = 1e-15 * area        # kernels beyond the pulse are rounding on every side
-    assert np.all(np.abs(compiled - kernels) <= 1e-12 * np.abs(kernels) + floor)
-    assert np.all(np.abs(traced - kernels) <= 1e-12 * np.abs(kernels) + floor)
+    for width in rng.uniform(0.0, 0.1 * span, 4):           # the deposit's bins are of one width
+        upper = u + width
+        kernels = kernel_array(terms, u, upper)
+        compiled = compiled_kernels(terms, u, upper)
+        traced = deposited_kernels(mitsuba, terms, u, width)
+        assert np.all(np.abs(compiled - kernels) <= 1e-12 * np.abs(kernels) + floor)
+        assert np.all(np.abs(traced - kernels) <= 1e-12 * np.abs(kernels) + floor)
 
 
 # the EMG's render (~25 s) under -m slow; its Dr.Jit deposit is held to the model's kernels by default above

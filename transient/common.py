@@ -31,6 +31,7 @@ from analytic.attenuation import LAMBERTIAN, attenuation_formula
 from analytic.binning import bin_index
 from analytic.scenes.common import Illumination
 from analytic.waveforms import WaveformTerms, make_waveform
+from analytic.waveforms.builders import illumination_options
 from analytic.kernels import formulas as special
 from analytic.kernels.forms import POLYNOMIAL, piece_forms
 
@@ -447,11 +448,10 @@ def time_axis_and_waveform(props, plugin: str):
     ----------
     props : mi.Properties
         ``bins``, ``bin_width_opl`` (m), ``start_opl`` (m, default 0),
-        ``waveform`` and its options (``pulse_width``, ``cutoff``,
-        ``duration``, ``order``, ``fwhm``, ``tail``; a sampled response's
-        ``samples`` as one string of comma-separated numbers,
-        ``sample_width`` in metres and ``sample_start``), named as the
-        scene file names them where they can be.
+        ``waveform`` and its options, the plugin properties the waveform
+        modules declare (:func:`analytic.waveforms.builders.illumination_options`;
+        a sampled response's ``samples`` as one string of comma-separated
+        numbers).
     plugin : str
         The plugin's name, for messages.
 
@@ -471,15 +471,10 @@ def time_axis_and_waveform(props, plugin: str):
         raise ValueError(f"{plugin}: bin_width_opl must be > 0, got {bin_width_opl}")
     if not math.isfinite(start_opl):
         raise ValueError(f"{plugin}: start_opl must be finite, got {start_opl}")
-    options = {name: props.get(key) if key in props else None
-               for name, key in (("width", "pulse_width"), ("cutoff", "cutoff"), ("duration", "duration"),
-                                 ("order", "order"), ("fwhm", "fwhm"), ("tail", "tail"),
-                                 ("sample_width", "sample_width"), ("start", "sample_start"))}
-    if "samples" in props:
-        try:
-            options["samples"] = [float(value) for value in str(props.get("samples")).split(",")]
-        except ValueError:
-            raise ValueError(f"{plugin}: samples must be comma-separated numbers") from None
+    try:
+        options = illumination_options(lambda key: props.get(key) if key in props else None)
+    except ValueError as error:
+        raise ValueError(f"{plugin}: {error}") from None
     # Illumination validates names and values exactly as the scene file does.
     illumination = Illumination(waveform=props.get("waveform", "impulse"), **options)
     return bins, start_opl, bin_width_opl, make_waveform(illumination, bin_width_opl)

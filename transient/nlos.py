@@ -147,7 +147,7 @@ class TransientNlosIntegrator(mi.SamplingIntegrator):
 
     .. pluginparameters::
 
-     * - bins, start_opl, bin_width_opl, waveform, pulse_width, cutoff, duration, order
+     * - bins, start_opl, bin_width_opl, waveform and its properties
        - 
        - The bins and the illumination, as for ``transient_opl``.
      * - hidden_to_world

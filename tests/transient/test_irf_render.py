@@ -23,6 +23,7 @@ RNG_SAMPLES = np.random.default_rng(4).uniform(0.0, 1.0, 24) * np.hanning(24)   
 ILLUMINATIONS = {
     "gaussian": Illumination(waveform="gaussian", fwhm=0.08),
     "emg": Illumination(waveform="emg", fwhm=0.05, tail=0.03),
+    "sech2": Illumination(waveform="sech2", fwhm=0.06),
     "sampled": Illumination(waveform="sampled", samples=RNG_SAMPLES, sample_width=0.01, start=-0.04),
     "sampled, 3 samples": Illumination(waveform="sampled", samples=[0.0, 1.0, 0.4], sample_width_ps=100.0),
 }
@@ -52,7 +53,7 @@ def test_cumulative_and_kernels_agree_in_numpy_numba_and_drjit(mitsuba, rng, nam
 
 
 # the EMG's render (~25 s) under -m slow; its Dr.Jit deposit is held to the model's kernels by default above
-@pytest.mark.parametrize("name", ["gaussian", pytest.param("emg", marks=pytest.mark.slow), "sampled"])
+@pytest.mark.parametrize("name", ["gaussian", pytest.param("emg", marks=pytest.mark.slow), "sech2", "sampled"])
 def test_renders_agree_with_the_model(scene, name):
     shaped = scene.replace(illumination=ILLUMINATIONS[name])
     result = render(shaped, spp=2**20, seed=12, progress=False)

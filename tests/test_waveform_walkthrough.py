@@ -80,6 +80,18 @@ def test_a_toy_waveform_reaches_the_schema_the_renderer_properties_and_the_plugi
     assert "``ramp``" in builders.plugin_rows()
 
 
+def test_the_scene_format_names_every_registered_waveform_and_its_keys():
+    """docs/files.md's [illumination] block, which users copy, lists each waveform and key of the registry."""
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[1] / "docs" / "files.md").read_text(encoding="utf-8")
+    block = text[text.index("[illumination]"):text.index("[sensors]")]
+    for name in builders.WAVEFORMS:
+        assert f'"{name}"' in block, name
+    for key in builders.keys():
+        assert f"# {key} = " in block or f"{key} =" in block, key
+
+
 def test_the_toy_is_gone_after_the_test_and_a_name_is_registered_once():
     assert "ramp" not in builders.WAVEFORMS
     with pytest.raises(SceneError, match="illumination.waveform: must be one of"):

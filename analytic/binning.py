@@ -1,14 +1,18 @@
 """The one binning function, shared by the analytic model and the renderer.
 
 Bin ``n`` covers path lengths ``[start_opl + n * bin_width_opl,
-start_opl + (n + 1) * bin_width_opl)`` (metres, c = 1). If the renderer and the
+start_opl + (n + 1) * bin_width_opl)`` (metres, c = 1). If the renderers and the
 model binned differently, the cross-check would compare different things, so
-both call :func:`bin_index`.
+the formula is written once (:func:`analytic.kernels.formulas.bin_formula`):
+the compiled kernels use it through :func:`analytic.kernels.bins.bin_of`, the
+renderers and NumPy callers through :func:`bin_index`.
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+from .kernels.formulas import bin_formula
 
 __all__ = ["bin_index"]
 
@@ -32,12 +36,13 @@ def bin_index(length_opl, start_opl: float, bin_width_opl: float, count: int, fl
     Returns
     -------
     index : array
-        ``floor((length_opl - start_opl) / bin_width_opl)``, as floats of the
+        :func:`~analytic.kernels.formulas.bin_formula`: ``floor((length_opl -
+        start_opl) / bin_width_opl)``, as floats of the
         input's type, unmasked (negative before the window).
     inside : array of bool
         ``0 <= index < count``.
     """
-    index = floor((length_opl - start_opl) / bin_width_opl)
+    index = bin_formula(floor)(length_opl, start_opl, bin_width_opl)
     inside = (index >= 0) & (index < count)
     return index, inside
 

@@ -5,7 +5,8 @@ definition (math.erfc, mpmath), the EMG from the textbook density
 (1/τ) e^{σ²/2τ² - u/τ} Φ(u/σ - σ/τ) and its cumulative in mpmath at 50
 digits (where that form's cancellations are harmless), or SciPy's
 ``exponnorm`` for the fast QUADPACK references; the sampled response from
-its trapezoids. Each is the *untruncated* pulse, unit peak.
+its trapezoids; the sech² pulse from its definition (math.cosh, mpmath's
+tanh). Each is the *untruncated* pulse, unit peak.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import mpmath
 import numpy as np
 from scipy import optimize, stats
 
-__all__ = ["sigma_of", "GaussianReference", "EmgReference", "SampledReference", "reference_for"]
+__all__ = ["sigma_of", "GaussianReference", "EmgReference", "Sech2Reference", "SampledReference", "reference_for"]
 
 _DIGITS = 50
 
@@ -98,6 +99,40 @@ class EmgReference:
         return float(self._scipy.cdf(u)) / float(self.peak)
 
 
+class Sech2Reference:
+    """s(t) = sech²(t/τ), τ = fwhm / (2 arccosh √2) (mpmath's acosh: not the model's constant)."""
+
+    def __init__(self, fwhm: float):
+        with mpmath.workdps(_DIGITS):
+            self.tau_mp = mpmath.mpf(fwhm) / (2 * mpmath.acosh(mpmath.sqrt(2)))
+        self.tau = float(self.tau_mp)
+        self.peak_time = 0.0
+        self.breakpoints = []
+
+    def intensity(self, t):
+        """sech²(x) = 4 e^{-2|x|} / (1 + e^{-2|x|})², which does not overflow far in the tails."""
+        small = math.exp(-2.0 * abs(t) / self.tau)
+        return 4.0 * small / (1.0 + small) ** 2
+
+    def cumulative(self, u: float) -> float:
+        """Fast (math.tanh of the end's own sign: no cancellation in either tail): for QUADPACK references."""
+        if u <= 0.0:
+            return self.tau * 2.0 / (1.0 + math.exp(-2.0 * u / self.tau))
+        return 2.0 * self.tau - self.tau * 2.0 / (1.0 + math.exp(2.0 * u / self.tau))
+
+    def cumulative_mp(self, u):
+        with mpmath.workdps(_DIGITS):
+            return self.tau_mp * (1 + mpmath.tanh(mpmath.mpf(u) / self.tau_mp))
+
+    def kernel_mp(self, lower: float, upper: float):
+        """∫_lower^upper s at 50 digits: τ (tanh(b/τ) - tanh(a/τ)), as e^{-2a/τ}-differences in the tails."""
+        with mpmath.workdps(_DIGITS):
+            t = self.tau_mp
+            a, b = mpmath.mpf(lower) / t, mpmath.mpf(upper) / t
+            # tanh(b) - tanh(a) = sinh(b - a) / (cosh a cosh b): no cancellation at either end
+            return t * mpmath.sinh(b - a) / (mpmath.cosh(a) * mpmath.cosh(b))
+
+
 class SampledReference:
     """Linear interpolation of samples, divided by the largest, 0 outside them."""
 
@@ -127,6 +162,8 @@ def _cached(name, key):
         return GaussianReference(*key)
     if name == "emg":
         return EmgReference(*key)
+    if name == "sech2":
+        return Sech2Reference(*key)
     samples, width, start = key
     return SampledReference(np.array(samples), width, start)
 
@@ -137,6 +174,8 @@ def reference_for(illumination):
         return _cached("gaussian", (illumination.fwhm,))
     if illumination.waveform == "emg":
         return _cached("emg", (illumination.fwhm, illumination.tail))
+    if illumination.waveform == "sech2":
+        return _cached("sech2", (illumination.fwhm,))
     width = (illumination.sample_width if illumination.sample_width is not None
              else illumination.sample_width_ps * 2.99792458e-4)
     return _cached("sampled", (tuple(illumination.samples), width,

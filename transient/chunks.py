@@ -54,8 +54,7 @@ DEFAULT_REPLICAS = 32
 #: Largest replica (samples): indices within a replica are 32-bit.
 MAX_REPLICA_SIZE = 2**32 - 1
 
-#: Largest render, samples. At 3e7 samples/s (2 CPU cores, one sensor) it
-#: would take about 108 days; at 2e10 samples/s (a datacentre GPU) 4 hours.
+#: Largest render, samples: months on a CPU, hours on a datacentre GPU at the rates of docs/benchmarks.md.
 MAX_SAMPLES = 2**48
 
 

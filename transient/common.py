@@ -3,10 +3,11 @@
 Everything here is Dr.Jit code in float64 (``mi.Float64``, ``mi.UInt32``)
 traced into the plugins' kernels:
 
-- :func:`cumulative`, :func:`kernel_between`: the illumination's cumulative
-  S(u) and its differences, from the pieces of
-  :class:`analytic.waveforms.WaveformTerms` that NumPy
-  (``Waveform.cumulative``) and Numba (``cumulative_scalar``) evaluate too;
+- the illumination's cumulative S(u) = K_i + F_i(u) (:func:`constant_and_form`),
+  from the pieces of :class:`analytic.waveforms.WaveformTerms` and the
+  families' forms that NumPy (``Waveform.cumulative``) and Numba
+  (``analytic.kernels.pieces.piece_value``) evaluate too
+  (:func:`analytic.kernels.forms.piece_forms`);
 - :func:`attenuation`: a_k(x) of docs/design.md section 2 (``lambertian``) at plane
   points, the twin of :func:`analytic.attenuation.attenuation`;
 - :func:`sample_stream`: the per-sample PCG32 stream of (seed, global sample
@@ -29,10 +30,12 @@ import mitsuba as mi
 from analytic.attenuation import LAMBERTIAN, attenuation_formula
 from analytic.binning import bin_index
 from analytic.scenes.common import Illumination
-from analytic.waveforms import ERRORFUNCTIONS, POLYNOMIAL, WaveformTerms, make_waveform
+from analytic.waveforms import WaveformTerms, make_waveform
+from analytic.waveforms.builders import illumination_options
 from analytic.kernels import formulas as special
+from analytic.kernels.forms import POLYNOMIAL, piece_forms
 
-__all__ = ["cumulative", "kernel_between", "attenuation", "height_over_cube", "sample_stream", "jittered_point", "replica_of", "deposit",
+__all__ = ["constant_and_form", "attenuation", "height_over_cube", "sample_stream", "jittered_point", "replica_of", "deposit",
            "reduce_mode", "per_thread_copies", "thread_copies", "block_copy", "opaque_u32", "opaque_f64", "is_diffuse", "time_axis_and_waveform"]
 
 
@@ -71,6 +74,10 @@ def _piece_index(terms: WaveformTerms, u):
     return index
 
 
+#: The families' forms (:func:`analytic.kernels.forms.piece_forms`) with Dr.Jit's functions.
+_FORMS = piece_forms(dr.exp, dr.cos, dr.sin, erfcx)
+
+
 def _piece_form(terms: WaveformTerms, piece: int, u):
     """F_i(u) of one piece on every lane (u clipped to the piece, so lanes outside it stay finite)."""
     first, last = int(terms.offsets[piece]), int(terms.offsets[piece + 1])
@@ -78,21 +85,7 @@ def _piece_form(terms: WaveformTerms, piece: int, u):
     low = float(terms.starts[piece])
     high = float(terms.starts[piece + 1]) if piece + 1 < len(terms.starts) else float(terms.duration)
     x = dr.clip(u, low, max(high, low)) - float(terms.origins[piece])
-    if terms.families[piece] == POLYNOMIAL:
-        value = mi.Float64(0.0)
-        for coefficient in coefficients[::-1]:
-            value = value * x + coefficient
-        return value
-    value = mi.Float64(0.0)
-    if terms.families[piece] == ERRORFUNCTIONS:
-        for b, centre, beta, gamma, p, shift in zip(*[iter(coefficients)] * 6):
-            y = x - centre
-            value += b * dr.exp(y * (beta - gamma * y)) * erfcx(p * y + shift)
-        return value
-    for a, w, b, c in zip(*[iter(coefficients)] * 4):
-        term = b * dr.cos(w * x) + c * dr.sin(w * x) if w else mi.Float64(b)
-        value += dr.exp(a * x) * term
-    return value
+    return mi.Float64(_FORMS[int(terms.families[piece])](coefficients, 0, len(coefficients), x)[0])
 
 
 #: Above this many pieces of polynomials (a sampled response), a lane finds its piece by binary search and
@@ -129,14 +122,13 @@ def _gathered_constant_and_form(terms: WaveformTerms, u):
     piece = dr.maximum(mi.Int32(below) - 1, 0)
     piece = mi.UInt32(piece)
     x = u - dr.gather(mi.Float64, origins, piece, active=found)
-    form = mi.Float64(0.0)
-    for m in range(width - 1, -1, -1):
-        form = form * x + dr.gather(mi.Float64, table, piece * width + m, active=found)
+    powers = [dr.gather(mi.Float64, table, piece * width + m, active=found) for m in range(width)]
+    form = mi.Float64(_FORMS[POLYNOMIAL](powers, 0, width, x)[0])
     constant = dr.gather(mi.Float64, constants, piece, active=found)
     return dr.select(found, constant, 0.0), dr.select(found, form, 0.0)
 
 
-def _constant_and_form(terms: WaveformTerms, u):
+def constant_and_form(terms: WaveformTerms, u):
     """(K_i, F_i(u)) of each lane's piece (0, 0 where S = 0): S(u) = K_i + F_i(u)."""
     if terms.degree >= 0 and len(terms.starts) > _GATHER_PIECES:
         return _gathered_constant_and_form(terms, u)
@@ -148,33 +140,6 @@ def _constant_and_form(terms: WaveformTerms, u):
         if terms.offsets[piece + 1] > terms.offsets[piece]:
             form = dr.select(inside, _piece_form(terms, piece, u), form)
     return constant, form
-
-
-def cumulative(terms: WaveformTerms, u):
-    """S(u) = ∫_{-∞}^u s(t) dt in Dr.Jit Float64, from the waveform's pieces.
-
-    Parameters
-    ----------
-    terms : WaveformTerms
-        The waveform's pieces (``Waveform.terms``, :mod:`analytic.waveforms.pieces`),
-        the same record NumPy and Numba evaluate.
-    u : mi.Float64
-        Time after the pulse's start, metres of path length (c = 1).
-
-    Returns
-    -------
-    mi.Float64
-        S(u): dimensionless for the impulse (a step), metres for the others.
-    """
-    constant, form = _constant_and_form(terms, u)
-    return constant + form
-
-
-def kernel_between(terms: WaveformTerms, lower, upper):
-    """S(upper) - S(lower) as (K_j - K_i) + (F_j(upper) - F_i(lower)): exact cancellation within a piece."""
-    constant_low, form_low = _constant_and_form(terms, lower)
-    constant_high, form_high = _constant_and_form(terms, upper)
-    return (constant_high - constant_low) + (form_high - form_low)
 
 
 # -- geometry --------------------------------------------------------------------
@@ -341,7 +306,7 @@ def reduce_mode():
 
     LLVM: ``Auto``, which expands a histogram of up to ``dr.expand_threshold()``
     entries into one private copy per thread and adds without atomics (the
-    fastest of Direct, Local and Expand on 2 cores; see the README). CUDA:
+    fastest of Direct, Local and Expand on 2 cores; docs/benchmarks.md). CUDA:
     ``Local``: the 32 lanes of a warp hold neighbouring cells of the jittered
     grid (Morton order), mostly reach the same bin, and are reduced in the
     warp before one atomic.
@@ -464,9 +429,9 @@ def deposit(histogram, row, weight, length, active, *, bins: int, start_opl: flo
     # from bins far before it, which no sample ever reads.
     start = dr.maximum(first, 0.0)
     lower = start_opl + start * bin_width_opl - length
-    edge_constant, edge_form = _constant_and_form(terms, lower)
+    edge_constant, edge_form = constant_and_form(terms, lower)
     for tap in range(taps):
-        upper_constant, upper_form = _constant_and_form(terms, lower + (tap + 1) * bin_width_opl)
+        upper_constant, upper_form = constant_and_form(terms, lower + (tap + 1) * bin_width_opl)
         n = start + tap
         inside = active & (n < bins)
         slot = mi.UInt32(dr.clip(n, 0.0, bins - 1.0)) + row * bins
@@ -483,11 +448,10 @@ def time_axis_and_waveform(props, plugin: str):
     ----------
     props : mi.Properties
         ``bins``, ``bin_width_opl`` (m), ``start_opl`` (m, default 0),
-        ``waveform`` and its options (``pulse_width``, ``cutoff``,
-        ``duration``, ``order``, ``fwhm``, ``tail``; a sampled response's
-        ``samples`` as one string of comma-separated numbers,
-        ``sample_width`` in metres and ``sample_start``), named as the
-        scene file names them where they can be.
+        ``waveform`` and its options, the plugin properties the waveform
+        modules declare (:func:`analytic.waveforms.builders.illumination_options`;
+        a sampled response's ``samples`` as one string of comma-separated
+        numbers).
     plugin : str
         The plugin's name, for messages.
 
@@ -507,15 +471,10 @@ def time_axis_and_waveform(props, plugin: str):
         raise ValueError(f"{plugin}: bin_width_opl must be > 0, got {bin_width_opl}")
     if not math.isfinite(start_opl):
         raise ValueError(f"{plugin}: start_opl must be finite, got {start_opl}")
-    options = {name: props.get(key) if key in props else None
-               for name, key in (("width", "pulse_width"), ("cutoff", "cutoff"), ("duration", "duration"),
-                                 ("order", "order"), ("fwhm", "fwhm"), ("tail", "tail"),
-                                 ("sample_width", "sample_width"), ("start", "sample_start"))}
-    if "samples" in props:
-        try:
-            options["samples"] = [float(value) for value in str(props.get("samples")).split(",")]
-        except ValueError:
-            raise ValueError(f"{plugin}: samples must be comma-separated numbers") from None
+    try:
+        options = illumination_options(lambda key: props.get(key) if key in props else None)
+    except ValueError as error:
+        raise ValueError(f"{plugin}: {error}") from None
     # Illumination validates names and values exactly as the scene file does.
     illumination = Illumination(waveform=props.get("waveform", "impulse"), **options)
     return bins, start_opl, bin_width_opl, make_waveform(illumination, bin_width_opl)

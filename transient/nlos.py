@@ -52,6 +52,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from analytic.binning import bin_index
 from analytic.scenes.relay_wall import WALL_NORMAL, grid_points
 
 from .chunks import ReplicaLayout, checked_chunk
@@ -146,7 +147,7 @@ class TransientNlosIntegrator(mi.SamplingIntegrator):
 
     .. pluginparameters::
 
-     * - bins, start_opl, bin_width_opl, waveform, pulse_width, cutoff, duration, order
+     * - bins, start_opl, bin_width_opl, waveform and its properties
        - 
        - The bins and the illumination, as for ``transient_opl``.
      * - hidden_to_world
@@ -403,10 +404,6 @@ class TransientNlosIntegrator(mi.SamplingIntegrator):
         mode = reduce_mode() if dr.backend_v(mi.Float64) == dr.JitBackend.CUDA else dr.ReduceMode.Direct
         taps = self._taps
         impulse = is_impulse(self.waveform.terms)   # not taps == 1: a one-bin window caps every pulse at one tap
-        # The impulse's bin, floor((τ + lead - t_0) / T), as a product by 1/T: it differs from the model's
-        # quotient (analytic.binning.bin_index) only for τ within an ulp of a bin edge, a null set.
-        inverse_width = 1.0 / self.bin_width_opl
-        shift = float(self.waveform.terms.lead) - self.start_opl
         # read points per loop iteration: the largest divisor of the grid's width up to UNROLLED_READS
         group = max(d for d in range(1, UNROLLED_READS + 1) if grid.width % d == 0)
 
@@ -415,8 +412,7 @@ class TransientNlosIntegrator(mi.SamplingIntegrator):
             if self.scan_type != "confocal":
                 weight = weight * point.z            # g_s = h_s z_x / |x - s|⁴: z_x once per sample
             # the path's length less |x - s| (less 2 |x - s| confocal), shifted for the product below
-            extra = (shift if impulse else 0.0) + (laser_offset if self.account and laser_offset is not None
-                                                     else 0.0)
+            extra = laser_offset if self.account and laser_offset is not None else 0.0
             base = extra if base_length is None else base_length + extra
 
             def body(b, column, line, slot):
@@ -437,11 +433,10 @@ class TransientNlosIntegrator(mi.SamplingIntegrator):
                         weight_b, length = weight * height * dr.square(inverse), base + distance
                     if self.account:
                         length += dr.gather(mi.Float64, self._read_offset, b + j)
-                    if impulse:                      # one bin, found by a product
-                        position = length * inverse_width
-                        inside = (position >= 0.0) & (position < bins)
-                        # truncation is the floor where inside; a signed conversion is one AVX2 instruction
-                        index = mi.UInt32(dr.select(inside, mi.Int32(position), 0))
+                    if impulse:                      # one bin (the impulse has no lead), the model's binning
+                        position, inside = bin_index(length, self.start_opl, self.bin_width_opl, bins,
+                                                     floor=dr.floor)
+                        index = mi.UInt32(dr.select(inside, position, 0.0))
                         dr.scatter_reduce(dr.ReduceOp.Add, histogram, weight_b, slot + (index + j * bins),
                                           active=inside, mode=mode)
                     else:

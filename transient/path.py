@@ -90,8 +90,8 @@ class TransientPathIntegrator(mi.SamplingIntegrator):
      * - bin_width_opl
        - |float|
        - Bin width T, metres of optical path length. (Required)
-     * - waveform, pulse_width, cutoff, duration, order
-       - |string|, |float|, |float|, |float|, |int|
+     * - waveform and its properties
+       - 
        - The illumination, as for :monosp:`transient_opl`.
      * - max_depth
        - |int|

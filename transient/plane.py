@@ -22,7 +22,7 @@ Only the reflectance texture is float32 (Mitsuba's bitmaps are), and so is
 the (u, v) that looks it up: a point within a float32 rounding (~6e-8 of
 the plane) of a pixel border may read the neighbouring pixel, either way.
 
-How x is drawn (measured in the README; :func:`techniques` chooses, the
+How x is drawn (:func:`techniques` chooses, the
 techniques themselves are :mod:`transient.plane_sampling`):
 
 - **by solid angle from the source** (spherical-rectangle sampling):
@@ -57,6 +57,7 @@ import mitsuba as mi
 import numpy as np
 
 from analytic.attenuation import ATTENUATIONS, attenuation_code
+from analytic.waveforms.builders import plugin_rows
 
 from . import spherical_rectangle
 from .chunks import ReplicaLayout, checked_chunk
@@ -189,18 +190,7 @@ class TransientPlaneIntegrator(mi.SamplingIntegrator):
      * - bin_width_opl
        - |float|
        - Bin width T, metres of optical path length. (Required)
-     * - waveform
-       - |string|
-       - Source intensity waveform s(t): ``impulse``, ``square`` or
-         ``butterworth`` (Default: ``impulse``). Each bin receives
-         κ_n(τ) = S(t_{n+1} - τ) - S(t_n - τ) of its path length τ.
-     * - pulse_width
-       - |float|
-       - ``square`` only: width in metres (Default: T / 5).
-     * - cutoff, duration, order
-       - |float|, |float|, |int|
-       - ``butterworth`` only: cutoff (cycles per metre), truncation
-         (metres), order (Defaults: 1/(2T), 3/cutoff, 3).
+WAVEFORM_ROWS
      * - plane_to_world
        - |transform|
        - The rectangle's ``to_world`` again, in double precision (Mitsuba
@@ -456,5 +446,8 @@ def _distance(x, y, point):
     px, py, height = (float(v) for v in point)
     return dr.sqrt(dr.square(x - px) + dr.square(y - py) + height * height)
 
+
+# the waveform rows from the waveform registry: each module's name and plugin properties
+TransientPlaneIntegrator.__doc__ = TransientPlaneIntegrator.__doc__.replace("WAVEFORM_ROWS", plugin_rows())
 
 mi.register_integrator(PLUGIN_NAME, lambda props: TransientPlaneIntegrator(props))

@@ -33,8 +33,7 @@ __all__ = ["Technique", "AREA", "SOLID_ANGLE", "AREA_SAMPLING_RATIO", "sampling_
 #: A point whose density h / d³ varies by less than this factor r over the
 #: rectangle is sampled by area: the variance of area sampling is then
 #: within (1 + r)² / (4 r) = 4/3 of the solid angle's (Kantorovich's
-#: bound), while the solid angle's map costs 1.2 to 1.6 times as much per
-#: sample (measured on 2 CPU cores with 1 and 16 sensors; see the README).
+#: bound), while the solid angle's map costs more per sample (docs/benchmarks.md).
 AREA_SAMPLING_RATIO = 3.0
 
 #: Technique kinds: uniform by area, or by the solid angle from a point.

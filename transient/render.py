@@ -73,13 +73,10 @@ __all__ = ["RenderResult", "RenderInterrupted", "render", "resume", "render_load
 #: under a second.
 DEFAULT_CHUNK = 2**22
 
-#: Largest chunk on a GPU: tracing a chunk's kernel costs 1.5 to 5 ms of
-#: Python with an impulse (up to 0.1 s for a Butterworth pulse and 64
-#: sensors, measured on a CPU), which 2^22 samples at 1e10 samples/s would
-#: not amortise. On an H100, 2^32 samples in chunks of 2^30 ran at 1.61e10
-#: samples/s (one sensor) against 1.50e10 in chunks of 2^28, and at 9.6e10
-#: against 9.4e10 sensor-samples/s with 16 (docs/benchmarks.md); a chunk
-#: then takes 0.07 to 0.2 s there.
+#: Largest chunk on a GPU: tracing a chunk's kernel costs milliseconds of
+#: Python, which a GPU's chunk of 2^22 samples would not amortise; chunks
+#: of 2^30 ran faster than 2^28 there and still take a fraction of a second
+#: (docs/benchmarks.md, "The renderer on a GPU").
 DEFAULT_CHUNK_GPU = 2**30
 
 #: The first chunk: small, so that the first checkpoint comes within a

@@ -79,33 +79,15 @@ def scene_text(root: ET.Element, name: str, format: str) -> str:
 
 
 def waveform_entries(illumination, bin_width_opl: float) -> dict:
-    """Our integrators' waveform keys for an illumination: the scene's own fields, defaults left to the plugin.
+    """Our integrators' waveform properties for an illumination, as its waveform module declares them.
 
-    The plugins build their waveform with the same :func:`analytic.waveforms.make_waveform` and
-    period, so the scene's own fields (defaults unset) give the same pulse; a square pulse's width is
-    passed resolved (its default follows the period).
+    :func:`analytic.waveforms.builders.plugin_entries`: the plugins build their waveform with the same
+    :func:`analytic.waveforms.make_waveform` and period, so the scene's own fields (defaults unset) give
+    the same pulse.
     """
-    entries = {"waveform": illumination.waveform}
-    if illumination.waveform == "square":
-        from analytic.waveforms import make_waveform
+    from analytic.waveforms.builders import plugin_entries
 
-        entries["pulse_width"] = float(make_waveform(illumination, bin_width_opl).duration)
-    elif illumination.waveform == "butterworth":
-        for name in ("cutoff", "duration", "order"):
-            value = getattr(illumination, name)
-            if value is not None:
-                entries[name] = int(value) if name == "order" else float(value)
-    elif illumination.waveform in ("gaussian", "emg"):
-        entries.update({name: float(getattr(illumination, name)) for name in ("fwhm", "tail")
-                        if getattr(illumination, name) is not None})
-    elif illumination.waveform == "sampled":
-        from analytic.waveforms.measured import sample_width_metres
-
-        # repr: the plugin reads back the very floats, so its pieces are the model's
-        entries["samples"] = ",".join(repr(float(value)) for value in illumination.samples)
-        entries["sample_width"] = sample_width_metres(illumination.sample_width, illumination.sample_width_ps)
-        entries["sample_start"] = 0.0 if illumination.start is None else float(illumination.start)
-    return entries
+    return plugin_entries(illumination, bin_width_opl)
 
 
 def add_entries(parent, entries: dict) -> None:

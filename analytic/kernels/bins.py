@@ -14,6 +14,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .cache import njit
+from .formulas import bin_formula
 from .pieces import ROUNDING, WaveformTerms, piece_of, piece_value
 from .quadrature import implements, time_weight
 
@@ -49,10 +50,14 @@ class KernelProblem(NamedTuple):
     run: BinRun
 
 
+#: :func:`.formulas.bin_formula`, compiled.
+_bin_position = njit(cache=True, error_model="numpy", forceinline=True)(bin_formula(np.floor))
+
+
 @njit(cache=True, error_model="numpy", forceinline=True)
 def bin_of(tau, axis):
-    """floor((τ - start) / period) clamped to [-1, count] in floating point (no integer overflow)."""
-    index = np.floor((tau - axis.start_opl) / axis.bin_width_opl)
+    """The bin of τ (:func:`.formulas.bin_formula`) clamped to [-1, count] in floating point (no integer overflow)."""
+    index = _bin_position(tau, axis.start_opl, axis.bin_width_opl)
     if not index >= -1.0:       # also NaN
         return -1
     if index > axis.count:

@@ -2,8 +2,8 @@
 
 Each is a plain function of its inputs and of the array module's functions
 (``sqrt``, ``exp``), with no import of its own, so that one expression
-serves every backend: :func:`attenuation_formula` (a_k of docs/design.md
-section 2) and the scaled complementary error function's three ranges
+serves every backend: :func:`bin_formula` (the bin of a path length),
+:func:`attenuation_formula` (a_k of docs/design.md section 2) and the scaled complementary error function's three ranges
 (:func:`small`, :func:`middle`, :func:`large`), which the Gaussian and EMG
 pulses' cumulatives are made of. NumPy's forms are here too
 (:func:`erfcx_array`); the compiled ones are in :mod:`.special` and
@@ -38,8 +38,30 @@ import math
 
 import numpy as np
 
-__all__ = ["attenuation_formula", "LAMBERTIAN", "PAPER", "small", "middle", "large", "erfcx_array", "SMALL",
+__all__ = ["bin_formula", "attenuation_formula", "LAMBERTIAN", "PAPER", "small", "middle", "large", "erfcx_array", "SMALL",
            "LARGE", "RECIPROCAL_SQRT_PI"]
+
+def bin_formula(floor):
+    """The bin of a path length, for an array module's ``floor``: the one binning of the model and renderers.
+
+    Parameters
+    ----------
+    floor : callable
+        ``numpy.floor`` (NumPy and compiled code) or ``drjit.floor``.
+
+    Returns
+    -------
+    callable
+        ``bin(length_opl, start_opl, bin_width_opl)`` = ⌊(length_opl -
+        start_opl) / bin_width_opl⌋ as a float of the input's type: bin n
+        covers [start_opl + n T, start_opl + (n + 1) T), metres (the
+        quotient, not a product by 1/T, so that a length on an edge falls
+        in the bin the edge starts).
+    """
+    def position(length_opl, start_opl, bin_width_opl):
+        return floor((length_opl - start_opl) / bin_width_opl)
+    return position
+
 
 #: Integer codes of the attenuation kinds for compiled code (``Frame.mode``).
 LAMBERTIAN, PAPER = 0, 1

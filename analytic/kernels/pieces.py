@@ -1,80 +1,28 @@
-"""A waveform's pieces as compiled code reads them: the record, the families' constants, the evaluators.
+"""A waveform's pieces as compiled code reads them: the compiled evaluators every kernel reads S through.
 
 The pieces and what each family's closed form is are described in
-:mod:`analytic.waveforms.pieces`, which builds them (:func:`make_terms`) and
-evaluates them with NumPy; the renderer evaluates them with Dr.Jit. Here:
-:class:`WaveformTerms` (the record compiled code accepts), the families'
-codes, and the compiled evaluators every kernel of :mod:`analytic.kernels`
-reads S through.
+:mod:`analytic.waveforms.pieces`, which builds them (:func:`make_terms`);
+the record (:class:`WaveformTerms`), the families' codes and each family's
+form, written once for NumPy, Numba and Dr.Jit, are :mod:`.forms`. Here:
+the forms compiled (:func:`piece_value`), and what only compiled code needs,
+the pieces' derivatives and bounds on them (the moments route's).
 """
 
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
-
 import numpy as np
 
 from .cache import njit
+from .forms import ERRORFUNCTIONS, EXPONENTIALS, POLYNOMIAL, ROUNDING, SIGMOIDS, TERM_SIZES, WaveformTerms, piece_forms
 from .special import erfcx_scalar, erfcx_taylor
 
-__all__ = ["WaveformTerms", "POLYNOMIAL", "EXPONENTIALS", "ERRORFUNCTIONS", "TERM_SIZES", "ROUNDING",
-           "piece_of", "piece_value", "piece_derivatives", "piece_derivative_bound", "cumulative_scalar"]
+__all__ = ["WaveformTerms", "POLYNOMIAL", "EXPONENTIALS", "ERRORFUNCTIONS", "SIGMOIDS", "TERM_SIZES", "ROUNDING",
+           "piece_of", "piece_value", "piece_derivatives", "piece_derivative_bound"]
 
-#: Families of the pieces' closed forms.
-POLYNOMIAL, EXPONENTIALS, ERRORFUNCTIONS = 0, 1, 2
-#: Coefficients per term of each family (POLYNOMIAL: one per power).
-TERM_SIZES = {POLYNOMIAL: 1, EXPONENTIALS: 4, ERRORFUNCTIONS: 6}
-
-#: Relative rounding allowed per term of a closed form when bounding a kernel's rounding error
-#: (a few roundings of each term and of the sums).
-ROUNDING = 8.0 * 2.0**-52
-
-
-class WaveformTerms(NamedTuple):
-    """A waveform's pieces as a record that compiled (Numba) code accepts; see the module docstring.
-
-    Attributes
-    ----------
-    starts : float64[P]
-        b_i, increasing, metres of path length; piece i covers (b_i, b_{i+1}].
-    kinks : bool[P]
-        Whether s or a derivative jumps at b_i (a breakpoint of the quadrature).
-    constants : float64[P]
-        K_i, metres (dimensionless for the impulse).
-    families : int64[P]
-        ``POLYNOMIAL``, ``EXPONENTIALS`` or ``ERRORFUNCTIONS``.
-    origins : float64[P]
-        o_i, metres.
-    offsets : int64[P + 1]
-        Piece i's coefficients are ``coefficients[offsets[i]:offsets[i + 1]]``.
-    coefficients : float64[C]
-        See the module docstring.
-    duration : float
-        Where s ends, metres: S is constant beyond it (to 2^-60 of the area).
-    lead : float
-        Where s starts, metres (<= 0): S is 0 before it (to 2^-60 of the area);
-        0 for a causal pulse, negative for one centred at 0 (a Gaussian).
-        Light leaving the plane at path length τ reaches the sensors over
-        [τ + lead, τ + duration]: the bins visited.
-    degree : int
-        The highest degree of the pieces' forms when they are all
-        polynomials (0: S is constant between kinks, as for the impulse;
-        1: linear, as for the square), -1 when some piece is not a
-        polynomial. A kernel is then exactly its Taylor polynomial of that
-        degree between kinks (:mod:`analytic.kernels.taylor`).
-    """
-
-    starts: np.ndarray
-    kinks: np.ndarray
-    constants: np.ndarray
-    families: np.ndarray
-    origins: np.ndarray
-    offsets: np.ndarray
-    coefficients: np.ndarray
-    duration: float
-    lead: float
-    degree: int
+#: The families' forms (:func:`.forms.piece_forms`) compiled with ``math``'s functions.
+_polynomial, _exponentials, _errorfunctions, _sigmoids = (
+    njit(cache=True, error_model="numpy", forceinline=True)(form) for form in piece_forms(math.exp, math.cos, math.sin, erfcx_scalar))
 
 
 # The small ones are inlined: a real call that passes the record (eight arrays) pays a reference count
@@ -97,52 +45,20 @@ def piece_of(terms, u):
     return low
 
 
-@njit(cache=True, error_model="numpy")
-def _error_terms(coefficients, first, last, x):
-    """(Σ_j b_j e^{y(β_j - γ_j y)} erfcx(p_j y + s_j), a bound on its rounding's scale) at x = u - o.
-
-    The scale counts each exponent's size: e^E carries E's rounding ε|E| as a relative error.
-    """
-    value = 0.0
-    size = 0.0
-    for t in range(first, last, 6):
-        y = x - coefficients[t + 1]
-        exponent = y * (coefficients[t + 2] - coefficients[t + 3] * y)
-        term = coefficients[t] * math.exp(exponent) * erfcx_scalar(coefficients[t + 4] * y + coefficients[t + 5])
-        value += term
-        size += abs(term) * (1.0 + abs(exponent))
-    return value, size
-
-
 @njit(cache=True, error_model="numpy", forceinline=True)
 def piece_value(terms, piece, u):
-    """(F_i(u), a bound on the size of its terms) for piece i, metres."""
+    """(F_i(u), a bound on the size of its terms) for piece i, metres: :func:`.forms.piece_forms` compiled."""
     first = terms.offsets[piece]
     last = terms.offsets[piece + 1]
     x = u - terms.origins[piece]
-    coefficients = terms.coefficients
-    value = 0.0
-    size = 0.0
-    if terms.families[piece] == 0:          # POLYNOMIAL, by Horner's rule (as NumPy's polyval)
-        magnitude = abs(x)
-        for m in range(last - 1, first - 1, -1):
-            value = value * x + coefficients[m]
-            size = size * magnitude + abs(coefficients[m])
-        return value, size
-    if terms.families[piece] == 2:          # ERRORFUNCTIONS
-        return _error_terms(coefficients, first, last, x)
-    for j in range(first, last, 4):         # EXPONENTIALS
-        envelope = math.exp(coefficients[j] * x)
-        frequency = coefficients[j + 1]
-        if frequency == 0.0:
-            term = envelope * coefficients[j + 2]
-            size += abs(term)
-        else:
-            angle = frequency * x
-            term = envelope * (coefficients[j + 2] * math.cos(angle) + coefficients[j + 3] * math.sin(angle))
-            size += envelope * (abs(coefficients[j + 2]) + abs(coefficients[j + 3]))
-        value += term
-    return value, size
+    family = terms.families[piece]
+    if family == POLYNOMIAL:
+        return _polynomial(terms.coefficients, first, last, x)
+    if family == ERRORFUNCTIONS:
+        return _errorfunctions(terms.coefficients, first, last, x)
+    if family == SIGMOIDS:
+        return _sigmoids(terms.coefficients, first, last, x)
+    return _exponentials(terms.coefficients, first, last, x)
 
 
 @njit(cache=True, error_model="numpy")
@@ -180,6 +96,34 @@ def _error_derivatives(coefficients, first, last, x, count, out):
 
 
 @njit(cache=True, error_model="numpy")
+def _sigmoid_derivatives(coefficients, first, last, x, count, out):
+    """out[j] += d^j/dx^j of the SIGMOIDS terms at x, j = 1 ... count - 1 (see piece_derivatives).
+
+    With w = e^y, σ(y + h) = g(h) / (1 + g(h)), g(h) = w e^h = Σ_k w h^k / k!: its Taylor coefficients
+    q_k solve q (1 + g) = g, q_k = (g_k - Σ_{i=1}^k g_i q_{k-i}) / (1 + w) (they decay as π^-k, the
+    sums' terms as e^π π^-k: no growth of the rounding with k).
+    """
+    series = np.empty(count)
+    for t in range(first, last, 3):
+        a = coefficients[t + 1]
+        w = math.exp(a * (x - coefficients[t + 2]))
+        series[0] = w / (1.0 + w)
+        for k in range(1, count):
+            total = 0.0
+            factorial = 1.0
+            for i in range(1, k + 1):
+                factorial *= i
+                total += w / factorial * series[k - i]
+            series[k] = (w / factorial - total) / (1.0 + w)
+        scale = coefficients[t]
+        factorial = 1.0
+        for j in range(1, count):
+            factorial *= j
+            scale *= a
+            out[j] += scale * factorial * series[j]
+
+
+@njit(cache=True, error_model="numpy")
 def piece_derivatives(terms, piece, u, count, out):
     """out[j] = d^j F_i / du^j at u for j = 1 ... count - 1 (out[0] is left alone), metres^(1-j).
 
@@ -188,7 +132,8 @@ def piece_derivatives(terms, piece, u, count, out):
     Re[(b - i c) z^j e^{z x}]; ERRORFUNCTIONS: j! times the Taylor
     coefficients of each term, the Cauchy product of those of
     e^{y(β - γy)} (Hermite's recurrence) and of erfcx(p y + s)
-    (:func:`analytic.kernels.special.erfcx_taylor`).
+    (:func:`analytic.kernels.special.erfcx_taylor`); SIGMOIDS: j! a^j times
+    the logistic's Taylor coefficients (:func:`_sigmoid_derivatives`).
     """
     first = terms.offsets[piece]
     last = terms.offsets[piece + 1]
@@ -208,6 +153,9 @@ def piece_derivatives(terms, piece, u, count, out):
         return
     if terms.families[piece] == 2:          # ERRORFUNCTIONS
         _error_derivatives(coefficients, first, last, x, count, out)
+        return
+    if terms.families[piece] == 3:          # SIGMOIDS
+        _sigmoid_derivatives(coefficients, first, last, x, count, out)
         return
     for t in range(first, last, 4):          # EXPONENTIALS
         z = complex(coefficients[t], coefficients[t + 1])
@@ -297,7 +245,10 @@ def piece_derivative_bound(terms, piece, low, high, order):
 
     POLYNOMIAL: Σ_m |c_m| m!/(m-order)! max|x|^(m-order); EXPONENTIALS:
     Σ e^{a x} (|b| + |c|) |a + iω|^order at the end where e^{a x} is largest;
-    ERRORFUNCTIONS: Cauchy's estimate (:func:`_error_derivative_bound`).
+    ERRORFUNCTIONS: Cauchy's estimate (:func:`_error_derivative_bound`);
+    SIGMOIDS: Cauchy's estimate on circles of radius π/2 in y = a(x - c),
+    where |Im y| <= π/2 keeps |1 + e^y| >= max(1, |e^y|), so |σ| <= min(1,
+    e^{Re y}): |b| order! (2|a|/π)^order min(1, e^{max y + π/2}).
     """
     first = terms.offsets[piece]
     last = terms.offsets[piece + 1]
@@ -314,18 +265,19 @@ def piece_derivative_bound(terms, piece, low, high, order):
         return bound
     if terms.families[piece] == 2:
         return _error_derivative_bound(coefficients, first, last, low - origin, high - origin, order)
+    if terms.families[piece] == 3:
+        factorial = 1.0
+        for k in range(2, order + 1):
+            factorial *= k
+        for t in range(first, last, 3):
+            a = coefficients[t + 1]
+            highest = max(a * (low - origin - coefficients[t + 2]), a * (high - origin - coefficients[t + 2]))
+            bound += (abs(coefficients[t]) * factorial * (2.0 * abs(a) / math.pi) ** order
+                      * min(1.0, math.exp(highest + 0.5 * math.pi)))
+        return bound
     for t in range(first, last, 4):
         a = coefficients[t]
         envelope = math.exp(a * ((high if a > 0.0 else low) - origin))
         size = abs(coefficients[t + 2]) + abs(coefficients[t + 3])
         bound += envelope * size * math.hypot(a, coefficients[t + 1]) ** order
     return bound
-
-
-@njit(cache=True, error_model="numpy")
-def cumulative_scalar(terms, u):
-    """S(u) at one path length u (metres), compiled."""
-    piece = piece_of(terms, u)
-    if piece < 0:
-        return 0.0
-    return terms.constants[piece] + piece_value(terms, piece, u)[0]

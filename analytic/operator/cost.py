@@ -41,6 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..binning import bin_index
 from ..errors import SceneError
 from ..resources import available_memory
 
@@ -117,14 +118,14 @@ def _family_cost(terms) -> float:
     Error-function pieces cost in proportion to their terms squared (measured: a Gaussian's one term
     per piece 8 µs, an EMG's up to three 90 µs: more terms, and more of its Taylor series to keep).
     """
-    from ..waveforms.pieces import ERRORFUNCTIONS, EXPONENTIALS, TERM_SIZES
+    from ..waveforms.pieces import ERRORFUNCTIONS, EXPONENTIALS, SIGMOIDS, TERM_SIZES
 
     families = np.asarray(terms.families)
     polynomial, exponential, special = _SECONDS["cut"]
     if np.any(families == ERRORFUNCTIONS):
         sizes = np.diff(np.asarray(terms.offsets))[families == ERRORFUNCTIONS] // TERM_SIZES[ERRORFUNCTIONS]
         return special * float(np.max(sizes)) ** 2
-    return exponential if np.any(families == EXPONENTIALS) else polynomial
+    return exponential if np.any((families == EXPONENTIALS) | (families == SIGMOIDS)) else polynomial
 
 
 def _ranges(rectangle, pairs, pixels: int) -> np.ndarray:
@@ -150,12 +151,13 @@ def _ranges(rectangle, pairs, pixels: int) -> np.ndarray:
 
 
 def _bin_of(length: float, sampling) -> int:
-    """⌊(length - t_0) / T⌋ clamped to [-1, N] (a pulse of 1e308 m ends past every bin, not at an overflow)."""
+    """The bin of a length (:func:`analytic.binning.bin_index`) clamped to [-1, N] (a pulse of 1e308 m ends
+    past every bin, not at an overflow)."""
     with np.errstate(over="ignore", invalid="ignore"):
-        index = (length - sampling.start_opl) / sampling.bin_width_opl
+        index, _ = bin_index(np.float64(length), sampling.start_opl, sampling.bin_width_opl, sampling.count)
     if not index >= -1.0:
         return -1
-    return sampling.count if index > sampling.count else math.floor(index)
+    return sampling.count if index > sampling.count else int(index)
 
 
 def _breakpoints(kinks: np.ndarray, start: float, width: float, first: int, bins: int, low: float,

@@ -38,13 +38,16 @@ from .limits import (MAX_TOLERANCE, MIN_HEIGHT_FRACTION, MIN_TOLERANCE, check_to
 from .reflectance import builtin_reflectance, reflectance_image
 from ..resources import require_memory
 from ..values import MAX_LENGTH, MIN_LENGTH, _integer, _number, exact
+from ..waveforms import builders as _registry
 
 __all__ = ["SceneError", "Illumination", "Sampling", "Noise", "Scene", "default_scene", "sensor_grid",
            "WAVEFORMS", "ATTENUATIONS", "NOISE_KINDS", "MAX_LENGTH", "MIN_LENGTH", "MIN_HEIGHT_FRACTION", "MAX_SENSORS", "MIN_TOLERANCE", "MAX_TOLERANCE",
-           "check_heights", "check_tolerance", "scene_extent", "minimum_height",
+           "illumination_keys", "check_heights", "check_tolerance", "scene_extent", "minimum_height",
            "DEFAULT_ARRAY"]
 
-WAVEFORMS = ("impulse", "square", "butterworth", "gaussian", "emg", "sampled")
+#: The waveforms a scene may name: the registry itself (:mod:`analytic.waveforms.builders`), so one
+#: registered later is known too.
+WAVEFORMS = _registry.WAVEFORMS
 NOISE_KINDS = ("gaussian", "poisson")
 
 #: Largest Gaussian noise σ: m σ² (the discrepancy rule's target) stays finite.
@@ -120,13 +123,12 @@ class Illumination:
 
     Parameters
     ----------
-    waveform : {"impulse", "square", "butterworth", "gaussian", "emg", "sampled"}
-        Dirac impulse; unit-amplitude box of width ``width``; the truncated
-        impulse response of an analogue Butterworth low-pass; a Gaussian of
-        FWHM ``fwhm`` centred at 0; a Gaussian convolved with an exponential
-        of time constant ``tail`` (EMG, a SPAD's response); or the
-        piecewise-linear interpolation of measured ``samples``. Each but the
-        impulse is scaled to unit peak amplitude.
+    waveform : str
+        A name in :data:`WAVEFORMS` (each module's ``SUMMARY`` says what it
+        is): ``impulse``, ``square``, ``butterworth``, ``gaussian``, ``emg``,
+        ``sech2``, ``sampled``. Each but the impulse is scaled to unit peak
+        amplitude. The keys below are the ones the waveforms declare
+        (``PARAMETERS``); each applies only to the waveforms declaring it.
     width : float, optional
         Square pulse width, metres of path length. Default: period / 5.
     cutoff : float, optional
@@ -138,8 +140,8 @@ class Illumination:
     order : int, optional
         Butterworth order. Default 3 (the paper's).
     fwhm : float, optional
-        Gaussian and EMG (required): the Gaussian's full width at half
-        maximum, metres of path (1 ps = 2.99792458e-4 m).
+        Gaussian, EMG and sech² (required): the full width at half maximum
+        (the EMG's Gaussian's), metres of path (1 ps = 2.99792458e-4 m).
     tail : float, optional
         EMG (required): the exponential's time constant, metres of path.
     samples : sequence of float, optional
@@ -171,22 +173,22 @@ class Illumination:
 
     def __post_init__(self):
         _choice("illumination.waveform", self.waveform, WAVEFORMS)
-        own = {"square": ("width",), "butterworth": ("cutoff", "duration", "order"), "gaussian": ("fwhm",),
-               "emg": ("fwhm", "tail"), "sampled": ("samples", "file", "sample_width", "sample_width_ps", "start")}
-        for name in _ILLUMINATION_KEYS:
+        own = _registry.own_keys(self.waveform)
+        for name in _registry.keys():
             value = getattr(self, name)
             if value is None:
                 continue
-            if name not in own.get(self.waveform, ()):
+            if name not in own:
                 raise SceneError(f"illumination.{name}",
                                  f"does not apply to waveform = {self.waveform!r}")
-            if name == "order":
-                object.__setattr__(self, name, _integer("illumination.order", value))
-            elif name in ("fwhm", "tail", "sample_width"):
+            kind = _registry.parameter(name).kind
+            if kind == "integer":
+                object.__setattr__(self, name, _integer(f"illumination.{name}", value))
+            elif kind == "length":
                 object.__setattr__(self, name, _number(f"illumination.{name}", value, positive=True, length=True))
-            elif name == "start":
-                object.__setattr__(self, name, _number("illumination.start", value, length=True))
-            elif name in ("width", "cutoff", "duration", "sample_width_ps"):
+            elif kind == "coordinate":
+                object.__setattr__(self, name, _number(f"illumination.{name}", value, length=True))
+            elif kind == "positive":
                 # the waveform's own bounds (analytic.waveforms.make_waveform) depend on the period
                 object.__setattr__(self, name, _number(f"illumination.{name}", value, positive=True))
         if self.waveform == "sampled":
@@ -217,9 +219,9 @@ class Illumination:
         finite_span(len(samples), width, 0.0 if self.start is None else self.start, MAX_LENGTH, _BIN_RESOLUTION)
 
 
-#: Every optional key of ``[illumination]`` (the scene file's names).
-_ILLUMINATION_KEYS = ("width", "cutoff", "duration", "order", "fwhm", "tail", "samples", "file", "sample_width",
-                      "sample_width_ps", "start")
+def illumination_keys() -> tuple:
+    """Every optional key of ``[illumination]`` (the scene file's names): those the registered waveforms declare."""
+    return _registry.keys()
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -23,7 +23,7 @@ import numpy as np
 from ..measurement.detector import Detector
 from ..errors import ImageError, SceneError
 from .reflectance import printable, read_reflectance, regular_file_problem
-from .common import (_ILLUMINATION_KEYS, MAX_SENSORS, Illumination, Noise, Sampling, Scene, _integer, _number,
+from .common import (MAX_SENSORS, illumination_keys, Illumination, Noise, Sampling, Scene, _integer, _number,
                     _point, sensor_grid)
 from ..values import exact
 
@@ -44,11 +44,21 @@ _TOML_PLACE = re.compile(r"^(?P<reason>.*) \(at (?:line (?P<line>\d+), column (?
 # TOML keys of [sampling] -> Sampling fields
 _SAMPLING_FIELDS = {"period": "bin_width_opl", "start": "start_opl", "count": "count"}
 
+class _IlluminationKeys:
+    """``[illumination]``'s keys, read from the waveform registry when asked (one registered later counts)."""
+
+    def __contains__(self, key) -> bool:
+        return key == "waveform" or key in illumination_keys()
+
+    def __iter__(self):
+        return iter(("waveform", *illumination_keys()))
+
+
 _SCHEMA = {
     "name": None,
     "plane": {"size", "pixels", "reflectance"},
     "source": {"position", "intensity"},
-    "illumination": {"waveform", *_ILLUMINATION_KEYS},
+    "illumination": _IlluminationKeys(),
     "sensors": {"positions", "grid", "extent", "center"},
     "sampling": {"period", "start", "count"},
     "model": {"attenuation", "tolerance"},
@@ -298,7 +308,7 @@ def scene_to_tables(scene: Scene) -> dict:
     """
     # a sampled response's samples inline (the file they came from is a label; the tables stand alone)
     illumination = {key: list(value) if key == "samples" else value
-                    for key in _ILLUMINATION_KEYS if key != "file"
+                    for key in illumination_keys() if key != "file"
                     for value in [getattr(scene.illumination, key)] if value is not None}
     common = {"illumination": {"waveform": scene.illumination.waveform, **illumination},
               "sampling": {"period": scene.sampling.bin_width_opl, "start": scene.sampling.start_opl,

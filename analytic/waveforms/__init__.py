@@ -12,19 +12,22 @@ pieces' kinks) shifted to the bin edges, every κ_n is smooth in τ; the
 quadrature of the system matrix splits its integrals there.
 
 One module per waveform (:mod:`.impulse`, :mod:`.square`,
-:mod:`.butterworth`, :mod:`.gaussian`, :mod:`.emg`, :mod:`.sampled`), each with ``PARAMETERS`` (its scene keys) and
-``build(illumination, period) -> Waveform``; :data:`analytic.waveforms.builders.BUILDERS`
-maps the scene's ``waveform`` name to it. A new waveform is one such module and
-its tests.
+:mod:`.butterworth`, :mod:`.gaussian`, :mod:`.emg`, :mod:`.sech2`, :mod:`.sampled`),
+each declaring ``NAME``, ``SUMMARY``, ``PARAMETERS`` (its scene keys as
+:class:`~.waveform.Parameter`: kind, unit, default, plugin property) and
+``build(illumination, period) -> Waveform``; the registry
+(:mod:`analytic.waveforms.builders`) maps the scene's ``waveform`` name to it,
+and the scene's schema, the XML export, the plugins' properties and their docs
+derive from it. A new waveform is one such module and its tests.
 """
 
 import lazy_loader
 
 __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
-    "builders": ["make_waveform", "BUILDERS"],
-    "waveform": ["Waveform"],
+    "builders": ["make_waveform", "register", "WAVEFORMS", "BUILDERS"],
+    "waveform": ["Waveform", "Parameter"],
     "pieces": ["WaveformTerms", "make_terms", "cumulative_array", "derivative_array", "kernel_array",
-               "POLYNOMIAL", "EXPONENTIALS", "ERRORFUNCTIONS"],
+               "POLYNOMIAL", "EXPONENTIALS", "ERRORFUNCTIONS", "SIGMOIDS"],
     "measured": ["read_samples", "check_samples", "MAX_SAMPLES", "METRES_PER_PICOSECOND"],
     "emg": ["TAIL_RATIO_RANGE"],
     "butterworth": ["MAX_ORDER", "CUTOFF_RANGE", "CUTOFF_PERIOD_RANGE", "MIN_CUTOFF_DURATION"],

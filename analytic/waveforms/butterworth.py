@@ -78,12 +78,17 @@ import numpy as np
 from ..errors import SceneError
 from ..values import exact
 from .pieces import EXPONENTIALS, POLYNOMIAL, make_terms
-from .waveform import Waveform
+from .waveform import Parameter, Waveform
 
-__all__ = ["build", "PARAMETERS", "MAX_ORDER", "CUTOFF_RANGE", "CUTOFF_PERIOD_RANGE", "MIN_CUTOFF_DURATION"]
+__all__ = ["build", "NAME", "SUMMARY", "PARAMETERS", "MAX_ORDER", "CUTOFF_RANGE", "CUTOFF_PERIOD_RANGE",
+           "MIN_CUTOFF_DURATION"]
 
-#: Scene keys of ``[illumination]`` this waveform takes.
-PARAMETERS = ("cutoff", "duration", "order")
+NAME = "butterworth"
+SUMMARY = "truncated impulse response of an analogue Butterworth low-pass"
+#: Scene keys of ``[illumination]`` this waveform takes (:mod:`analytic.waveforms.builders`).
+PARAMETERS = (Parameter("cutoff", "positive", "cycles/m", "1/(2T)", plugin="cutoff"),
+              Parameter("duration", "positive", "m", "3 / cutoff", plugin="duration"),
+              Parameter("order", "integer", "", "3", plugin="order"))
 
 #: Highest Butterworth order accepted (criterion in :func:`make_waveform`).
 MAX_ORDER = 20

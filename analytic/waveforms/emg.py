@@ -46,15 +46,17 @@ import numpy as np
 
 from ..errors import SceneError
 from ..values import exact
-from .gaussian import FWHM_PER_SIGMA, TRUNCATION, require
+from .gaussian import FWHM, FWHM_PER_SIGMA, TRUNCATION, require
 from .pieces import ERRORFUNCTIONS, POLYNOMIAL, make_terms
 from ..kernels.formulas import erfcx_array
-from .waveform import Waveform
+from .waveform import Parameter, Waveform
 
-__all__ = ["build", "PARAMETERS", "TAIL_RATIO_RANGE"]
+__all__ = ["build", "NAME", "SUMMARY", "PARAMETERS", "TAIL_RATIO_RANGE"]
 
-#: Scene keys of ``[illumination]`` this waveform takes.
-PARAMETERS = ("fwhm", "tail")
+NAME = "emg"
+SUMMARY = "a Gaussian (FWHM ``fwhm``) convolved with an exponential of time constant ``tail`` (a SPAD's response)"
+#: Scene keys of ``[illumination]`` this waveform takes (:mod:`analytic.waveforms.builders`).
+PARAMETERS = (FWHM, Parameter("tail", "length", "m", "required", plugin="tail"))
 
 #: Accepted tail / fwhm (see the module docstring).
 TAIL_RATIO_RANGE = (1e-4, 1e4)

@@ -23,12 +23,16 @@ import math
 
 from ..errors import SceneError
 from .pieces import ERRORFUNCTIONS, POLYNOMIAL, make_terms
-from .waveform import Waveform
+from .waveform import Parameter, Waveform
 
-__all__ = ["build", "PARAMETERS", "TRUNCATION", "FWHM_PER_SIGMA", "require"]
+__all__ = ["build", "NAME", "SUMMARY", "PARAMETERS", "FWHM", "TRUNCATION", "FWHM_PER_SIGMA", "require"]
 
-#: Scene keys of ``[illumination]`` this waveform takes.
-PARAMETERS = ("fwhm",)
+NAME = "gaussian"
+SUMMARY = "Gaussian of FWHM ``fwhm`` centred at 0"
+#: The full width at half maximum, metres of path (gaussian, emg, sech2).
+FWHM = Parameter("fwhm", "length", "m", "required", plugin="fwhm")
+#: Scene keys of ``[illumination]`` this waveform takes (:mod:`analytic.waveforms.builders`).
+PARAMETERS = (FWHM,)
 
 #: FWHM / σ of a Gaussian, 2 √(2 ln 2).
 FWHM_PER_SIGMA = 2.0 * math.sqrt(2.0 * math.log(2.0))

@@ -5,9 +5,11 @@ from __future__ import annotations
 from .pieces import POLYNOMIAL, make_terms
 from .waveform import Waveform
 
-__all__ = ["build", "PARAMETERS"]
+__all__ = ["build", "NAME", "SUMMARY", "PARAMETERS"]
 
-#: Scene keys of ``[illumination]`` this waveform takes.
+NAME = "impulse"
+SUMMARY = "Dirac impulse δ(t), unit area"
+#: Scene keys of ``[illumination]`` this waveform takes (:mod:`analytic.waveforms.builders`).
 PARAMETERS = ()
 
 

@@ -17,12 +17,13 @@ with K_i a constant and F_i a closed form of one *family*:
 ``POLYNOMIAL``     F(u) = Σ_m c_m (u - o)^m (Horner; no coefficient: F = 0)
 ``EXPONENTIALS``   F(u) = Σ_j e^{a_j (u - o)} (b_j cos ω_j (u - o) + c_j sin ω_j (u - o))
 ``ERRORFUNCTIONS`` F(u) = Σ_j b_j e^{y (β_j - γ_j y)} erfcx(p_j y + s_j), y = u - o - c_j
+``SIGMOIDS``       F(u) = Σ_j b_j e^y / (1 + e^y), y = a_j (u - o - c_j) <= 0 over the piece
 ================== ===========================================================
 
 (o is the piece's origin; coefficients are stored flat, four per term for
 ``EXPONENTIALS``: a_j, ω_j, b_j, c_j; six for ``ERRORFUNCTIONS``: b_j, c_j,
 β_j, γ_j >= 0, p_j, s_j, built so that p_j y + s_j >= 0 over the piece,
-where erfcx(v) = e^{v²} erfc(v) <= 1 (:mod:`analytic.kernels.special`),
+three for ``SIGMOIDS``: b_j, a_j, c_j; where erfcx(v) = e^{v²} erfc(v) <= 1 (:mod:`analytic.kernels.special`),
 and the exponent stays at most a few units above its value at the piece's
 ends: no term overflows, and e^{-v²} erfcx(v) keeps erfc's relative
 accuracy in a Gaussian's tails). Why a constant and a form, not S
@@ -41,8 +42,9 @@ are the waveform's breakpoints, where the model's quadrature cuts its
 integrals (a piece boundary that only switches between two closed forms of
 one analytic function, as the Butterworth pulse's Taylor series and its
 exponential sum, is not a kink). Adding a waveform means building its
-pieces (see :mod:`analytic.waveforms.square`); the quadrature, the NumPy
-and Numba evaluators here and the renderer's Dr.Jit one read nothing else.
+pieces (see :mod:`analytic.waveforms.square`); each family's form is written
+once (:func:`analytic.kernels.forms.piece_forms`), which NumPy (here), Numba
+and the renderer's Dr.Jit evaluate, and the quadrature reads nothing else.
 """
 
 from __future__ import annotations
@@ -51,11 +53,15 @@ import math
 
 import numpy as np
 
-from ..kernels.pieces import ERRORFUNCTIONS, EXPONENTIALS, POLYNOMIAL, ROUNDING, TERM_SIZES, WaveformTerms
+from ..kernels.forms import (ERRORFUNCTIONS, EXPONENTIALS, POLYNOMIAL, ROUNDING, SIGMOIDS, TERM_SIZES, WaveformTerms,
+                             piece_forms)
 from ..kernels.formulas import RECIPROCAL_SQRT_PI, erfcx_array
 
-__all__ = ["WaveformTerms", "make_terms", "POLYNOMIAL", "EXPONENTIALS", "ERRORFUNCTIONS", "TERM_SIZES",
+__all__ = ["WaveformTerms", "make_terms", "POLYNOMIAL", "EXPONENTIALS", "ERRORFUNCTIONS", "SIGMOIDS", "TERM_SIZES",
            "cumulative_array", "derivative_array", "kernel_array", "ROUNDING"]
+
+#: The families' forms (:func:`analytic.kernels.forms.piece_forms`) with NumPy's functions.
+_FORMS = piece_forms(np.exp, np.cos, np.sin, erfcx_array)
 
 
 def _frozen(values, dtype=np.float64) -> np.ndarray:
@@ -108,30 +114,33 @@ def _piece_indices(terms: WaveformTerms, u: np.ndarray) -> np.ndarray:
 
 
 def _forms(terms: WaveformTerms, piece: int, x: np.ndarray, derivative: bool) -> np.ndarray:
-    """F_i (or dF_i/du) at x = u - o_i."""
-    coefficients = terms.coefficients[terms.offsets[piece]:terms.offsets[piece + 1]]
-    if terms.families[piece] == POLYNOMIAL:
-        if coefficients.size == 0:
+    """F_i (or dF_i/du) at x = u - o_i: the shared forms for F, their derivatives here (NumPy only)."""
+    first, last = int(terms.offsets[piece]), int(terms.offsets[piece + 1])
+    family = int(terms.families[piece])
+    if not derivative:
+        return _FORMS[family](terms.coefficients, first, last, x)[0] + np.zeros_like(x)
+    coefficients = terms.coefficients[first:last]
+    if family == POLYNOMIAL:
+        if coefficients.size <= 1:
             return np.zeros_like(x)
-        if derivative:
-            coefficients = np.polynomial.polynomial.polyder(coefficients) if coefficients.size > 1 else [0.0]
-        return np.polynomial.polynomial.polyval(x, coefficients)
+        return np.polynomial.polynomial.polyval(x, np.polynomial.polynomial.polyder(coefficients))
     value = np.zeros_like(x)
-    if terms.families[piece] == ERRORFUNCTIONS:
+    if family == ERRORFUNCTIONS:
         for b, centre, beta, gamma, p, shift in coefficients.reshape(-1, 6):
             y = x - centre
             front = b * np.exp(y * (beta - gamma * y))
             argument = p * y + shift
-            scaled = erfcx_array(argument)
-            if derivative:      # d/dy e^E erfcx(v) = e^E [(E' + 2pv) erfcx(v) - 2p/√π]
-                value += front * ((beta - 2.0 * gamma * y + 2.0 * p * argument) * scaled
-                                  - 2.0 * p * RECIPROCAL_SQRT_PI)
-            else:
-                value += front * scaled
+            # d/dy e^E erfcx(v) = e^E [(E' + 2pv) erfcx(v) - 2p/√π]
+            value += front * ((beta - 2.0 * gamma * y + 2.0 * p * argument) * erfcx_array(argument)
+                              - 2.0 * p * RECIPROCAL_SQRT_PI)
+        return value
+    if family == SIGMOIDS:
+        for b, a, centre in coefficients.reshape(-1, 3):
+            scaled = np.exp(a * (x - centre))      # d/dx b σ(y) = b a σ(1 - σ), σ(1 - σ) = e^y / (1 + e^y)²
+            value += b * a * scaled / (1.0 + scaled) ** 2
         return value
     for a, w, b, c in coefficients.reshape(-1, 4):
-        if derivative:      # d/dx of e^{ax}(b cos wx + c sin wx)
-            b, c = a * b + w * c, a * c - w * b
+        b, c = a * b + w * c, a * c - w * b     # d/dx of e^{ax}(b cos wx + c sin wx)
         value += np.exp(a * x) * (b * np.cos(w * x) + c * np.sin(w * x))
     return value
 

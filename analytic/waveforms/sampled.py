@@ -21,12 +21,28 @@ import numpy as np
 
 from .measured import sample_width_metres
 from .pieces import POLYNOMIAL, make_terms
-from .waveform import Waveform
+from .waveform import Parameter, Waveform
 
-__all__ = ["build", "PARAMETERS"]
+__all__ = ["build", "plugin_entries", "NAME", "SUMMARY", "PARAMETERS"]
 
-#: Scene keys of ``[illumination]`` this waveform takes (``file`` is read into ``samples``).
-PARAMETERS = ("samples", "sample_width", "sample_width_ps", "start")
+NAME = "sampled"
+SUMMARY = "piecewise-linear interpolation of measured ``samples``"
+#: Scene keys of ``[illumination]`` this waveform takes (:mod:`analytic.waveforms.builders`; ``file`` is
+#: read into ``samples``).
+PARAMETERS = (Parameter("samples", "samples", "", "required, or file", plugin="samples"),
+              Parameter("file", "file", "", "none (or samples)"),
+              Parameter("sample_width", "length", "m", "required, or sample_width_ps", plugin="sample_width"),
+              Parameter("sample_width_ps", "positive", "ps", "none (or sample_width)"),
+              Parameter("start", "coordinate", "m", "0", plugin="sample_start"))
+
+
+def plugin_entries(illumination, period: float) -> dict:
+    """``samples`` as text, ``sample_width`` in metres (from either key) and ``sample_start``."""
+    del period
+    # repr: the plugin reads back the very floats, so its pieces are the model's
+    return {"samples": ",".join(repr(float(value)) for value in illumination.samples),
+            "sample_width": sample_width_metres(illumination.sample_width, illumination.sample_width_ps),
+            "sample_start": 0.0 if illumination.start is None else float(illumination.start)}
 
 
 def build(illumination, period: float) -> Waveform:

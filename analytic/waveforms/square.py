@@ -4,12 +4,19 @@ from __future__ import annotations
 
 from ..errors import SceneError
 from .pieces import POLYNOMIAL, make_terms
-from .waveform import Waveform
+from .waveform import Parameter, Waveform
 
-__all__ = ["build", "PARAMETERS"]
+__all__ = ["build", "plugin_entries", "NAME", "SUMMARY", "PARAMETERS"]
 
-#: Scene keys of ``[illumination]`` this waveform takes.
-PARAMETERS = ("width",)
+NAME = "square"
+SUMMARY = "unit-amplitude box of width ``width``"
+#: Scene keys of ``[illumination]`` this waveform takes (:mod:`analytic.waveforms.builders`).
+PARAMETERS = (Parameter("width", "positive", "m", "T / 5", plugin="pulse_width"),)
+
+
+def plugin_entries(illumination, period: float) -> dict:
+    """``pulse_width`` resolved (its default follows the period, which the plugin reads as the bin width)."""
+    return {"pulse_width": float(build(illumination, period).duration)}
 
 
 def build(illumination, period: float) -> Waveform:

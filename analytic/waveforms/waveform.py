@@ -10,7 +10,42 @@ import numpy as np
 
 from .pieces import WaveformTerms, cumulative_array, derivative_array, kernel_array
 
-__all__ = ["Waveform"]
+__all__ = ["Waveform", "Parameter", "KINDS"]
+
+#: How a parameter's value is checked where the scene is built (:class:`analytic.scenes.common.Illumination`):
+#: ``length`` a length > 0 in metres, ``coordinate`` a path length of either sign in metres, ``positive``
+#: a number > 0 (bounds that depend on the period are the waveform's own), ``integer`` a whole number;
+#: ``samples`` and ``file`` are left to the waveform's own check.
+KINDS = ("length", "coordinate", "positive", "integer", "samples", "file")
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One ``[illumination]`` key a waveform takes: what a waveform module declares in ``PARAMETERS``.
+
+    Attributes
+    ----------
+    name : str
+        The scene file's key (and :class:`analytic.scenes.common.Illumination`'s field).
+    kind : str
+        One of :data:`KINDS`: how the scene checks its value.
+    unit : str
+        Its unit in words, for the docs (``"m"``, ``"cycles/m"``, ``""``).
+    default : str
+        Its default in words, or ``"required"``.
+    plugin : str or None
+        The renderer plugins' property carrying it (``None``: the module's ``plugin_entries`` handles it).
+    """
+
+    name: str
+    kind: str
+    unit: str
+    default: str
+    plugin: str | None = None
+
+    def __post_init__(self):
+        if self.kind not in KINDS:
+            raise ValueError(f"parameter {self.name!r}: kind must be one of {KINDS}, got {self.kind!r}")
 
 
 @dataclass(frozen=True, eq=False)

@@ -25,6 +25,7 @@ from analytic.operator.system import QuadratureWarning, pair_entries, system_mat
 ILLUMINATIONS = {
     "gaussian": Illumination(waveform="gaussian", fwhm=0.04),
     "emg": Illumination(waveform="emg", fwhm=0.03, tail=0.05),
+    "sech2": Illumination(waveform="sech2", fwhm=0.04),
     "sampled": Illumination(waveform="sampled", samples=[0.0, 0.3, 1.0, 0.6, 0.2, 0.05, 0.0], sample_width=0.012,
                             start=-0.02),
 }

@@ -14,7 +14,7 @@ import math
 import mpmath
 import numpy as np
 import pytest
-from irf_reference import EmgReference, GaussianReference, SampledReference, sigma_of
+from irf_reference import EmgReference, GaussianReference, SampledReference, Sech2Reference, sigma_of
 from scipy import integrate
 
 from analytic.kernels.bins import BinRun, TimeAxis
@@ -91,6 +91,42 @@ def test_gaussian_kernels_keep_relative_accuracy_in_both_tails():
     _check_kernels(waveform, GaussianReference(FWHM), 1e-12)
 
 
+@pytest.mark.parametrize("fwhm", [FWHM, 1e-6, 3.0])
+def test_sech2_is_its_definition_with_unit_peak_its_fwhm_and_its_area(fwhm):
+    waveform = make_waveform(Illumination(waveform="sech2", fwhm=fwhm), 0.01)
+    reference = Sech2Reference(fwhm)
+    tau = reference.tau
+    t = np.linspace(-15 * tau, 15 * tau, 121)
+    np.testing.assert_allclose(waveform.intensity(t), [reference.intensity(x) for x in t], rtol=1e-13, atol=0)
+    # unit peak at 0, half of it at ±fwhm/2
+    assert waveform.intensity(np.array([0.0]))[0] == pytest.approx(1.0, rel=1e-15)
+    assert waveform.intensity(np.array([fwhm / 2, -fwhm / 2])) == pytest.approx([0.5, 0.5], rel=1e-14)
+    # the area 2τ (unit area once divided by it), by QUADPACK over the pulse (e^-80 of it beyond ±40τ)
+    area = sum(integrate.quad(reference.intensity, a * tau, b * tau, epsabs=0, epsrel=1e-13)[0]
+               for a, b in ((-40, -1), (-1, 1), (1, 40)))
+    assert waveform.energy == pytest.approx(area, rel=1e-13)
+    assert waveform.energy == pytest.approx(2 * tau, rel=1e-15)
+    for u in [-12 * tau, -0.1 * tau, 0.0, tau, 9 * tau]:
+        assert waveform.cumulative(u) == pytest.approx(float(reference.cumulative_mp(u)), rel=1e-13)
+    # the truncation: 2^-60 of the area beyond each end
+    assert waveform.lead == -waveform.duration == pytest.approx(-30 * math.log(2) * tau, rel=1e-14)
+    assert waveform.cumulative(waveform.lead) == 0.0
+
+
+def test_sech2_kernels_keep_relative_accuracy_in_both_tails():
+    waveform = make_waveform(Illumination(waveform="sech2", fwhm=FWHM), 0.01)
+    _check_kernels(waveform, Sech2Reference(FWHM), 1e-12)
+
+
+def test_sech2_needs_its_fwhm_and_takes_nothing_else():
+    with pytest.raises(SceneError, match="illumination.fwhm: required"):
+        make_waveform(Illumination(waveform="sech2"), 0.01)
+    with pytest.raises(SceneError, match="illumination.tail: does not apply"):
+        Illumination(waveform="sech2", fwhm=FWHM, tail=TAIL)
+    with pytest.raises(SceneError, match="illumination.fwhm"):
+        Illumination(waveform="sech2", fwhm=-1.0)
+
+
 @pytest.mark.parametrize("fwhm, tail", EMG_CASES)
 def test_emg_is_its_definition(fwhm, tail):
     waveform = make_waveform(Illumination(waveform="emg", fwhm=fwhm, tail=tail), 0.01)
@@ -164,6 +200,9 @@ def _derivative_cases():
         s = mpmath.mpf(gaussian.sigma)
     yield (make_waveform(Illumination(waveform="gaussian", fwhm=FWHM), 0.01),
            lambda u: s * mpmath.sqrt(mpmath.pi / 2) * mpmath.erfc(-u / (s * mpmath.sqrt(2))), 1.0)
+    sech2 = Sech2Reference(FWHM)
+    yield (make_waveform(Illumination(waveform="sech2", fwhm=FWHM), 0.01),
+           lambda u: sech2.tau_mp * (1 + mpmath.tanh(u / sech2.tau_mp)), 1.0)
     for fwhm, tail in EMG_CASES[:2] + EMG_CASES[3:]:
         reference = EmgReference(fwhm, tail)
         yield (make_waveform(Illumination(waveform="emg", fwhm=fwhm, tail=tail), 0.01),
@@ -201,6 +240,7 @@ def test_derivatives_and_their_bounds_hold():
 
 
 @pytest.mark.parametrize("illumination", [Illumination(waveform="gaussian", fwhm=0.03),
+                                          Illumination(waveform="sech2", fwhm=0.03),
                                           Illumination(waveform="emg", fwhm=0.02, tail=0.05),
                                           Illumination(waveform="sampled", samples=[0, 2, 5, 3, 1, 0],
                                                        sample_width=0.011, start=-0.01)])

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 from analytic.scenes.common import Illumination, Sampling
-from analytic.kernels.pieces import cumulative_scalar
 from analytic.waveforms import make_waveform
-from compiled_kernels import compiled_kernels
+from compiled_kernels import compiled_cumulative, compiled_kernels
+from deposited_kernels import deposited_kernels, traced_cumulative
 from transient import backend
 
 WAVEFORMS = ["impulse", "square", "butterworth"]
@@ -48,14 +48,12 @@ def _arguments(waveform, rng, size=4000):
 @pytest.mark.parametrize("name", WAVEFORMS)
 @pytest.mark.parametrize("period", [1e-3, 0.1, 10.0])
 def test_cumulative_agrees_in_numpy_numba_and_drjit(mitsuba, rng, name, period):
-    from transient.common import cumulative
-
     waveform = make_waveform(Illumination(waveform=name), period)
     u = _arguments(waveform, rng)
     numpy_values = waveform.cumulative(u)
     terms = waveform.terms
-    numba_values = np.array([cumulative_scalar(terms, float(x)) for x in u])
-    drjit_values = np.array(cumulative(terms, mitsuba.Float64(u)), dtype=np.float64)
+    numba_values = compiled_cumulative(terms, u)
+    drjit_values = traced_cumulative(mitsuba, terms, u)
     np.testing.assert_allclose(numba_values, numpy_values, rtol=1e-12, atol=0)
     np.testing.assert_allclose(drjit_values, numpy_values, rtol=1e-12, atol=0)
     if name == "butterworth":
@@ -197,14 +195,11 @@ def test_is_diffuse(mitsuba):
 
 def test_kernels_far_in_the_tail_agree_in_numba_and_drjit(mitsuba):
     """κ 1e-15 of the area below the peak: Dr.Jit's piece-wise difference keeps the digits Numba's does."""
-    from transient.common import kernel_between
-
     waveform = make_waveform(Illumination(waveform="butterworth", order=1, cutoff=0.5, duration=12.0), 0.075)
     lower = np.linspace(0.5, 11.9, 400)
     upper = lower + 0.075
     expected = compiled_kernels(waveform.terms, lower, upper)
-    traced = np.array(kernel_between(waveform.terms, mitsuba.Float64(lower), mitsuba.Float64(upper)),
-                      dtype=np.float64)
+    traced = deposited_kernels(mitsuba, waveform.terms, lower, 0.075)
     closed_form = (np.exp(-np.pi * lower) * -np.expm1(-np.pi * 0.075)) / np.pi     # s = e^{-πt}, unit peak
     assert expected.min() < 1e-15 * expected.max()
     np.testing.assert_allclose(expected, closed_form, rtol=1e-12, atol=0)

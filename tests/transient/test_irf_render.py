@@ -13,16 +13,17 @@ import pytest
 from render_checks import agreement, model
 
 from analytic.scenes.common import Illumination
-from analytic.kernels.pieces import cumulative_scalar
 from analytic.waveforms import make_waveform
 from analytic.waveforms.pieces import kernel_array
-from compiled_kernels import compiled_kernels
+from compiled_kernels import compiled_cumulative, compiled_kernels
+from deposited_kernels import deposited_kernels, traced_cumulative
 from transient.render import render
 
 RNG_SAMPLES = np.random.default_rng(4).uniform(0.0, 1.0, 24) * np.hanning(24)      # > 8 pieces: the gather path
 ILLUMINATIONS = {
     "gaussian": Illumination(waveform="gaussian", fwhm=0.08),
     "emg": Illumination(waveform="emg", fwhm=0.05, tail=0.03),
+    "sech2": Illumination(waveform="sech2", fwhm=0.06),
     "sampled": Illumination(waveform="sampled", samples=RNG_SAMPLES, sample_width=0.01, start=-0.04),
     "sampled, 3 samples": Illumination(waveform="sampled", samples=[0.0, 1.0, 0.4], sample_width_ps=100.0),
 }
@@ -30,30 +31,29 @@ ILLUMINATIONS = {
 
 @pytest.mark.parametrize("name", list(ILLUMINATIONS))
 def test_cumulative_and_kernels_agree_in_numpy_numba_and_drjit(mitsuba, rng, name):
-    from transient.common import cumulative, kernel_between
-
     waveform = make_waveform(ILLUMINATIONS[name], 0.05)
     terms = waveform.terms
     span = waveform.duration - waveform.lead
     u = np.concatenate([rng.uniform(waveform.lead - 0.2 * span, waveform.duration + 0.2 * span, 3000),
                         np.asarray(terms.starts), [0.0, -0.0, 1e-300]])
     expected = waveform.cumulative(u)
-    compiled = np.array([cumulative_scalar(terms, float(x)) for x in u])
-    traced = np.array(cumulative(terms, mitsuba.Float64(u)), dtype=np.float64)
+    compiled = compiled_cumulative(terms, u)
+    traced = traced_cumulative(mitsuba, terms, u)
     area = waveform.energy
     assert np.max(np.abs(compiled - expected)) <= 1e-14 * area
     assert np.max(np.abs(traced - expected)) <= 1e-14 * area
-    upper = u + rng.uniform(0.0, 0.1 * span, u.size)
-    kernels = kernel_array(terms, u, upper)
-    compiled = compiled_kernels(terms, u, upper)
-    traced = np.array(kernel_between(terms, mitsuba.Float64(u), mitsuba.Float64(upper)), dtype=np.float64)
     floor = 1e-15 * area        # kernels beyond the pulse are rounding on every side
-    assert np.all(np.abs(compiled - kernels) <= 1e-12 * np.abs(kernels) + floor)
-    assert np.all(np.abs(traced - kernels) <= 1e-12 * np.abs(kernels) + floor)
+    for width in rng.uniform(0.0, 0.1 * span, 4):           # the deposit's bins are of one width
+        upper = u + width
+        kernels = kernel_array(terms, u, upper)
+        compiled = compiled_kernels(terms, u, upper)
+        traced = deposited_kernels(mitsuba, terms, u, width)
+        assert np.all(np.abs(compiled - kernels) <= 1e-12 * np.abs(kernels) + floor)
+        assert np.all(np.abs(traced - kernels) <= 1e-12 * np.abs(kernels) + floor)
 
 
 # the EMG's render (~25 s) under -m slow; its Dr.Jit deposit is held to the model's kernels by default above
-@pytest.mark.parametrize("name", ["gaussian", pytest.param("emg", marks=pytest.mark.slow), "sampled"])
+@pytest.mark.parametrize("name", ["gaussian", pytest.param("emg", marks=pytest.mark.slow), "sech2", "sampled"])
 def test_renders_agree_with_the_model(scene, name):
     shaped = scene.replace(illumination=ILLUMINATIONS[name])
     result = render(shaped, spp=2**20, seed=12, progress=False)

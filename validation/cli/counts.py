@@ -24,6 +24,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from analytic.waveforms.builders import WAVEFORMS, own_keys
+
 from .common import UsageError
 
 __all__ = ["COUNTS_FILES", "COUNTS_CAPTURE", "COUNTS_FIGURE", "draw_scene_counts", "refuse_unreachable_counts", "RENDER_STREAM", "write_counts",
@@ -272,12 +274,11 @@ def check_counts_options(args, scene) -> tuple[str, ...]:
     if len(set(fitted)) != len(fitted):
         raise UsageError(f"--fit: each name once, got {args.fit}")
     waveform = scene.illumination.waveform
-    if "fwhm" in fitted and waveform not in ("gaussian", "emg"):
-        raise UsageError(f"--fit fwhm: the scene's pulse ({waveform!r}) has no fwhm; it is fitted for a "
-                         f"gaussian or emg illumination")
-    if "tail" in fitted and waveform != "emg":
-        raise UsageError(f"--fit tail: the scene's pulse ({waveform!r}) has no tail; it is fitted for an emg "
-                         f"illumination")
+    for key in ("fwhm", "tail"):
+        if key in fitted and key not in own_keys(waveform):
+            takers = " or ".join(name for name in WAVEFORMS if key in own_keys(name))
+            raise UsageError(f"--fit {key}: the scene's pulse ({waveform!r}) has no {key}; it is fitted for a "
+                             f"{takers} illumination")
     return fitted
 
 

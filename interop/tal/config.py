@@ -300,13 +300,19 @@ def _scan(config: dict, halves: tuple[float, float]) -> Scan:
         point = [halves[0] * (2 * lookat[0] - 1), halves[1] * (2 * lookat[1] - 1), 0.0]
         return Scan(type="single", grid=(width, height), laser_point=point)
     laser = (_integer("laser_width", config["laser_width"]), _integer("laser_height", config["laser_height"]))
-    aperture = [float(tal_or(config[f"laser_aperture_{end}_{axis}"], default))
-                for end, default in (("start", 0), ("end", 1)) for axis in "xy"]
-    if aperture != [0.0, 0.0, 1.0, 1.0]:
-        raise SceneError("laser_aperture_start_x", f"a partial laser aperture {aperture} is not modelled (and tal "
-                                                   f"0.20 writes the whole wall's sensor_grid_xyz for a confocal "
-                                                   f"scan while it reads the aperture's points); scan the whole "
-                                                   f"wall (0, 0, 1, 1)")
+    aperture, partial = [], []
+    for end, default in (("start", 0), ("end", 1)):
+        for axis in "xy":
+            key = f"laser_aperture_{end}_{axis}"
+            if config[key] is not None:             # a string or a list is no fraction of the wall (nor NaN)
+                _number(key, config[key])
+            aperture.append(float(tal_or(config[key], default)))
+            if aperture[-1] != default:
+                partial.append(key)
+    if partial:
+        raise SceneError(partial[0], f"a partial laser aperture {aperture} is not modelled (and tal 0.20 writes "
+                                     f"the whole wall's sensor_grid_xyz for a confocal scan while it reads the "
+                                     f"aperture's points); scan the whole wall (0, 0, 1, 1)")
     if kind == "confocal":
         if laser != (width, height):
             raise SceneError("laser_width", f"{laser[0]} x {laser[1]} differs from sensor_width x sensor_height "

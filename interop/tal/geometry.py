@@ -136,9 +136,12 @@ def wall_halves(wall: dict, key: str) -> tuple[float, float]:
         if f"rot_degrees_{axis}" in wall:
             raise SceneError(f"{key}.rot_degrees_{axis}", "tal refuses a relay wall rotation (not yet implemented "
                                                          "there); rotate the rest of the scene instead")
-        if tal_or(wall.get(f"displacement_{axis}"), 0.0) != 0.0:
+        # a number first: tal reads it without a default, and a string or NaN is no position ("moved" would mislead)
+        if _number(f"{key}.displacement_{axis}", wall[f"displacement_{axis}"]) != 0.0:
             raise SceneError(f"{key}.displacement_{axis}", "a moved relay wall is not modelled (the wall is z = 0 "
                                                            "at the origin); move the rest of the scene instead")
+    if wall.get("scale_z") is not None:         # through tal's `or` in to_world: unset or 0 is 1
+        _number(f"{key}.scale_z", wall["scale_z"])
     if float(tal_or(wall.get("scale_z"), 1.0)) <= 0:
         raise SceneError(f"{key}.scale_z", "the relay wall must face +z (scale_z = 1)")
     halves = []

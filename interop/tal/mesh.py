@@ -143,6 +143,10 @@ def planar_polygon(vertices: np.ndarray, faces: list[list[int]], stated_normals:
     """
     used = sorted({i for face in faces for i in face})
     points = vertices[used]
+    # a vertex no face names is not rendered: put it on a used one, so that no bound below sees it (the merging
+    # of repeated vertices divided its coordinates: 1e308 overflowed, with a RuntimeWarning, on a legal mesh)
+    vertices = np.repeat(points[:1], len(vertices), axis=0)
+    vertices[used] = points
     far = float(np.max(np.abs(points)))
     if not far <= MAX_LENGTH:           # inf or NaN too (a transform that overflowed): areas would overflow
         raise SceneError(key, f"{shown}: a vertex at {exact(far)} m is beyond the ±{MAX_LENGTH:g} m this tool "

@@ -23,9 +23,12 @@ def test_a_window_far_from_zero_is_drawn_from_a_round_origin(start, span, origin
         assert 0 <= start - found < 10 * span     # the ticks then read like the span itself
 
 
-@pytest.mark.parametrize("peak, power", [(409.0, 0), (0.04, 0), (1.2e-14, -14), (3e7, 7), (0.0, 0)])
+@pytest.mark.parametrize("peak, power", [(409.0, 0), (0.04, 0), (1.2e-14, -14), (3e7, 7), (0.0, 0),
+                                         (3e-299, -299), (2e-305, -300), (1.2e-322, -300), (5e-324, -300)])
 def test_y_outside_the_readable_range_gets_a_named_power_of_ten(peak, power):
+    """Below 1e-300 (subnormal light included) the power stays -300, so that the figures' 10^-power is finite."""
     assert power_of_ten(np.array([0.0, peak])) == power
+    assert math.isfinite(10.0 ** -power * 1e8)         # room for a faint trace's factor too
 
 
 def test_a_far_tiny_transient_is_drawn(tmp_path):

@@ -155,11 +155,17 @@ def round_origin(edges: np.ndarray) -> float:
     return math.floor(start / step) * step
 
 
+#: Smallest power of ten named: the figures draw values times 10^-power (and a faint trace times a further
+#: factor), which must stay finite; light below 1e-300 (subnormal values included) is drawn as small numbers
+#: times 1e-300.
+MIN_POWER = -300
+
+
 def power_of_ten(values: np.ndarray) -> int:
     """The power of ten to name in the y label when values leave [1e-3, 1e4] (else 0), instead of
-    matplotlib's multiplier text."""
+    matplotlib's multiplier text; at least :data:`MIN_POWER`, whose 10^-power is finite."""
     peak = float(np.nanmax(np.abs(values))) if values.size and np.isfinite(values).any() else 0.0
-    return int(math.floor(math.log10(peak))) if peak > 0 and not 1e-3 <= peak < 1e4 else 0
+    return max(int(math.floor(math.log10(peak))), MIN_POWER) if peak > 0 and not 1e-3 <= peak < 1e4 else 0
 
 
 class TimeAxis(NamedTuple):

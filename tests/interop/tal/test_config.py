@@ -220,7 +220,7 @@ def test_stated_flag_kept_and_warned():
     ({"integrator_max_depth": 3}, "integrator_max_depth"),
     ({"histogram_mode": "frequency"}, "histogram_mode"),
     ({"scan_type": "confocal", "laser_width": 4, "laser_height": 4, "laser_aperture_end_x": 0.5},
-     "laser_aperture_start_x"),
+     "laser_aperture_end_x"),                    # the key that makes it partial
     ({"laser_lookat_x": 9}, "laser_lookat_x"),
     ({"laser_emission_mode": "spectrum"}, "laser_emission_mode"),
     ({"sensor_widht": 4}, "sensor_widht"),

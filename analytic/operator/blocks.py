@@ -37,11 +37,13 @@ COUNTS_BYTES = 2**28
 #: (pixel, pair)s per block at most: about a second of one thread at the slowest (~30 µs each).
 COMBINATIONS_PER_BLOCK = 2**15
 #: Slots of A the general routes gather at once (each left (pixel, pair)'s with them; see system.py).
-ROUTE_SLOTS = 2**18
-#: Bytes per slot gathered for the general routes: its position, value and NaN test, and for a left slot
-#: its row, pair, bin, pixel and sort order while its window's jobs are made, and then its batch's copies
-#: (measured: 40 on relay walls, where every slot is left): bounded by ROUTE_SLOTS, not by A.
-_ROUTE_BYTES_PER_SLOT = 48
+ROUTE_SLOTS = 2**17
+#: Bytes per slot of a window of the general routes while its jobs are made (its slots' positions, values,
+#: NaN tests; for a left slot its row, pair, bin, pixel and sort order), and per left slot of a batch
+#: (the windows' jobs, their joined copy and a route's subset): measured on relay walls, where every slot
+#: is left, with a margin. A window lies inside one block and holds at most ROUTE_SLOTS slots; a batch
+#: runs once it holds ROUTE_SLOTS / 2 left slots.
+_WINDOW_BYTES_PER_SLOT, _BATCH_BYTES_PER_SLOT = 64, 56
 #: Bytes per pair of the pairs' table and the scene's points and normals that build it (analytic.geometry).
 _PAIR_BYTES = PAIR_DTYPE.itemsize + 8 * 16
 #: Bytes per pair of a block's frames (compiled: the kernels' Frame record, ~20 floats, and its time shift).
@@ -198,7 +200,8 @@ def assembly_bytes(nnz: float, pairs: int, bins: int, pixels: int, layout: Layou
     While the blocks are filled and the general routes run: A's values and column indices (8 and 4 or 8
     bytes per entry), its row pointers (int64), each block of pixels' next slot in each row (int64), the
     counts per column (one copy per pair chunk), the pairs' table, the routes' working set
-    (:data:`ROUTE_SLOTS` slots at most, fewer where A has fewer) and each thread's frames and scratch.
+    (a window of at most :data:`ROUTE_SLOTS` slots inside one block, and a batch of jobs) and each
+    thread's frames and scratch.
     The row pointers' final int32 copy, A's exact zeros dropped in place and y = A f come after the
     counts per row are freed, which are larger.
     """
@@ -206,7 +209,9 @@ def assembly_bytes(nnz: float, pairs: int, bins: int, pixels: int, layout: Layou
     columns = pixels ** 2
     matrix = nnz * (8 + index_bytes(int(nnz), rows, columns)) + (rows + 1) * 8
     counts = layout.pixel_blocks * rows * 8 + (len(layout.pair_bounds) - 1) * columns * 8 + layout.blocks * 8
-    routes = _ROUTE_BYTES_PER_SLOT * min(nnz, max(ROUTE_SLOTS, -(-columns // layout.pixel_blocks) * bins))
+    # a block's window: at most ROUTE_SLOTS, and about its share of A (twice the mean, for uneven blocks)
+    window = min(ROUTE_SLOTS, 2 * nnz / layout.blocks, nnz)
+    routes = _WINDOW_BYTES_PER_SLOT * window + _BATCH_BYTES_PER_SLOT * min(nnz, ROUTE_SLOTS // 2 + window)
     chunk = int(np.max(np.diff(layout.pair_bounds), initial=0))
     threads = layout.threads * (_FRAME_BYTES * chunk + 16 * 8 * widest) + list_bytes
     return matrix + counts + routes + pairs * _PAIR_BYTES + threads

@@ -45,11 +45,18 @@ def _window_jobs(starts: np.ndarray, ends: np.ndarray, first_row: int, indices: 
     positions += np.arange(positions.size, dtype=np.int64)
     left = np.flatnonzero(np.isnan(data[positions]))
     slots = positions[left]
-    del positions
-    rows = first_row + np.searchsorted(until, left, side="right")
-    pairs, bin_index, pixels = rows // bins, rows % bins, indices[slots].astype(np.int64)
+    del positions                                   # each array freed as soon as the next is made: the
+    rows = first_row + np.searchsorted(until, left, side="right")     # window's peak stays a few per slot
+    del left
+    pairs, bin_index = np.divmod(rows, bins)
+    del rows
+    pixels = indices[slots].astype(np.int64)
     order = np.lexsort((bin_index, pixels, pairs))
-    slots, pairs, bin_index, pixels = slots[order], pairs[order], bin_index[order], pixels[order]
+    slots = slots[order]
+    pairs = pairs[order]
+    bin_index = bin_index[order]
+    pixels = pixels[order]
+    del order
     begins = np.flatnonzero(np.concatenate([[True], (pairs[1:] != pairs[:-1]) | (pixels[1:] != pixels[:-1])]))
     offsets = np.append(begins, slots.size).astype(np.int64)
     return Jobs(pairs[begins], pixels[begins], bin_index[begins], offsets, slots, np.empty(begins.size),
@@ -97,16 +104,16 @@ def left_pairs(record: Assembly, layout: Layout, left: np.ndarray, cursors: np.n
     parts, gathered = [], 0
     bar = progress_bar(progress, int(left.sum()), "cut pixels", "pixel-pair")
     try:
-        windows = _windows(layout, left, cursors, indptr, bins)
-        for starts, ends, row in windows:
-            part = _window_jobs(starts, ends, row, indices, data, bins)
-            parts.append(part)
-            gathered += part.slots.size
+        for starts, ends, row in _windows(layout, left, cursors, indptr, bins):
+            parts.append(_window_jobs(starts, ends, row, indices, data, bins))
+            gathered += parts[-1].slots.size
             if gathered >= ROUTE_SLOTS // 2:
-                failures, smooth = _add(run_left(record, _joined(parts), data, layout.threads), failures, smooth, bar)
-                parts, gathered = [], 0
+                batch, parts, gathered = _joined(parts), [], 0        # the parts freed before the routes run
+                failures, smooth = _add(run_left(record, batch, data, layout.threads), failures, smooth, bar)
+                del batch
         if parts:
-            failures, smooth = _add(run_left(record, _joined(parts), data, layout.threads), failures, smooth, bar)
+            batch, parts = _joined(parts), []
+            failures, smooth = _add(run_left(record, batch, data, layout.threads), failures, smooth, bar)
     finally:
         if bar is not None:
             bar.close()
@@ -121,13 +128,16 @@ def _add(outcome: tuple[int, int, int], failures: int, smooth: int, bar) -> tupl
 
 
 def _subset(jobs: Jobs, chosen: np.ndarray) -> Jobs:
-    """The jobs where ``chosen`` is True, with their slots."""
+    """The jobs where ``chosen`` is True, with their slots (``jobs`` itself when all are)."""
+    if np.all(chosen):
+        return jobs
     index = np.flatnonzero(chosen)
     lengths = np.diff(jobs.offsets)[index]
-    offsets = np.concatenate([[0], np.cumsum(lengths)]).astype(np.int64)
-    slots = np.concatenate([jobs.slots[jobs.offsets[j]:jobs.offsets[j + 1]] for j in index]) if index.size \
-        else np.empty(0, dtype=np.int64)
-    return Jobs(jobs.pairs[index], jobs.pixels[index], jobs.firsts[index], offsets, slots.astype(np.int64),
+    offsets = np.zeros(index.size + 1, dtype=np.int64)
+    np.cumsum(lengths, out=offsets[1:])
+    positions = np.repeat(jobs.offsets[index] - offsets[:-1], lengths)
+    positions += np.arange(positions.size, dtype=np.int64)
+    return Jobs(jobs.pairs[index], jobs.pixels[index], jobs.firsts[index], offsets, jobs.slots[positions],
                 jobs.lows[index], jobs.highs[index])
 
 

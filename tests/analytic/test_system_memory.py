@@ -9,7 +9,11 @@ the estimate not far above it (else a job that fits would be refused). The scene
 
 import tracemalloc
 
+import numpy as np
 import pytest
+import scipy.sparse
+
+from analytic.operator import system
 
 from analytic.errors import ResourceError
 from analytic.operator.cost import model_cost, refuse_unaffordable
@@ -68,3 +72,23 @@ def test_progress_shows_counting_filling_and_the_general_routes(capsys):
     for name in ("counting A's entries", "system matrix", "cut pixels"):
         assert name in bars
     assert (quiet != shown).nnz == 0
+
+
+@pytest.mark.parametrize("window", [1, 3, 7, 2**18])
+def test_zeros_are_dropped_in_place_as_scipy_drops_them(rng, monkeypatch, window):
+    """A's exact zeros go a window of slots at a time (no copy of A): the same CSR as SciPy's
+    eliminate_zeros, rows with no entry, with only zeros and windows of one slot included."""
+    monkeypatch.setattr(system, "ROUTE_SLOTS", window)
+    dense = rng.random((40, 30)) * (rng.random((40, 30)) < 0.4)
+    dense[[5, 6, 39]] = 0.0
+    dense[7, 3:] = 0.0                          # after empty rows, a row of few entries: one window holds them
+    stored = scipy.sparse.csr_array(dense)
+    data, indices, indptr = stored.data.copy(), stored.indices.copy(), stored.indptr.astype(np.int64)
+    data[rng.random(data.size) < 0.3] = 0.0                         # stored zeros, as a cancelling entry gives
+    data[indptr[10]:indptr[11]] = 0.0                               # a row of stored zeros only
+    expected = scipy.sparse.csr_array((data.copy(), indices.copy(), indptr.copy()), shape=dense.shape)
+    expected.eliminate_zeros()
+    kept = system._drop_zeros(data, indices, indptr)
+    assert kept == expected.nnz < stored.nnz
+    assert np.array_equal(data[:kept], expected.data) and np.array_equal(indices[:kept], expected.indices)
+    assert np.array_equal(indptr, expected.indptr)

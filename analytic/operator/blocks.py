@@ -36,7 +36,7 @@ BLOCKS_PER_THREAD = 16  # blocks per thread at least (pulled by the threads as t
 COUNTS_BYTES = 2**28
 #: (pixel, pair)s per block at most: about a second of one thread at the slowest (~30 µs each).
 COMBINATIONS_PER_BLOCK = 2**15
-#: Slots of A the general routes gather at once (each left (pixel, pair)'s with them; see system.py).
+#: Slots of A the general routes gather at once, a window inside one block (analytic.operator.general_routes).
 ROUTE_SLOTS = 2**17
 #: Bytes per slot of a window of the general routes while its jobs are made (its slots' positions, values,
 #: NaN tests; for a left slot its row, pair, bin, pixel and sort order), and per left slot of a batch

@@ -42,11 +42,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..binning import bin_index
-from ..errors import SceneError
+from ..errors import ResourceError, SceneError
 from ..resources import available_memory
+from .blocks import assembly_bytes, assembly_layout
 
 __all__ = ["ModelCost", "model_cost", "impractical_illumination", "refuse_impractical_illumination",
-           "LIMIT_SECONDS", "PAIR_LIMIT_SECONDS"]
+           "refuse_unaffordable", "estimate_text", "LIMIT_SECONDS", "PAIR_LIMIT_SECONDS"]
 
 #: A model estimated to take longer than this is refused when its illumination is the cause (below).
 LIMIT_SECONDS = 180.0
@@ -78,7 +79,8 @@ class ModelCost:
     entries : float
         Non-zeros of A (bins reached, summed over pixels and pairs).
     memory : float
-        Bytes: A (12 per entry) and the kernels' kink lists (every thread's).
+        Peak bytes of the assembly: A (12 or 16 per entry), its row pointers and counts, the working
+        set of its blocks and every thread's kink lists (:func:`analytic.operator.blocks.assembly_bytes`).
     list_memory : float
         Bytes of the kink lists alone (every thread's), which the kernels allocate per pixel.
     bins : float
@@ -178,12 +180,14 @@ def _breakpoints(kinks: np.ndarray, start: float, width: float, first: int, bins
     return int(np.sum(np.maximum(inside, 0)))
 
 
-def model_cost(scene) -> ModelCost:
+def model_cost(scene, *, memory_limit: int | None = None) -> ModelCost:
     """The estimated cost of assembling the scene's A (:mod:`analytic.operator.system`), from a sample of its ranges.
 
     Parameters
     ----------
     scene : Scene or RelayWallScene
+    memory_limit : int, optional
+        Bytes A may use (default half the memory available): how assembly cuts A into blocks follows it.
 
     Returns
     -------
@@ -211,7 +215,7 @@ def model_cost(scene) -> ModelCost:
     ranges = _ranges(rectangle, pairs, pixels)
     start, width, count = sampling.start_opl, sampling.bin_width_opl, sampling.count
     per_bin = _family_cost(terms)
-    thread_seconds = listing_seconds = bins_total = pieces_total = largest_list = 0.0
+    thread_seconds = listing_seconds = bins_total = pieces_total = largest_list = widest = 0.0
     for low, high in ranges:
         thread_seconds += _SECONDS["pixel"]
         first = max(0, _bin_of(low + waveform.lead, sampling))
@@ -230,15 +234,20 @@ def model_cost(scene) -> ModelCost:
         bins_total += bins
         pieces_total += cuts + 1
         largest_list = max(largest_list, listed)
+        widest = max(widest, bins)
     thread_seconds += listing_seconds
     threads = thread_count()
     samples = len(ranges)
     combinations = len(pairs) * pixels * pixels
     entries = combinations * bins_total / samples
     list_memory = _LISTED_BYTES * largest_list * threads
+    limit = available_memory() // 2 if memory_limit is None else memory_limit
+    memory = assembly_bytes(entries, len(pairs), count, pixels, assembly_layout(len(pairs), count, pixels, limit,
+                                                                                threads=threads),
+                            widest=int(widest), list_bytes=list_memory)
     reach = (start - float(ranges[:, 1].max()), start + width * count - float(ranges[:, 0].min()))
     return ModelCost(seconds=combinations * thread_seconds / samples / threads,
-                     pair_seconds=thread_seconds / samples, entries=entries, memory=12.0 * entries + list_memory,
+                     pair_seconds=thread_seconds / samples, entries=entries, memory=memory,
                      list_memory=list_memory, bins=bins_total / samples, pieces=pieces_total / samples,
                      kinks=int(kinks.size), span=float(waveform.duration - waveform.lead), threads=threads,
                      listing_share=listing_seconds / thread_seconds, reach=reach)
@@ -249,6 +258,11 @@ def _duration_text(seconds: float) -> str:
         if seconds >= size:
             return f"{seconds / size:.2g} {unit}"
     return f"{seconds:.2g} s"
+
+
+def estimate_text(cost: ModelCost) -> str:
+    """"about 68 s and 0.13 GiB": the estimated wall time and peak memory of assembling A."""
+    return f"about {_duration_text(cost.seconds)} and {cost.memory / 2**30:.2g} GiB"
 
 
 def impractical_illumination(scene, cost: ModelCost | None = None) -> str | None:
@@ -335,3 +349,27 @@ def _illumination_key(illumination) -> str:
         if getattr(illumination, name, None) is not None:
             return f"illumination.{name}"
     return "illumination.waveform"
+
+
+def refuse_unaffordable(cost: ModelCost, *, memory_limit: int | None = None) -> None:
+    """Refuse, before any work, an A whose assembly is estimated not to fit in memory.
+
+    Parameters
+    ----------
+    cost : ModelCost
+        The scene's estimate (:func:`model_cost`).
+    memory_limit : int, optional
+        Bytes A may use; default half the memory available now.
+
+    Raises
+    ------
+    ResourceError
+        Naming the estimate, the entries of A and the limit, and what to reduce. (The exact count of A's
+        entries, which assembly makes first, is checked again: :func:`analytic.operator.system.count_entries`.)
+    """
+    limit = available_memory() // 2 if memory_limit is None else memory_limit
+    if cost.memory > limit:
+        raise ResourceError(f"sampling: the system matrix would take about {cost.memory / 2**30:.3g} GiB while it "
+                            f"is assembled ({cost.entries:.3g} entries of A estimated), over the "
+                            f"{limit / 2**30:.3g} GiB limit; use fewer sensors or scan points, fewer pixels or fewer "
+                            f"bins (sampling.count / period)")

@@ -63,11 +63,16 @@ tolerance (each entry's relative error 2 to 4 times below it from 1e-2 to
 tolerance is faster.
 
 Assembly (geometry -> entries) runs once, compiled and in parallel over
-blocks of pixels (all pairs of a pixel together, blocks dealt across the
-image so that the threads stay balanced), straight into CSR
-(:mod:`analytic.kernels.assembly`); the result is a SciPy sparse matrix to apply,
-transpose and slice. Its memory is proportional to nnz(A), which is counted
-exactly, per block and row, before anything of that size is allocated.
+blocks of pixels x chunks of pairs (:mod:`analytic.operator.blocks`: each
+short, so that Ctrl-C stops it within about a second), straight into CSR
+(:mod:`analytic.kernels.assembly`): a counting pass, a filling pass, then the
+general routes on the (pixel, pair)s the fill left
+(:mod:`analytic.operator.general_routes`, a bounded batch at a time); the
+result is a SciPy sparse matrix to apply, transpose and slice. Its memory is
+proportional to nnz(A), counted exactly, per block and row, before anything
+of that size is allocated, and estimated before any work on a large scene
+(:func:`analytic.operator.blocks.assembly_bytes`: A, its row pointers and
+counts and a bounded working set).
 """
 
 from __future__ import annotations
@@ -83,13 +88,12 @@ from ..errors import ResourceError
 from ..geometry import PointPairs, Rectangle, pair_table
 from ..kernels import assembly
 from ..kernels.assembly import Assembly, ImageGrid, Jobs, Slots, StepAssembly, auto_entries, pair_frame_of, pixel_box
-from ..kernels.cache import compiled
 from ..kernels.isochrone import rectangle_range
-from ..kernels.quadrature import nested_integral_arguments, pixel_isochrone_integral
 from ..kernels import routes
 from ..kernels.routes import SAFETY, Route, TimeAxis, make_scratch, pixel_bins
-from .blocks import run_blocks, thread_count
-from .cost import may_be_impractical, refuse_impractical_illumination
+from .blocks import ROUTE_SLOTS, Layout, assembly_bytes, assembly_layout, index_bytes, run_blocks
+from .general_routes import left_pairs, progress_bar, run_left, run_route
+from .cost import may_be_impractical, model_cost, refuse_impractical_illumination, refuse_unaffordable
 from ..resources import available_memory
 from ..scenes.common import MAX_TOLERANCE, MIN_TOLERANCE, Sampling, Scene, check_heights, check_tolerance
 from ..waveforms import Waveform, make_waveform
@@ -103,8 +107,9 @@ __all__ = ["system_matrix", "rectangle_matrix", "forward", "count_entries", "che
 # longer converges: on the default scene 1e-11 takes about 10 times the time
 # of 1e-6 with ~500 such pieces, 1e-12 about 60 times with ~5000, and 1e-300
 # would refine every piece to its limit.
-_BLOCKS_PER_THREAD = 16  # blocks of pixels per thread (pulled by the threads as they finish the last)
-_COUNTS_BYTES = 2**28    # at most this much (and an eighth of the memory limit) for the blocks' counts per row
+#: (pixel, pair)s above which :func:`system_matrix` refuses, before counting, an A estimated not to fit in memory
+#: (:func:`analytic.operator.cost.refuse_unaffordable`; below, the exact count takes less than the estimate).
+_ESTIMATED_FROM = 2**20
 
 #: Quadrature routes :func:`pair_entries` can be asked for ("auto": what assembly does).
 METHODS = ("auto", "smooth", "isochrone", "adaptive", "strip")
@@ -145,45 +150,31 @@ def _record(problem: _Problem, rtol: float, *, first_pass: bool = False) -> Asse
                 problem.scales)
 
 
-def _block_bounds(columns: int, blocks: int) -> np.ndarray:
-    """(B + 1,) int64 column bounds of B contiguous blocks of pixels, as even as integers allow."""
-    return (np.arange(blocks + 1, dtype=np.int64) * columns) // blocks
-
-
-def _index_bytes(limit: int) -> int:
-    return 4 if limit < 2**31 else 8
-
-
 def _gib(size: float) -> str:
     return f"{size / 2**30:.3g} GiB"
 
 
-class _Layout(NamedTuple):
-    """How assembly splits A's columns: B contiguous blocks of pixels, one job each, and its thread count."""
-
-    bounds: np.ndarray      # (B + 1,) int64 column bounds
-    threads: int
+def _layout(problem: _Problem, limit: int) -> Layout:
+    return assembly_layout(len(problem.pairs), problem.axis.count, problem.grid.pixels, limit)
 
 
-def _layout(problem: _Problem, limit: int) -> _Layout:
-    """About _BLOCKS_PER_THREAD blocks per thread, fewer where their counts per row would take much memory."""
-    threads = thread_count()
-    rows = max(len(problem.pairs) * problem.axis.count, 1)
-    affordable = min(limit // 8, _COUNTS_BYTES) // (8 * rows)
-    blocks = max(1, min(_BLOCKS_PER_THREAD * threads, affordable, problem.grid.pixels ** 2))
-    return _Layout(_block_bounds(problem.grid.pixels ** 2, blocks), threads)
+def _check_columns(pixels: int, needed: int, limit: int) -> None:
+    """Refuse pixels whose column counts alone would not fit in ``limit`` (``needed``: the counts' bytes)."""
+    if pixels ** 2 * 8 > limit:
+        raise ResourceError(f"plane.pixels: {pixels}² pixels need {_gib(needed)} just to index "
+                            f"A's columns, over the {_gib(limit)} limit; use fewer pixels")
 
 
-def _check_layout(problem: _Problem, layout: _Layout, limit: int) -> None:
+def _check_layout(problem: _Problem, layout: Layout, limit: int) -> None:
     """Refuse, before allocating anything, what the column counts and the row pointers alone cannot fit."""
     pixels = problem.grid.pixels
     columns = pixels ** 2
     rows = len(problem.pairs) * problem.axis.count
-    # counting: per-column non-zeros and each block's count per row (its slots later, in place); the rows' pointers
-    needed = columns * 8 + (len(layout.bounds) - 1) * rows * 8 + (rows + 1) * 8
-    if columns * 8 > limit:
-        raise ResourceError(f"plane.pixels: {pixels}² pixels need {_gib(needed)} just to index "
-                            f"A's columns, over the {_gib(limit)} limit; use fewer pixels")
+    # counting: per-column non-zeros (a copy per pair chunk) and each block of pixels' count per row
+    # (its slots later, in place); the rows' pointers
+    chunks = len(layout.pair_bounds) - 1
+    needed = chunks * columns * 8 + layout.pixel_blocks * rows * 8 + (rows + 1) * 8
+    _check_columns(pixels, needed, limit)
     if needed > limit:
         raise ResourceError(f"sampling.count: {len(problem.pairs)} sensors x {problem.axis.count:,} "
                             f"bins need {_gib(needed)} just to index A's rows, over the {_gib(limit)} "
@@ -194,40 +185,55 @@ class _Counts(NamedTuple):
     """What the counting pass found."""
 
     per_pixel: np.ndarray   # (M²,) entries of each column
-    per_block: np.ndarray   # (B, rows) entries of each block's pixels in each row
-    widest: np.ndarray      # (B,) most bins of one (pixel, pair) in each block
+    per_block: np.ndarray   # (B, rows) entries of each block of pixels in each row
+    widest: np.ndarray      # (blocks,) most bins of one (pixel, pair) in each block
 
 
 def _limit(memory_limit: int | None) -> int:
     return memory_limit if memory_limit is not None else available_memory() // 2
 
 
-def _count(problem: _Problem, layout: _Layout, limit: int) -> _Counts:
+def _chunk_records(record, layout: Layout) -> list:
+    """The record of each chunk of pairs: its pairs and scales (views), so that a block's kernels see only
+    its pairs (their frames are built per block) and write only its rows."""
+    bounds = layout.pair_bounds
+    return [record._replace(pairs=record.pairs[bounds[c]:bounds[c + 1]], scales=record.scales[bounds[c]:bounds[c + 1]])
+            for c in range(len(bounds) - 1)]
+
+
+def _count(problem: _Problem, layout: Layout, limit: int, *, progress: bool = False) -> _Counts:
     """Count every block's entries in every row, refusing what would not fit in ``limit`` bytes."""
     _check_layout(problem, layout, limit)
     columns = problem.grid.pixels ** 2
-    rows = len(problem.pairs) * problem.axis.count
-    blocks = len(layout.bounds) - 1
-    per_pixel = np.empty(columns, dtype=np.int64)
-    per_block = np.zeros((blocks, rows), dtype=np.int64)
-    record = _record(problem, 0.0)
-    bounds = layout.bounds
-    widest = run_blocks(assembly.count_block, lambda b: (record, bounds[b], bounds[b + 1], per_pixel, per_block[b]),
-                        blocks, threads=layout.threads)
-    counts = _Counts(per_pixel, per_block, np.asarray(widest, dtype=np.int64))
+    bins = problem.axis.count
+    rows = len(problem.pairs) * bins
+    chunks = len(layout.pair_bounds) - 1
+    per_pixel = np.empty((chunks, columns), dtype=np.int64)
+    per_block = np.zeros((layout.pixel_blocks, rows), dtype=np.int64)
+    records = _chunk_records(_record(problem, 0.0), layout)
+
+    def arguments(b):
+        i, begin, end, first, last = layout.block(b)
+        return records[b // layout.pixel_blocks], begin, end, per_pixel[b // layout.pixel_blocks], \
+            per_block[i, first * bins:last * bins]
+
+    bar = progress_bar(progress, layout.combinations().sum(), "counting A's entries", "pixel-pair")
+    try:
+        widest = run_blocks(assembly.count_block, arguments, layout.blocks, threads=layout.threads, bar=bar,
+                            weights=layout.combinations())
+    finally:
+        if bar is not None:
+            bar.close()
+    counts = _Counts(per_pixel.sum(axis=0) if chunks > 1 else per_pixel[0], per_block,
+                     np.asarray(widest, dtype=np.int64))
     nnz = int(counts.per_pixel.sum())
-    needed = _matrix_bytes(nnz, columns, rows, len(layout.bounds) - 1)
+    needed = assembly_bytes(nnz, len(problem.pairs), bins, problem.grid.pixels, layout,
+                            widest=int(np.max(counts.widest, initial=0)))
     if needed > limit:
         raise ResourceError(f"sampling: the system matrix would hold {nnz:,} entries "
                             f"({_gib(needed)} while it is assembled), over the {_gib(limit)} limit; "
                             f"use fewer bins (sampling.count / period) or fewer pixels")
     return counts
-
-
-def _matrix_bytes(nnz: int, columns: int, rows: int, blocks: int) -> int:
-    """Peak bytes of assembly: A in CSR (data + index, written in place) and the counts that place it."""
-    index = _index_bytes(max(nnz, rows, columns))
-    return nnz * (8 + index) + (rows + 1) * 8 + columns * 8 + blocks * rows * 8
 
 
 def count_entries(scene: Scene, *, memory_limit: int | None = None) -> np.ndarray:
@@ -295,7 +301,8 @@ def system_matrix(scene: Scene, *, tolerance: float | None = None, memory_limit:
         make A take impractically long (:func:`analytic.operator.cost.impractical_illumination`:
         the estimate and what to change), as every command refuses it.
     ResourceError
-        An A that does not fit in memory (the need and the limit named).
+        An A that does not fit in memory (the need and the limit named): estimated before any work on a
+        large scene, and after the exact count of its entries on every scene.
 
     Warns
     -----
@@ -311,6 +318,9 @@ def system_matrix(scene: Scene, *, tolerance: float | None = None, memory_limit:
     waveform = make_waveform(scene.illumination, scene.sampling.bin_width_opl)
     if may_be_impractical(waveform, scene.sampling):
         refuse_impractical_illumination(scene)      # as every command does, before any work
+    if scene.sensor_count * scene.pixels ** 2 > _ESTIMATED_FROM:
+        _check_columns(scene.pixels, 8 * scene.pixels ** 2, _limit(memory_limit))
+        refuse_unaffordable(model_cost(scene, memory_limit=memory_limit), memory_limit=memory_limit)
     rectangle, pairs = scene.geometry()
     return rectangle_matrix(rectangle, pairs, scene.sampling, waveform, statistics=statistics, tolerance=tolerance,
                             memory_limit=memory_limit, progress=progress)
@@ -349,10 +359,12 @@ def rectangle_matrix(rectangle: Rectangle, pairs: PointPairs, sampling: Sampling
     problem = _problem(rectangle, pairs, sampling, waveform)
     limit = _limit(memory_limit)
     layout = _layout(problem, limit)
-    counts = _count(problem, layout, limit)
-    rows = len(pairs) * sampling.count
+    counts = _count(problem, layout, limit, progress=progress)
+    bins = sampling.count
+    rows = len(pairs) * bins
     columns = rectangle.pixels ** 2
-    # each block's first slot in each row: the row's start and the earlier blocks' entries there, in place
+    # each block of pixels' first slot in each row: the row's start and the earlier blocks' entries there,
+    # in place; as the blocks fill, each moves to its end (the next block's start)
     cursors = np.cumsum(counts.per_block, axis=0, out=counts.per_block)
     indptr = np.zeros(rows + 1, dtype=np.int64)
     indptr[1:] = cursors[-1]
@@ -362,117 +374,61 @@ def rectangle_matrix(rectangle: Rectangle, pairs: PointPairs, sampling: Sampling
         cursors[block] = cursors[block - 1]
     cursors[0] = 0
     cursors += indptr[:-1]
-    index_type = np.int32 if _index_bytes(max(nnz, rows, columns)) == 4 else np.int64
+    index_type = np.int32 if index_bytes(nnz, rows, columns) == 4 else np.int64
     indices = np.empty(nnz, dtype=index_type)
     data = np.empty(nnz, dtype=np.float64)
-    record = _record(problem, SAFETY * tolerance, first_pass=True)
-    bounds, widest = layout.bounds, counts.widest
-    bar = None
-    if progress:
-        from tqdm import tqdm
-        bar = tqdm(total=columns, desc="system matrix", unit="pixel", leave=False)
+    records = _chunk_records(_record(problem, SAFETY * tolerance, first_pass=True), layout)
+    widest = counts.widest
+
+    def arguments(b):
+        i, begin, end, first, last = layout.block(b)
+        return (records[b // layout.pixel_blocks], begin, end, widest[b],
+                Slots(cursors[i, first * bins:last * bins], indices, data))
+
+    bar = progress_bar(progress, layout.combinations().sum(), "system matrix", "pixel-pair")
     try:
-        totals = run_blocks(assembly.fill_block,
-                            lambda b: (record, bounds[b], bounds[b + 1], widest[b], Slots(cursors[b], indices, data)),
-                            len(bounds) - 1, threads=layout.threads, bar=bar, weights=np.diff(bounds))
-        failures, served, reached, left = (int(total) for total in np.sum(totals, axis=0))
-        if left:
-            more_failures, more_served = _left_pairs(_record(problem, SAFETY * tolerance), data, indices, indptr,
-                                                     sampling.count, layout.threads)
-            failures += more_failures
-            served += more_served
+        totals = np.array(run_blocks(assembly.fill_block, arguments, layout.blocks, threads=layout.threads, bar=bar,
+                                     weights=layout.combinations()), dtype=np.int64).reshape(-1, 4)
     finally:
         if bar is not None:
             bar.close()
+    failures, served, reached, left = (int(total) for total in totals.sum(axis=0))
+    if left:
+        more_failures, more_served = left_pairs(_record(problem, SAFETY * tolerance), layout, totals[:, 3],
+                                                 cursors, indptr, indices, data, bins, progress=progress)
+        failures += more_failures
+        served += more_served
+    del counts, cursors         # before the row pointers' copy and A's zeros: the peak stays the fill's
     if statistics is not None:
         statistics.update(pairs=reached, smooth_pairs=served)
     if failures:
         warnings.warn(f"{failures} quadrature pieces stopped refining before reaching "
                       f"tolerance {tolerance:g}", QuadratureWarning, stacklevel=2)
-    matrix = scipy.sparse.csr_array((data, indices, indptr.astype(index_type)), shape=(rows, columns))
-    matrix.eliminate_zeros()
-    return matrix
+    nnz = _drop_zeros(data, indices, indptr)
+    return scipy.sparse.csr_array((data[:nnz], indices[:nnz], indptr.astype(index_type, copy=False)),
+                                  shape=(rows, columns))
 
 
-#: Jobs per block of the general routes (each a cut pixel's quadrature: about a millisecond or more).
-_JOBS_PER_BLOCK = 64
-
-
-def _left_jobs(data: np.ndarray, indices: np.ndarray, indptr: np.ndarray, bins: int) -> Jobs:
-    """The (pair, pixel)s the first pass left (NaN in their slots), each with its slots in bin order."""
-    slots = np.flatnonzero(np.isnan(data))
-    rows = np.searchsorted(indptr, slots, side="right") - 1
-    pairs, bin_index, pixels = rows // bins, rows % bins, indices[slots].astype(np.int64)
-    order = np.lexsort((bin_index, pixels, pairs))
-    slots, pairs, bin_index, pixels = slots[order], pairs[order], bin_index[order], pixels[order]
-    starts = np.flatnonzero(np.concatenate([[True], (pairs[1:] != pairs[:-1]) | (pixels[1:] != pixels[:-1])]))
-    offsets = np.append(starts, slots.size).astype(np.int64)
-    return Jobs(pairs[starts].astype(np.int64), pixels[starts], bin_index[starts].astype(np.int64), offsets,
-                slots.astype(np.int64), np.empty(starts.size), np.empty(starts.size))
-
-
-def _subset(jobs: Jobs, chosen: np.ndarray) -> Jobs:
-    """The jobs where ``chosen`` is True, with their slots."""
-    index = np.flatnonzero(chosen)
-    lengths = np.diff(jobs.offsets)[index]
-    offsets = np.concatenate([[0], np.cumsum(lengths)]).astype(np.int64)
-    slots = np.concatenate([jobs.slots[jobs.offsets[j]:jobs.offsets[j + 1]] for j in index]) if index.size \
-        else np.empty(0, dtype=np.int64)
-    return Jobs(jobs.pairs[index], jobs.pixels[index], jobs.firsts[index], offsets, slots.astype(np.int64),
-                jobs.lows[index], jobs.highs[index])
-
-
-def _compile_nested() -> None:
-    """The φ-integrals that the cut routes nest in their τ-integrals, compiled first (see
-    :func:`analytic.kernels.quadrature.nested_integral_arguments`)."""
-    compiled(pixel_isochrone_integral, *nested_integral_arguments())
-
-
-def _left_pairs(record: Assembly, data: np.ndarray, indices: np.ndarray, indptr: np.ndarray, bins: int,
-                threads: int) -> tuple[int, int]:
-    """The general routes on the pairs the first pass left, one route at a time; (pieces failed, served smooth).
-
-    Their kernel is compiled (or loaded) only when some pair is left (:mod:`analytic.kernels.assembly`); a
-    route that does not serve a pair leaves it to the next.
-    """
-    return _run_left(record, _left_jobs(data, indices, indptr, bins), data, threads)
-
-
-#: The general routes assembly runs, in order, on the pairs its first pass leaves.
-_GENERAL_ROUTES = (Route(routes.DIRECT), Route(routes.STRIP), Route(routes.CUT))
-
-
-def _run_left(record: Assembly, jobs: Jobs, data: np.ndarray, threads: int) -> tuple[int, int]:
-    """:data:`_GENERAL_ROUTES` on ``jobs``, each trying those the one before did not serve; (failures, smooth)."""
-    flags = np.zeros(jobs.pairs.size, dtype=np.int64)
-    compiled(assembly.job_routes, record, jobs, flags)(record, jobs, flags)
-    waiting = np.ones(jobs.pairs.size, dtype=bool)
-    failures, smooth = 0, 0
-    for route, applies in zip(_GENERAL_ROUTES, (flags & assembly.DIRECT_APPLIES > 0,
-                                                flags & assembly.STRIPS_APPLY > 0, None)):
-        chosen = waiting if applies is None else waiting & applies
-        if not np.any(chosen):
-            continue
-        batch = _subset(jobs, chosen)
-        outcomes, more = _run_route(route, record, batch, data, threads)
-        failures += more
-        served = outcomes == routes.SERVED
-        if route.code == routes.DIRECT:
-            smooth += int(served.sum())
-        waiting[np.flatnonzero(chosen)[served]] = False
-    return failures, smooth
-
-
-def _run_route(route: Route, record: Assembly, jobs: Jobs, data: np.ndarray, threads: int):
-    """(outcomes, pieces failed) of one route on every job, in blocks on ``threads`` threads."""
-    _compile_nested()
-    outcomes = np.zeros(jobs.pairs.size, dtype=np.int64)
-    count = jobs.pairs.size
-    blocks = max(1, -(-count // _JOBS_PER_BLOCK))
-    failures = run_blocks(assembly.run_jobs, lambda b: (route, record, jobs, b * count // blocks,
-                                                        (b + 1) * count // blocks, data, outcomes),
-                          blocks, threads=threads)
-    return outcomes, int(sum(failures))
+def _drop_zeros(data: np.ndarray, indices: np.ndarray, indptr: np.ndarray) -> int:
+    """A's exact zeros removed in place, a window of rows at a time (no copy of A, as SciPy's
+    ``eliminate_zeros`` makes when it drops half); the entries left, first in ``data`` and ``indices``."""
+    if np.count_nonzero(data) == data.size:
+        return data.size
+    rows = indptr.size - 1
+    kept, read, row = 0, 0, 0        # entries kept so far; where the window's entries start; its first row
+    while row < rows:
+        stop = max(row + 1, int(np.searchsorted(indptr[row + 1:], read + ROUTE_SLOTS, side="right")) + row)
+        stop = min(stop, rows)
+        end = int(indptr[stop])
+        keep = data[read:end] != 0.0
+        ends = np.cumsum(keep)[indptr[row + 1:stop + 1] - read - 1] if end > read else np.zeros(stop - row, np.int64)
+        ends[indptr[row + 1:stop + 1] == read] = 0      # rows before the window's first entry keep none
+        count = int(np.count_nonzero(keep))
+        data[kept:kept + count] = data[read:end][keep]
+        indices[kept:kept + count] = indices[read:end][keep]
+        indptr[row + 1:stop + 1] = kept + ends
+        kept, read, row = kept + count, end, stop
+    return kept
 
 
 def pair_entries(scene: Scene, sensor: int, pixel: int, *, method: str = "auto",
@@ -548,12 +504,12 @@ def pair_entries(scene: Scene, sensor: int, pixel: int, *, method: str = "auto",
             jobs = jobs._replace(firsts=np.array([run.first]), offsets=np.array([0, run.bins]),
                                  slots=np.arange(run.bins), lows=np.array([column.low]),
                                  highs=np.array([column.high]))
-            failures += _run_left(record, jobs, data, 1)[0]
+            failures += run_left(record, jobs, data, 1)[0]
     elif run.bins > 0:
         code, arcs = {"smooth": (routes.MOMENTS if taylor else routes.DIRECT, routes.AUTO_ARCS),
                       "strip": (routes.STRIP, routes.AUTO_ARCS), "isochrone": (routes.CUT, routes.SMOOTH_ARCS),
                       "adaptive": (routes.CUT, routes.ADAPTIVE_ARCS)}[method]
-        outcomes, failures = _run_route(Route(code, arcs, bool(taylor)), record, jobs, data, 1)
+        outcomes, failures = run_route(Route(code, arcs, bool(taylor)), record, jobs, data, 1)
         if outcomes[0] == routes.DOES_NOT_APPLY:
             raise ValueError(f"the {method} rule does not apply to pixel {pixel}, sensor {sensor}: "
                              + ("x* or a foot is near" if method == "strip" else

@@ -7,7 +7,7 @@ import warnings
 from pathlib import Path
 
 from .common import (UsageError, add_quiet, add_window_option, announce_window, apply_window, check_samples_type,
-                     load_scene_argument, release_warnings, seed_type, show_progress)
+                     load_scene_argument, refuse_unmodellable, release_warnings, seed_type, show_progress)
 from .counts import RENDER_STREAM, draw_scene_counts, refuse_unreachable_counts, write_counts
 from .reconstruct import add_lambda_options, information_text
 
@@ -58,7 +58,6 @@ def command_validate(args) -> int:
     ``--spp``, say) names that scene. Each scene's figures are in a folder
     named by :func:`validation.runs.report.scene_folder_names`.
     """
-    from analytic.operator.cost import refuse_impractical_illumination
     from analytic.errors import UserError
     from analytic.files import output_folder, staged_writes
     from analytic.operator.window import window_share
@@ -76,7 +75,7 @@ def command_validate(args) -> int:
     for (scene, spp), label in zip(suite, labels):    # a scene with no light is refused before any render
         shares.append(window_share(scene))
         try:
-            refuse_impractical_illumination(scene)
+            refuse_unmodellable(scene)
             refuse_dark(scene, shares[-1])
         except UserError as error:
             raise _named(error, f"{label} at {spp:,} samples") from None
@@ -135,7 +134,6 @@ def command_run(args) -> int:
     figures lie beside report.md in ``--out`` (one scene: no folder of its
     own; :mod:`validation.runs.report`).
     """
-    from analytic.operator.cost import refuse_impractical_illumination
     from analytic.operator.window import window_share
     from validation.runs.harness import data_driven_rule, imaging_problem, refuse_dark
     from validation.plots.worker import FigureWorker
@@ -151,7 +149,8 @@ def command_run(args) -> int:
             raise UsageError(f"--lambda: run does not reconstruct this scene ({unimageable}); leave out "
                              f"--lambda, --lambda-range and --lambda-count")
         grid = lambda_grid_of(args)
-        refuse_impractical_illumination(scene)    # a response the model cannot cover in reasonable time
+        refuse_unmodellable(scene)                # a response the model cannot cover in reasonable time, or
+                                                  # an A beyond memory
         refuse_unreachable_counts(scene)          # before the model and render, not after them
         share = window_share(scene)
         refuse_dark(scene, share)                 # nothing to judge: one line, not a warning and then an error

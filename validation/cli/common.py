@@ -18,7 +18,10 @@ from analytic.errors import OptionError
 __all__ = ["UsageError", "OneLineParser", "seed_type", "samples_type", "positive_float_type",
            "load_scene_argument", "show_progress", "MAX_SAMPLES", "add_quiet",
            "check_samples_type", "add_window_option", "apply_window", "announce_window", "release_warnings",
-           "rows_text"]
+           "rows_text", "refuse_unmodellable", "announce_model", "ANNOUNCED_SECONDS"]
+
+#: A model estimated to take longer than this is announced (its time and memory) before it starts.
+ANNOUNCED_SECONDS = 2.0
 
 #: Most samples a render may be asked for: 2^44, about two days at 1e8 samples/s.
 MAX_SAMPLES = 2**44
@@ -111,6 +114,26 @@ def load_scene_argument(path: str | None):
 def rows_text(scene) -> str:
     """A transient's rows in words: "16 sensors", or "64 pairs (confocal scan)" of a relay-wall capture."""
     return scene.describe()
+
+
+def refuse_unmodellable(scene):
+    """The scene's model estimate (:class:`analytic.operator.cost.ModelCost`), or a refusal in one line: an
+    illumination that makes A impractical, or an A whose assembly would not fit in memory."""
+    from analytic.operator.cost import refuse_impractical_illumination, refuse_unaffordable
+
+    cost = refuse_impractical_illumination(scene)
+    refuse_unaffordable(cost)
+    return cost
+
+
+def announce_model(args, cost, what: str) -> None:
+    """One line on stderr before a model estimated to take more than :data:`ANNOUNCED_SECONDS` (not with
+    ``--quiet``): ``diffuse-imaging: <what>: about T s and M GiB (estimate)``. Called once the command's inputs
+    are accepted, so that a refused command's stderr is its one error line."""
+    from analytic.operator.cost import estimate_text
+
+    if not getattr(args, "quiet", False) and cost.seconds > ANNOUNCED_SECONDS:
+        print(f"diffuse-imaging: {what}: {estimate_text(cost)} (estimate)", file=sys.stderr, flush=True)
 
 
 def show_progress(args) -> bool:

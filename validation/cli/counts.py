@@ -26,7 +26,7 @@ from pathlib import Path
 
 from analytic.waveforms.builders import WAVEFORMS, own_keys
 
-from .common import UsageError
+from .common import UsageError, refuse_unmodellable
 
 __all__ = ["COUNTS_FILES", "COUNTS_CAPTURE", "COUNTS_FIGURE", "draw_scene_counts", "refuse_unreachable_counts", "RENDER_STREAM", "write_counts",
            "write_render_counts",
@@ -317,7 +317,6 @@ def command_check_counts(args, scene) -> int:
     """
     import numpy as np
 
-    from analytic.operator.cost import refuse_impractical_illumination
     from analytic.measurement.detector import expected_counts
     from analytic.files import json_ready, output_folder, save_json, staged_writes
     from analytic.operator.system import forward
@@ -328,7 +327,7 @@ def command_check_counts(args, scene) -> int:
     from .common import announce_window
 
     names = check_counts_options(args, scene)
-    refuse_impractical_illumination(scene)
+    refuse_unmodellable(scene)
     counts = _read_counts(args.data[0], scene)
     detector = scene.detector
     alpha = DEFAULT_FALSE_ALARM if args.false_alarm is None else args.false_alarm

@@ -8,7 +8,8 @@ import math
 import os
 from pathlib import Path
 
-from .common import UsageError, add_quiet, announce_window, load_scene_argument, positive_float_type
+from .common import (UsageError, add_quiet, announce_window, load_scene_argument, positive_float_type,
+                     refuse_unmodellable)
 from .counts import add_counts_options, check_counts_options, command_check_counts
 
 __all__ = ["add_commands", "command_check", "command_export"]
@@ -36,7 +37,6 @@ def command_check(args) -> int:
     the function under ``validation.check_transient`` and
     ``validation.assert_agrees``, with the command line's words in its messages.
     """
-    from analytic.operator.cost import refuse_impractical_illumination
     from analytic.files import output_folder
     from validation.check import write_check_report
     from validation.check.inputs import COMMAND_WORDS
@@ -51,7 +51,7 @@ def command_check(args) -> int:
                          "spread is their error")
     if args.shape_only and (args.stderr is not None or len(args.data) > 1):
         raise UsageError("--shape-only: only for one --data file without --stderr")
-    refuse_impractical_illumination(scene)      # before the data are read: the model is what takes long
+    refuse_unmodellable(scene)      # before the data are read: the model is what takes long
     data = args.data[0] if len(args.data) == 1 else list(args.data)
     result = judge(scene, data, stderr=args.stderr, shape_only=args.shape_only, expect=_stated(args),
                    radius=args.radius, words=COMMAND_WORDS)

@@ -5,8 +5,8 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from .common import (add_quiet, add_window_option, announce_window, apply_window, load_scene_argument,
-                     positive_float_type, rows_text, show_progress)
+from .common import (add_quiet, add_window_option, announce_model, announce_window, apply_window,
+                     load_scene_argument, positive_float_type, refuse_unmodellable, rows_text, show_progress)
 from .counts import draw_scene_counts, refuse_unreachable_counts, write_counts
 
 __all__ = ["add_commands", "command_forward", "model_title"]
@@ -30,7 +30,6 @@ def command_forward(args) -> int:
 
 
 def _forward(args, scene, drawer) -> int:
-    from analytic.operator.cost import refuse_impractical_illumination
     from analytic.files import build_meta, output_folder, staged_writes, write_transient
     from analytic.measurement.noise import add_noise
     from analytic.operator.system import forward, system_matrix
@@ -39,9 +38,10 @@ def _forward(args, scene, drawer) -> int:
     scene = apply_window(args, scene)
     if args.tolerance is not None:
         scene = scene.replace(tolerance=args.tolerance)
-    refuse_impractical_illumination(scene)           # a response the model cannot cover in reasonable time
-    refuse_unreachable_counts(scene, margin=1.0)     # before the window's warning: a refusal is one line
+    cost = refuse_unmodellable(scene)                # a response the model cannot cover in reasonable time,
+    refuse_unreachable_counts(scene, margin=1.0)     # an A beyond memory; before the window's warning
     with output_folder(args.out) as out:
+        announce_model(args, cost, "forward")        # first: the window's share may take a model of its own
         share = announce_window(args, scene)
         started = time.perf_counter()
         matrix = system_matrix(scene, progress=show_progress(args))

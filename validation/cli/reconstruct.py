@@ -8,8 +8,8 @@ import warnings
 
 import numpy as np
 
-from .common import (UsageError, add_quiet, load_scene_argument, positive_float_type, release_warnings,
-                     rows_text, show_progress)
+from .common import (UsageError, add_quiet, announce_model, load_scene_argument, positive_float_type,
+                     refuse_unmodellable, release_warnings, rows_text, show_progress)
 
 __all__ = ["add_commands", "command_reconstruct", "command_reproduce", "lambda_argument", "lambda_grid_of",
            "add_lambda_options"]
@@ -63,7 +63,6 @@ def add_lambda_options(parser, *, default: str) -> None:
 
 def command_reconstruct(args) -> int:
     """Reconstruct the scene's image from a transient; write images, metrics, figures, report."""
-    from analytic.operator.cost import refuse_impractical_illumination
     from analytic.errors import SceneError
     from analytic.files import (PrecisionWarning, discard, float32_problem, output_folder, reading_folder,
                              save_exr, save_json, save_npy, save_png_image, staged_writes)
@@ -74,7 +73,7 @@ def command_reconstruct(args) -> int:
     from validation.runs.report import write_markdown
 
     scene = load_scene_argument(args.scene)
-    refuse_impractical_illumination(scene)
+    cost = refuse_unmodellable(scene)
     rule, sigma = data_driven_rule(scene, args.rule)
     known_sigma = noise_sigma(scene)       # counts what the data fix at their noise, whatever the rule
     if args.regularizer == "tv":
@@ -91,6 +90,7 @@ def command_reconstruct(args) -> int:
         data = _read_data(args.data, scene)
     release_warnings()                                   # the inputs are accepted: what they warned of first
     with output_folder(args.out) as out:
+        announce_model(args, cost, "reconstruct")
         assembly_started = time.perf_counter()
         matrix = system_matrix(scene, progress=show_progress(args))
         assembly = time.perf_counter() - assembly_started

@@ -84,7 +84,7 @@ import numpy as np
 import scipy.sparse
 
 from ..attenuation import attenuation_code
-from ..errors import ResourceError
+from ..errors import OptionError, ResourceError
 from ..geometry import PointPairs, Rectangle, pair_table
 from ..kernels import assembly
 from ..kernels.assembly import Assembly, ImageGrid, Jobs, Slots, StepAssembly, auto_entries, pair_frame_of, pixel_box
@@ -95,6 +95,7 @@ from .blocks import ROUTE_SLOTS, Layout, assembly_bytes, assembly_layout, index_
 from .general_routes import left_pairs, progress_bar, run_left, run_route
 from .cost import may_be_impractical, model_cost, refuse_impractical_illumination, refuse_unaffordable
 from ..resources import available_memory
+from ..scenes.scene_file import scene_of
 from ..scenes.common import MAX_TOLERANCE, MIN_TOLERANCE, Sampling, Scene, check_heights, check_tolerance
 from ..waveforms import Waveform, make_waveform
 
@@ -270,8 +271,9 @@ def system_matrix(scene: Scene, *, tolerance: float | None = None, memory_limit:
 
     Parameters
     ----------
-    scene : Scene
-        Geometry, sampling, illumination and attenuation.
+    scene : Scene, RelayWallScene, str or Path
+        Geometry, sampling, illumination and attenuation; or the scene's file (TOML, or a tal YAML
+        configuration).
     tolerance : float, optional
         Relative accuracy of every entry (hence relative to its row's largest
         entry), in [MIN_TOLERANCE, MAX_TOLERANCE). Default: ``scene.tolerance``
@@ -314,6 +316,7 @@ def system_matrix(scene: Scene, *, tolerance: float | None = None, memory_limit:
     y = A f with f = ``image.ravel()`` gives y_k[n] = ∫ (g_k * s)(t) dt over
     bin n, with g_k(t) = ∫ f a_k δ(t - d_k) dx (docs/design.md section 2).
     """
+    scene = scene_of(scene)
     tolerance = check_tolerance(scene.tolerance if tolerance is None else tolerance)
     waveform = make_waveform(scene.illumination, scene.sampling.bin_width_opl)
     if may_be_impractical(waveform, scene.sampling):
@@ -527,17 +530,24 @@ def forward(scene: Scene, matrix=None) -> np.ndarray:
 
     Parameters
     ----------
-    scene : Scene
-        The scene (its reflectance image is f).
+    scene : Scene, RelayWallScene, str or Path
+        The scene (its reflectance image is f), or its file (TOML, or a tal YAML configuration).
     matrix : sparse matrix, optional
-        A, if already assembled.
+        A, if already assembled for this scene (``(K N, M^2)``).
 
     Returns
     -------
     numpy.ndarray
         ``(K, N)`` float64.
     """
+    scene = scene_of(scene)
     if matrix is None:
         matrix = system_matrix(scene)
-    y = matrix @ scene.reflectance.ravel()
-    return y.reshape(scene.sensor_count, scene.sampling.count)
+    f = scene.reflectance.ravel()
+    rows = scene.sensor_count * scene.sampling.count
+    if getattr(matrix, "shape", None) != (rows, f.size):
+        raise OptionError(f"matrix: shape {getattr(matrix, 'shape', type(matrix).__name__)} is not this scene's "
+                          f"A, ({rows}, {f.size}) (sensors x bins, pixels); give the matrix system_matrix made "
+                          f"for it, or none")
+    y = matrix @ f
+    return np.asarray(y, dtype=np.float64).reshape(scene.sensor_count, scene.sampling.count)

@@ -33,8 +33,8 @@ from ..measurement.detector import Detector
 from ..errors import SceneError
 from ..geometry import ATTENUATIONS, plane_geometry
 from .kinds import register_scene_kind
-from .limits import (MAX_TOLERANCE, MIN_HEIGHT_FRACTION, MIN_TOLERANCE, check_tolerance, minimum_height,
-                     scene_extent)
+from .limits import (MAX_INTENSITY, MAX_TOLERANCE, MIN_HEIGHT_FRACTION, MIN_INTENSITY, MIN_TOLERANCE,
+                     check_intensity, check_tolerance, minimum_height, scene_extent)
 from .reflectance import builtin_reflectance, reflectance_image
 from ..resources import require_memory
 from ..values import MAX_LENGTH, MIN_LENGTH, _integer, _number, exact
@@ -52,8 +52,6 @@ NOISE_KINDS = ("gaussian", "poisson")
 
 #: Largest Gaussian noise σ: m σ² (the discrepancy rule's target) stays finite.
 MAX_SIGMA = 1e150
-#: Largest source intensity, W/sr: y (and the squares the λ rules form) stay finite.
-MAX_INTENSITY = 1e30
 #: Most sensors a scene may have.
 MAX_SENSORS = 1024
 #: Relative resolution a bin edge needs in float64 (T against |t|).
@@ -388,11 +386,7 @@ class Scene:
         object.__setattr__(self, "reflectance", reflectance_image("plane.reflectance", self.reflectance, pixels))
         object.__setattr__(self, "source", _point("source.position", self.source))
         self.source.setflags(write=False)
-        intensity = _number("source.intensity", self.intensity, positive=True)
-        if intensity > MAX_INTENSITY:
-            raise SceneError("source.intensity", f"{exact(intensity)} W/sr is beyond the {MAX_INTENSITY:g} W/sr "
-                                                 f"supported (y and its squares must stay finite)")
-        object.__setattr__(self, "intensity", intensity)
+        object.__setattr__(self, "intensity", check_intensity("source.intensity", self.intensity))
         if not isinstance(self.sensors, np.ndarray) and not isinstance(self.sensors, (list, tuple)):
             raise SceneError("sensors.positions", f"expected a list of [x, y, z], got {self.sensors!r}")
         sensors = list(self.sensors)

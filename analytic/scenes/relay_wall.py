@@ -41,9 +41,10 @@ from ..geometry import PointPairs, Rectangle
 from ..resources import require_memory
 from .kinds import register_scene_kind
 from .reflectance import reflectance_image
-from .common import (MAX_INTENSITY, MAX_LENGTH, MIN_LENGTH, Illumination, Noise, Sampling, _choice, _integer, _number,
+from .common import (MAX_LENGTH, MIN_LENGTH, Illumination, Noise, Sampling, _choice, _integer, _number,
                     check_tolerance)
 from ..values import exact
+from .limits import check_intensity
 
 __all__ = ["RelayWallScene", "Scan", "SCAN_TYPES", "MAX_PAIRS", "grid_points", "check_edges",
            "default_relay_wall_scene"]
@@ -260,11 +261,7 @@ class RelayWallScene:
             vector = _vector(key, getattr(self, name), front=front)
             vector.setflags(write=False)
             object.__setattr__(self, name, vector)
-        intensity = _number("laser.intensity", self.intensity, positive=True)
-        if intensity > MAX_INTENSITY:
-            raise SceneError("laser.intensity", f"{exact(intensity)} W/sr is beyond the {MAX_INTENSITY:g} W/sr "
-                                                f"supported")
-        object.__setattr__(self, "intensity", intensity)
+        object.__setattr__(self, "intensity", check_intensity("laser.intensity", self.intensity))
         for name, kind in (("scan", Scan), ("illumination", Illumination), ("sampling", Sampling)):
             if not isinstance(getattr(self, name), kind):
                 raise SceneError(name, f"expected a {kind.__name__}")

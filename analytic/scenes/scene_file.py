@@ -21,13 +21,14 @@ from typing import Any
 import numpy as np
 
 from ..measurement.detector import Detector
-from ..errors import ImageError, SceneError
+from ..errors import ImageError, OptionError, SceneError
+from .kinds import is_scene
 from .reflectance import printable, read_reflectance, regular_file_problem
 from .common import (MAX_SENSORS, illumination_keys, Illumination, Noise, Sampling, Scene, _integer, _number,
                     _point, sensor_grid)
 from ..values import exact
 
-__all__ = ["load_scene", "read_toml", "scene_from_dict", "scene_to_tables", "MAX_FILE_BYTES"]
+__all__ = ["load_scene", "scene_of", "read_toml", "scene_from_dict", "scene_to_tables", "MAX_FILE_BYTES"]
 
 #: Largest scene or sweep file read, bytes: a TOML scene is a few hundred bytes,
 #: and a device such as /dev/zero must not be read until memory runs out.
@@ -449,3 +450,21 @@ def _toml_problem(error: tomllib.TOMLDecodeError, text: str) -> str:
         return (f"{place}: a carriage return without a line feed (old Mac line endings); save the "
                 f"file with LF or CRLF line endings")
     return f"{place}: {printable(reason)}; fix the TOML syntax there"
+
+
+def scene_of(scene):
+    """A scene object, loaded when given as a path (TOML or tal YAML, as ``check``'s SCENE).
+
+    Raises
+    ------
+    SceneError
+        A bad scene file.
+    OptionError
+        Neither a scene nor a path.
+    """
+    if is_scene(scene):
+        return scene
+    if isinstance(scene, (str, os.PathLike)):
+        return load_scene(scene)
+    raise OptionError(f"scene: expected a Scene, a RelayWallScene or a scene file's path (TOML or tal YAML), "
+                      f"got {type(scene).__name__}")

@@ -49,7 +49,7 @@ LEGAL_NUMBERS = {
     "plane.size": set(),
     "plane.pixels": set(),
     "plane.reflectance": {"zero", "negative_zero", "subnormal"},
-    "source.intensity": {"subnormal", "huge_integer"},
+    "source.intensity": {"huge_integer"},   # a subnormal intensity: y below float64's normal range (refused)
     "sampling.period": set(),
     "sampling.start": {"zero", "negative", "negative_zero", "subnormal"},
     "sampling.count": set(),

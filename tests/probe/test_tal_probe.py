@@ -514,10 +514,6 @@ def test_light_below_float64s_normal_range_is_no_traceback(tmp_path, monkeypatch
         assert (tmp_path / "out" / "transient.png").stat().st_size > 0
 
 
-@pytest.mark.xfail(strict=True, reason="light below float64's normal range is written as zeros or subnormals "
-                                       "(a 1e-320 W/sr laser: every bin 0.0) instead of being refused; the check "
-                                       "of y's range belongs where y is formed, analytic/operator/system.py "
-                                       "(another helper's file)")
 @pytest.mark.parametrize("scene, intensity, key", [("yaml", 1e-320, "laser_emission"),
                                                    ("toml", 1e-320, "laser.intensity")])
 def test_light_that_underflows_is_refused(tmp_path, monkeypatch, capsys, scene, intensity, key):

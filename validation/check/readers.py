@@ -30,7 +30,7 @@ from analytic.files import TRANSIENT_FILES, read_exr, read_exr_channels, read_np
 from interop.tal import CaptureError, read_capture
 from analytic.scenes.common import Sampling, Scene
 from analytic.scenes.kinds import is_scene, for_kind
-from analytic.scenes.scene_file import load_scene
+from analytic.scenes.scene_file import load_scene, scene_of
 
 __all__ = ["read_data", "scene_of", "read_stderr", "stderr_beside", "replicas_beside", "film_transient", "checked_transient"]
 
@@ -313,24 +313,6 @@ _LAYOUTS = {
 
 def _layout(scene) -> _Layout:
     return for_kind(_LAYOUTS, scene, "reading another tool's captures and films")
-
-
-def scene_of(scene):
-    """A scene object, loaded when given as a path (TOML or tal YAML, as ``check``'s SCENE).
-
-    Raises
-    ------
-    SceneError
-        A bad scene file.
-    OptionError
-        Neither a scene nor a path.
-    """
-    if is_scene(scene):
-        return scene
-    if isinstance(scene, (str, os.PathLike)):
-        return load_scene(scene)
-    raise OptionError(f"scene: expected a Scene, a RelayWallScene or a scene file's path (TOML or tal YAML), "
-                      f"got {type(scene).__name__}")
 
 
 def read_data(path: str | Path, scene: Scene) -> np.ndarray:

@@ -91,9 +91,19 @@ def run_blocks(kernel, arguments: Callable[[int], Sequence], blocks: int, *, thr
     compiled(kernel, *arguments(0))
     threads = min(thread_count() if threads is None else threads, blocks)
     results: list = [None] * blocks
+    upcoming = iter(range(blocks))
     with concurrent.futures.ThreadPoolExecutor(max_workers=threads) as pool:
-        pending = {pool.submit(kernel, *arguments(block)): block for block in range(blocks)}
+        pending: dict = {}
+
+        def submit():
+            # a few blocks per thread in flight, not all: each wait() visits every pending future
+            for block in upcoming:
+                pending[pool.submit(kernel, *arguments(block))] = block
+                if len(pending) >= 2 * threads:
+                    break
+
         try:
+            submit()
             while pending:
                 done, _ = concurrent.futures.wait(pending, timeout=0.2,
                                                   return_when=concurrent.futures.FIRST_COMPLETED)
@@ -102,6 +112,7 @@ def run_blocks(kernel, arguments: Callable[[int], Sequence], blocks: int, *, thr
                     results[block] = future.result()
                     if bar is not None:
                         bar.update(1 if weights is None else int(weights[block]))
+                submit()
         except BaseException:
             for future in pending:
                 future.cancel()

@@ -39,7 +39,10 @@ def test_a_long_model_is_announced_and_ends_at_ctrl_c(tmp_path, quiet):
     scene.write_text(_SCENE)
     child = subprocess.Popen([sys.executable, "-m", "validation.cli", "forward", str(scene), "--out",
                               str(tmp_path / "out"), *(["--quiet"] if quiet else [])],
-                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                             # Ctrl-C as a terminal delivers it: a pytest-xdist worker ignores SIGINT, and a
+                             # child started with SIGINT ignored (as from `nohup` or `&`) rightly keeps ignoring it
+                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         if quiet:
             time.sleep(6)       # started, loaded and assembling (nothing to wait for on a quiet stderr)

@@ -541,13 +541,9 @@ def forward(scene: Scene, matrix=None) -> np.ndarray:
         ``(K, N)`` float64.
     """
     scene = scene_of(scene)
-    if matrix is None:
-        matrix = system_matrix(scene)
-    f = scene.reflectance.ravel()
-    rows = scene.sensor_count * scene.sampling.count
-    if getattr(matrix, "shape", None) != (rows, f.size):
-        raise OptionError(f"matrix: shape {getattr(matrix, 'shape', type(matrix).__name__)} is not this scene's "
-                          f"A, ({rows}, {f.size}) (sensors x bins, pixels); give the matrix system_matrix made "
-                          f"for it, or none")
-    y = matrix @ f
-    return np.asarray(y, dtype=np.float64).reshape(scene.sensor_count, scene.sampling.count)
+    matrix, f = system_matrix(scene) if matrix is None else matrix, scene.reflectance.ravel()
+    shape = (scene.sensor_count * scene.sampling.count, f.size)
+    if getattr(matrix, "shape", None) != shape:
+        raise OptionError(f"matrix: shape {getattr(matrix, 'shape', type(matrix).__name__)} is not this scene's A, "
+                          f"{shape} (sensors x bins, pixels); give the matrix system_matrix made for it, or none")
+    return np.asarray(matrix @ f, dtype=np.float64).reshape(scene.sensor_count, scene.sampling.count)

@@ -54,6 +54,7 @@ from analytic.values import exact
 from transient.intensity import emitter_intensity
 from transient.scene_xml import add as _add, add_entries, number as _number, point as _point, scene_text, \
     textured_diffuse, transform as _transform, waveform_entries, write_scene_files
+from .export_relay_wall import MITRANSIENT_IMPULSE_ONLY, export_relay_wall
 
 __all__ = ["export_scene", "FORMATS", "RADIUS", "SPP", "SPP_RELAY_WALL", "plane_to_world_matrix",
            "MITRANSIENT_IMPULSE_ONLY"]
@@ -68,14 +69,6 @@ SPP = 2**20
 
 #: Default samples per film pixel of a relay-wall capture for mitransient (``$spp`` in the XML).
 SPP_RELAY_WALL = 2**18
-
-#: Why a pulse (square, Butterworth, ...) is not exported for mitransient (the README quotes it). Its
-#: point emitter emits a Dirac pulse and its film bins each path by floor((length - start_opl) /
-#: bin_width_opl), a box; its integrators read ``temporal_filter`` and discard it. A pulse's bin is
-#: ∫_bin (g * s) = ∫ g(τ) κ_n(τ) dτ, with κ_n a ramp wherever the pulse straddles a bin edge: box-binned
-#: samples of g (sums of g over bins) give it only in the limit of ever finer bins, so no export is exact.
-MITRANSIENT_IMPULSE_ONLY = ('mitransient renders the impulse response only; export the scene with '
-                            'waveform = "impulse" and convolve, or use our render')
 
 # Plugin names of this package (transient/plane.py, transient/sensor.py); kept
 # here as strings so that exporting never imports Mitsuba.
@@ -306,7 +299,6 @@ def _relay_wall_options(format: str, radius, spp) -> None:
 
 
 def _export_relay_wall(scene, out_dir: str | Path, format: str, *, radius, spp) -> dict[str, Path]:
-    from .export_relay_wall import export_relay_wall
 
     spp = SPP_RELAY_WALL if spp is None else int(spp)
     if spp < 1:

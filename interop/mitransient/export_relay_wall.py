@@ -65,6 +65,14 @@ PROJECTOR_FOV = 2.0
 _INTEGRATOR = "transient_opl_nlos"
 _SENSOR = "omni_point"
 
+#: Why a pulse (square, Butterworth, ...) is not exported for mitransient (the README quotes it). Its
+#: point emitter emits a Dirac pulse and its film bins each path by floor((length - start_opl) /
+#: bin_width_opl), a box; its integrators read ``temporal_filter`` and discard it. A pulse's bin is
+#: ∫_bin (g * s) = ∫ g(τ) κ_n(τ) dτ, with κ_n a ramp wherever the pulse straddles a bin edge: box-binned
+#: samples of g (sums of g over bins) give it only in the limit of ever finer bins, so no export is exact.
+MITRANSIENT_IMPULSE_ONLY = ('mitransient renders the impulse response only; export the scene with '
+                            'waveform = "impulse" and convolve, or use our render')
+
 
 def hidden_to_world_matrix(scene: RelayWallScene) -> np.ndarray:
     """4 x 4 transform of the local rectangle [-1, 1]² onto the hidden rectangle, float64.
@@ -168,8 +176,6 @@ def _mitransient(root, scene: RelayWallScene, shift: np.ndarray) -> None:
 
 
 def _check_mitransient(scene: RelayWallScene) -> None:
-    from .export import MITRANSIENT_IMPULSE_ONLY
-
     if scene.scan.type not in MITRANSIENT_SCANS:
         raise SceneError("scan.type", f"export --format mitransient writes {' and '.join(MITRANSIENT_SCANS)} scans, "
                                       f"not {scene.scan.type!r}; export one laser point at a time as a single "

@@ -47,7 +47,7 @@ from pathlib import Path
 
 from numba import njit
 from numba.core import config, event
-from numba.core.caching import CacheImpl, _CacheLocator
+from numba.core.caching import CacheImpl, IndexDataCacheFile, _CacheLocator
 
 __all__ = ["KernelCacheLocator", "sources_stamp", "cache_folder", "compiled", "install", "njit", "NOTICE_SECONDS"]
 
@@ -249,10 +249,38 @@ def compiled(kernel, *args):
     return kernel
 
 
+_numba_save = IndexDataCacheFile.save
+
+
+def _locked_save(self, key, data):
+    """Numba's save of a cache entry, under a lock file beside the index when the index is ours.
+
+    Numba reads the index, picks the first free data file, writes the index, then the data, with no lock:
+    two processes saving two signatures of one kernel at once (the warm-up's two waveform kinds, xdist or
+    Dask workers) could pick the same data file, and the index could then map one signature to the other's
+    machine code. One lock per index makes each save whole.
+    """
+    if Path(self._cache_path) != cache_folder():      # another package's cache: Numba's own save
+        return _numba_save(self, key, data)
+    try:
+        import fcntl
+        handle = open(self._index_path + ".lock", "a")
+    except (ImportError, OSError):      # not POSIX, or a folder we cannot write: Numba's own save
+        return _numba_save(self, key, data)
+    with handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            return _numba_save(self, key, data)
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
+
+
 def install() -> None:
-    """Put :class:`KernelCacheLocator` first among Numba's locators and listen for long compiles (once)."""
+    """Put :class:`KernelCacheLocator` first among Numba's locators, lock its saves, and listen for long
+    compiles (once)."""
     if KernelCacheLocator not in CacheImpl._locator_classes:
         CacheImpl._locator_classes.insert(0, KernelCacheLocator)
+        IndexDataCacheFile.save = _locked_save
         event.register("numba:compile", _Listener(_NOTICE))
 
 

@@ -134,3 +134,35 @@ def test_a_long_compile_says_so_once_on_stderr(tmp_path):
     assert str(tmp_path / "numba" / "diffuse-imaging" / "kernels") in lines[0]
     again = _run(code, {"PYTHONPATH": str(ROOT), "NUMBA_CACHE_DIR": str(tmp_path / "numba")}, tmp_path)
     assert again.returncode == 0 and again.stderr.strip() == ""      # loaded from the cache: no compile, no line
+
+
+def test_a_save_into_the_kernels_cache_holds_the_index_lock(monkeypatch, tmp_path):
+    """Numba saves an entry with no lock (read the index, take the first free data file, write both): two
+    processes saving two signatures of one kernel could take the same data file, and the index then map one
+    signature to the other's code. Our saves hold a lock file beside the index for the whole save."""
+    import fcntl
+    from types import SimpleNamespace
+
+    import analytic.kernels.cache as cache
+
+    folder = tmp_path / "stamp"
+    folder.mkdir()
+    monkeypatch.setattr(cache, "cache_folder", lambda: folder)
+    index = SimpleNamespace(_cache_path=str(folder), _index_path=str(folder / "kernel-1.py311.nbi"))
+    held = []
+
+    def save(self, key, data):
+        with open(self._index_path + ".lock", "a") as other:      # another process's attempt, meanwhile
+            try:
+                fcntl.flock(other, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                held.append(False)
+            except BlockingIOError:
+                held.append(True)
+
+    monkeypatch.setattr(cache, "_numba_save", save)
+    from numba.core.caching import IndexDataCacheFile
+    assert IndexDataCacheFile.save is cache._locked_save
+    IndexDataCacheFile.save(index, "key", b"data")
+    elsewhere = SimpleNamespace(_cache_path=str(tmp_path), _index_path=str(tmp_path / "other.nbi"))
+    IndexDataCacheFile.save(elsewhere, "key", b"data")             # another package's cache: no lock of ours
+    assert held == [True, False]

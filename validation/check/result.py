@@ -153,7 +153,6 @@ class CheckResult:
         """max |z| after the fit (None by shape only or without a fit)."""
         return None if self.after_fit is None else self.after_fit.max_abs_z
 
-
     @property
     def model_tolerance_note(self) -> str | None:
         """Why the model was evaluated at a tighter tolerance than the scene's (None when it was not)."""

@@ -36,4 +36,6 @@ __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
                   "flat_image_psnr", "lambda_grid", "RULES", "RankDeficiencyWarning", "NoiseLimitWarning",
                   "RegularizationWarning"],
     "operator.conditioning": ["singular_values", "conditioning_summary"],
+    "operator.derivatives": ["jacobian"],
+    "operator.parameters": ["with_values"],
 })

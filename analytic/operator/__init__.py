@@ -7,6 +7,7 @@
 - :mod:`.response`: continuous impulse responses g_k(t) from the contour (coarea) form;
 - :mod:`.conditioning`: A's singular values against the array's extent and the period;
 - :mod:`.derivatives`: derivatives of y with respect to the geometry.
+- :mod:`.parameters`: the scene's numbers named by scene-file keys (docs/design.md section 9).
 
 The compiled kernels these drive are :mod:`analytic.kernels`. Names are
 loaded on first use (``lazy_loader``); ``__all__`` lists the public API.

@@ -65,4 +65,4 @@ def test_moving_the_plane_is_moving_the_points_the_other_way():
 
 def test_unknown_parameters_are_refused():
     with pytest.raises(ValueError, match="parameter"):
-        derivative(_scene(), "source.intensity")
+        derivative(_scene(), "source.colour")

@@ -6,7 +6,7 @@
 - :mod:`.window`: which path lengths reach the sensors, and the share of the light a window holds;
 - :mod:`.response`: continuous impulse responses g_k(t) from the contour (coarea) form;
 - :mod:`.conditioning`: A's singular values against the array's extent and the period;
-- :mod:`.derivatives`: derivatives of y with respect to the geometry.
+- :mod:`.derivatives`: derivatives of y with respect to the scene's parameters;
 - :mod:`.parameters`: the scene's numbers named by scene-file keys (docs/design.md section 9).
 
 The compiled kernels these drive are :mod:`analytic.kernels`. Names are
@@ -20,4 +20,6 @@ __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "response": ["impulse_response", "binned_contour_model"],
     "window": ["response_range", "covering_sampling", "window_share", "WindowWarning"],
     "conditioning": ["singular_values", "conditioning_summary"],
+    "derivatives": ["jacobian", "derivative"],
+    "parameters": ["Parameter", "parameter", "parameters", "value_of", "with_values", "parameter_keys"],
 })

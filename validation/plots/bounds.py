@@ -70,14 +70,15 @@ def whitened_spectrum_figure(values: np.ndarray, *, title: str = ""):
     return figure
 
 
-def tikhonov_error_figure(bias: np.ndarray, stddev: np.ndarray, bound: np.ndarray, *, title: str = ""):
-    """The Tikhonov estimate's bias and standard deviation per pixel beside the Cramér-Rao bound."""
-    figure = new_figure(13.0, 3.8, dpi=100)
-    axes = figure.subplots(1, 3)
+def tikhonov_error_figure(bias: np.ndarray, stddev: np.ndarray, bound: np.ndarray | None, *, title: str = ""):
+    """The Tikhonov estimate's bias and standard deviation per pixel beside the Cramér-Rao bound (when known)."""
+    figure = new_figure(13.0 if bound is not None else 9.0, 3.8, dpi=100)
+    axes = figure.subplots(1, 3 if bound is not None else 2)
     limit = float(np.max(np.abs(bias))) or 1.0
     _panel(figure, axes[0], bias, "bias (R − I) f", "reflectance", cmap="RdBu_r", vmin=-limit, vmax=limit)
     _panel(figure, axes[1], stddev, "standard deviation of the estimate", "reflectance")
-    _bound_panel(figure, axes[2], bound, "Cramér-Rao bound (unbiased estimates)")
+    if bound is not None:
+        _bound_panel(figure, axes[2], bound, "Cramér-Rao bound (unbiased estimates)")
     if title:
         suptitle(figure, title, fontsize=9)
     return figure

@@ -152,11 +152,15 @@ def information_bounds(jacobian, weights) -> dict:
         basis = vt[exact_rank:].T
     whitened = np.sqrt(weights[soft])[:, None] * dense[soft]
     reduced = whitened if basis is None else whitened @ basis
+    shape = reduced.shape                                 # the threshold's max(rows, columns)
+    if reduced.shape[0] > reduced.shape[1]:
+        # a tall J̃ has the singular values and right vectors of its R factor: no (rows x P) U to form
+        reduced = np.linalg.qr(reduced, mode="r")
     if reduced.size:
         _, values, vt = np.linalg.svd(reduced, full_matrices=False)
     else:
         values, vt = np.zeros(0), np.zeros((0, reduced.shape[1]))
-    rank = int(np.sum(values > _threshold(values, reduced.shape))) if values.size and values[0] > 0 else 0
+    rank = int(np.sum(values > _threshold(values, shape))) if values.size and values[0] > 0 else 0
     right = vt[:rank].T                                   # (free dimensions, rank)
     scaled = right / values[:rank]
     if basis is not None:

@@ -17,5 +17,6 @@ __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "rules": ["RULES", "DEFAULT_LAMBDA_COUNT", "lambda_grid"],
     "metrics": ["image_metrics", "structural_similarity", "flat_image_psnr"],
     "laplacian": ["neumann_laplacian", "laplacian_eigenvalues", "dct2", "idct2"],
+    "bounds": ["crb", "Bounds", "information_bounds"],
     "poisson": ["reconstruct_counts", "poisson_map", "compare_to_map", "rate_estimate"],
 })

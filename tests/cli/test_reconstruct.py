@@ -55,7 +55,7 @@ def test_reconstruct_command_writes_its_files(tmp_path, noisy_data):
                  "--quiet"]) == 0
     names = {p.name for p in (tmp_path / "r").iterdir()}
     assert {"reconstruction.png", "reconstruction.exr", "reconstruction.npy", "metrics.json",
-            "criterion.png", "comparison.png", "report.md"} == names
+            "criterion.png", "comparison.png", "error.png", "report.md"} == names
     metrics = json.loads((tmp_path / "r" / "metrics.json").read_text())
     # the scene knows σ, so the data-driven default is the discrepancy principle
     assert metrics["rule"] == "discrepancy" and metrics["data_range"] == 1.0
@@ -223,3 +223,25 @@ def test_reconstruct_reports_what_the_data_fix_at_their_noise(tmp_path, capsys):
         if warned:
             assert shown[0].startswith(f"diffuse-imaging: warning: at σ = {sigma:g} the data fix about {kept} ")
             assert f"- warning: {shown[0].removeprefix('diffuse-imaging: warning: ')}" in report
+
+
+def test_reconstruct_reports_its_exact_bias_and_variance_beside_the_bound(tmp_path, noisy_data, capsys):
+    from analytic.inversion.bounds import crb
+    from analytic.inversion.tikhonov_error import tikhonov_error
+
+    scene_path, data = noisy_data
+    assert main(["reconstruct", str(scene_path), "--data", str(data), "--out", str(tmp_path / "r")]) == 0
+    out = capsys.readouterr().out
+    recorded = json.loads((tmp_path / "r" / "metrics.json").read_text())
+    error, scene = recorded["tikhonov_error"], load_scene(scene_path)
+    expected = tikhonov_error(_matrix(scene), scene.reflectance, recorded["lambda"], variance=scene.noise.sigma**2)
+    assert error["bias_rms"] == pytest.approx(np.sqrt(np.mean(expected.bias**2)), rel=1e-9)
+    assert error["stddev_median"] == pytest.approx(np.median(expected.stddev), rel=1e-9)
+    assert error["crb_median"] == pytest.approx(np.median(crb(scene).image), rel=1e-9)
+    assert f"standard deviation median {error['stddev_median']:.3g} per pixel" in out
+    assert "error.png" in (tmp_path / "r" / "report.md").read_text()
+
+
+def _matrix(scene):
+    from analytic.operator.system import system_matrix
+    return system_matrix(scene)

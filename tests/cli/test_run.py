@@ -51,6 +51,16 @@ def test_run_reconstructs_from_noisy_data_better_than_a_flat_image(run_folder):
     assert metrics["agreement"]["agrees"] and metrics["window_share"] == 1.0
 
 
+def test_run_reports_the_model_estimates_exact_error_beside_the_bound(run_folder):
+    """The letter's scene: the Tikhonov estimate's rms error predicted exactly at its λ, while no unbiased
+    estimate of any pixel exists (192 samples for 2500 pixels: the Cramér-Rao bound is inf everywhere)."""
+    recon = json.loads((run_folder / "metrics.json").read_text())["reconstruction"]
+    error = recon["error"]
+    assert error["lambda"] == recon["model"]["lambda"] and error["crb_unbounded_pixels"] == 2500
+    # PSNR over a data range of 1 is -20 log10(rms error): one draw's error against its expectation
+    assert abs(-20 * np.log10(error["rmse_expected"]) - recon["model"]["psnr"]) < 0.5
+
+
 def test_run_states_what_its_render_can_detect(run_folder):
     """metrics.json and report.md carry `detectable`, the directed tests' power (docs/design.md section 6)."""
     metrics = json.loads((run_folder / "metrics.json").read_text())

@@ -9,7 +9,7 @@ from pathlib import Path
 from .common import (UsageError, add_quiet, add_window_option, announce_window, apply_window, check_samples_type,
                      load_scene_argument, refuse_unmodellable, release_warnings, seed_type, show_progress)
 from .counts import RENDER_STREAM, draw_scene_counts, refuse_unreachable_counts, write_counts
-from .reconstruct import add_lambda_options, information_text
+from .reconstruct import add_lambda_options, error_text, information_text
 
 __all__ = ["add_commands", "command_validate", "command_run", "show_reconstruction_warnings"]
 
@@ -164,6 +164,8 @@ def command_run(args) -> int:
             print(f"reconstruction: {information_text(recon['information'])}PSNR {recon['model']['psnr']:.1f} dB "
                   f"from model data, {recon['render']['psnr']:.1f} dB from rendered data -> "
                   f"{Path(args.out) / 'report.md'}")
+            if recon.get("error"):
+                print(f"reconstruction error at the model data's λ: {error_text(recon['error'])}")
     return 0 if check.agreement.agrees else 1
 
 

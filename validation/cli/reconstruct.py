@@ -12,7 +12,7 @@ from .common import (UsageError, add_quiet, announce_model, load_scene_argument,
                      refuse_unmodellable, release_warnings, rows_text, show_progress)
 
 __all__ = ["add_commands", "command_reconstruct", "command_reproduce", "lambda_argument", "lambda_grid_of",
-           "add_lambda_options"]
+           "add_lambda_options", "error_text"]
 
 
 def lambda_argument(text: str):
@@ -67,6 +67,8 @@ def command_reconstruct(args) -> int:
     from analytic.files import (PrecisionWarning, discard, float32_problem, output_folder, reading_folder,
                              save_exr, save_json, save_npy, save_png_image, staged_writes)
     from analytic.inversion import RankDeficiencyWarning, RegularizationWarning, image_metrics, reconstruct
+    from analytic.inversion.tikhonov_error import scene_tikhonov_error
+    from validation.plots.bounds import tikhonov_error_figure
     from analytic.operator.system import system_matrix
     from validation.runs.harness import data_driven_rule, noise_sigma
     from validation.plots import criterion_figure, reconstruction_figure, save_figure
@@ -122,6 +124,8 @@ def command_reconstruct(args) -> int:
                             "isotropic total variation (½||Af − y||² + λ TV), Neumann edges, PDHG"),
             "warnings": notes, "lambdas": result.lambdas, "criterion": result.criterion,
         }
+        tikhonov = (scene_tikhonov_error(scene, matrix, result.lam) if args.regularizer == "laplacian" else None)
+        report["tikhonov_error"] = None if tikhonov is None else tikhonov[2]
         exr_problem = float32_problem(result.image)
         report["exr"] = ("written: float32, every value within float32's rounding of reconstruction.npy"
                          if exr_problem is None else
@@ -139,6 +143,9 @@ def command_reconstruct(args) -> int:
             save_png_image(out / "reconstruction.png", result.image)
             save_json(out / "metrics.json", report)
             save_figure(criterion_figure(result, title=f"{scene.name}: {how}"), out / "criterion.png")
+            if tikhonov is not None:
+                save_figure(tikhonov_error_figure(tikhonov[0].bias, tikhonov[0].stddev, tikhonov[1],
+                                                  title=f"{scene.name}: {how}"), out / "error.png")
             save_figure(reconstruction_figure(truth, result.image,
                                               title=f"{scene.name}: {how}, PSNR {metrics['psnr']:.2f} dB, "
                                                     f"SSIM {metrics['ssim']:.3f}"), out / "comparison.png")
@@ -152,6 +159,8 @@ def command_reconstruct(args) -> int:
                 *_result_table(result, metrics, sigma, args.regularizer, scene.noise), "",
                 "![truth, reconstruction and error](comparison.png)", "",
                 "![the λ rule's criterion and the L-curve](criterion.png)", "",
+                *([] if tikhonov is None else [f"Error of this estimate (exact at λ): {error_text(tikhonov[2])}.", "",
+                                               "![bias, standard deviation and Cramér-Rao bound](error.png)", ""]),
                 *_warning_lines(notes)])
     # after the files: the inversion's own warnings again (rank deficiency, a λ rule that could not do what
     # it was asked), for the one-line policy; the report holds every warning
@@ -166,7 +175,23 @@ def command_reconstruct(args) -> int:
         print(f"reconstruct: M = {scene.pixels}, {how} ({result.method}) in {result.seconds:.2f} s "
               f"(A assembled in {assembly:.2f} s); {information_text(result)}PSNR {metrics['psnr']:.2f} dB, "
               f"SSIM {metrics['ssim']:.3f} (range 1) -> {out}")
+        if tikhonov is not None:
+            print(f"reconstruct: error at λ: {error_text(tikhonov[2])}")
     return 0
+
+
+def error_text(summary: dict) -> str:
+    """The Tikhonov estimate's bias and spread beside the Cramér-Rao bound, in one clause."""
+    text = (f"bias rms {summary['bias_rms']:.3g}, standard deviation median {summary['stddev_median']:.3g} per "
+            f"pixel (expected rms error {summary['rmse_expected']:.3g})")
+    if "crb_median" in summary:
+        unbounded = summary["crb_unbounded_pixels"]
+        if summary["crb_median"] == float("inf"):
+            return text + (f"; Cramér-Rao bound: no unbiased estimate of any pixel exists (the data leave every "
+                           f"pixel a component they cannot fix: the prior sets it)")
+        text += (f"; Cramér-Rao bound on unbiased estimates: median {summary['crb_median']:.3g}"
+                 + (f", {unbounded} pixels unbounded (the data cannot fix them without the prior)" if unbounded else ""))
+    return text
 
 
 def information_text(result) -> str:

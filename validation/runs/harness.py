@@ -196,10 +196,13 @@ def reconstruct_from_noisy_data(matrix, scene: Scene, model: np.ndarray, rendere
         ``render``: {``psnr``, ``ssim``, ``lambda``, ``image``,
         ``degrees_of_freedom``, ``warnings``: the inversion's warnings about
         these data}, ``oracle``: {``psnr``, ``lambda``, ``image``},
-        ``flat_psnr``.
+        ``flat_psnr``, ``error``: the model's estimate's exact bias and standard deviation at its λ beside
+        the Cramér-Rao bound (:func:`analytic.inversion.tikhonov_error.scene_tikhonov_error`'s summary; None
+        beyond its size).
     """
     from analytic.inversion import (RankDeficiencyWarning, RegularizationWarning, flat_image_psnr, image_metrics,
                                     reconstruct)
+    from analytic.inversion.tikhonov_error import scene_tikhonov_error
     from analytic.measurement.noise import add_noise
 
     truth = scene.reflectance
@@ -233,6 +236,8 @@ def reconstruct_from_noisy_data(matrix, scene: Scene, model: np.ndarray, rendere
                                          for w in caught[first:]
                                          if not issubclass(w.category, RankDeficiencyWarning)]}
         oracle = reconstruct(matrix, model_data.ravel(), pixels, rule="oracle", truth=truth, lambdas=lambdas)
+    # what the model's λ trades, exactly, beside the Cramér-Rao bound (analytic.inversion.tikhonov_error)
+    tikhonov = scene_tikhonov_error(scene, matrix, results["model"]["lambda"])
     for unexpected in caught:       # anything else goes on to the caller, as it did
         if not issubclass(unexpected.category, (RankDeficiencyWarning, RegularizationWarning)):
             warnings.warn_explicit(unexpected.message, unexpected.category, unexpected.filename,
@@ -262,6 +267,7 @@ def reconstruct_from_noisy_data(matrix, scene: Scene, model: np.ndarray, rendere
         "oracle": {"image": oracle.image, "lambda": float(oracle.lam),
                    "psnr": image_metrics(oracle.image, truth)["psnr"]},
         "flat_psnr": flat_image_psnr(truth),
+        "error": None if tikhonov is None else tikhonov[2],
     }
 
 

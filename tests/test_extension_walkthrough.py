@@ -211,7 +211,7 @@ def test_registry_refuses_a_kind_that_misses_part_of_the_protocol_or_takes_a_nam
 #: The project's packages (tests may test classes freely).
 PACKAGES = ("analytic", "transient", "validation", "interop", "benchmarks", "scripts")
 #: Names whose isinstance test asks a scene's kind: the kinds' classes, and the registry's own.
-KIND_NAMES = {"Scene", "RelayWallScene", "TalScene", "_builtin_kinds", "SCENE_KINDS", *(
+KIND_NAMES = {"Scene", "RelayWallScene", "TalScene", "SCENE_KINDS", *(
     cls.__name__ for cls in SCENE_KINDS.values())}
 
 

@@ -1,5 +1,5 @@
 """The tree's shape promises (issue 40): records, not long argument lists, in the model; no import cycle;
-the model importing nothing above it."""
+the model importing nothing above it; files at most 550 lines."""
 
 import ast
 from pathlib import Path
@@ -59,3 +59,21 @@ def test_the_model_imports_nothing_of_the_renderer_validation_or_interop():
                    if name.split(".")[0] == "analytic" for target in targets if target.split(".")[0] in others)
     assert not found, found
 
+
+# --- file sizes ----------------------------------------------------------------------------------------
+
+#: Folders whose Python files must stay readable in one sitting.
+SIZED = ("analytic", "transient", "validation", "interop", "tests", "benchmarks", "scripts")
+MAX_LINES = 550
+#: Temporary exceptions, each with its reason (remove when split).
+OVER_LIMIT = {
+    "analytic/kernels/quadrature.py",   # split by its owner at the merge of the kernels' branch
+}
+
+
+def test_every_file_is_at_most_550_lines():
+    over = [f"{path.relative_to(ROOT)} ({count} lines)"
+            for folder in SIZED for path in sorted((ROOT / folder).rglob("*.py"))
+            for count in [len(path.read_text(encoding="utf-8").splitlines())]
+            if count > MAX_LINES and path.relative_to(ROOT).as_posix() not in OVER_LIMIT]
+    assert not over, f"files over {MAX_LINES} lines (split by theme): {over}"

@@ -18,14 +18,12 @@ from typing import Any
 import numpy as np
 
 from analytic.errors import DataError
+from analytic.formats import reader_for, writers
 from analytic.scenes.common import Scene
 from analytic.scenes.relay_wall import RelayWallScene
 
-from analytic.formats import reader_for, writers
-
 from .atomic import discard, staged_writes
-from .formats import (PrecisionWarning, float32_problem, read_exr, read_npy, save_exr, save_json,
-                      save_npy)
+from .formats import PrecisionWarning, float32_problem, read_exr, read_npy, save_exr, save_json, save_npy
 
 __all__ = ["build_meta", "write_transient", "read_transient", "transient_format",
            "transient_in_folder", "UNITS", "RELAY_WALL_UNITS", "RELAY_WALL_KEYS", "KIND_KEYS",

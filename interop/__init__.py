@@ -1,8 +1,10 @@
 """Other tools' files: tal's YAML scenes, OBJ meshes and HDF5 captures; Mitsuba 3 / mitransient XML and films.
 
-The exact model (:mod:`analytic`) reaches it only where a user hands it one
-of these files (a tal configuration as a scene, a tal histogram as an
-instrument response, a transient written as tal's HDF5), on first use.
+The exact model (:mod:`analytic`) imports none of it: where a user hands it
+one of these files (a tal configuration as a scene, a tal histogram as an
+instrument response, a transient written as tal's HDF5), it asks its format
+registry (:mod:`analytic.formats`), which :mod:`interop.tal.formats` fills
+as the package's entry point, on first use.
 Two sub-packages, one per tool family:
 
 - :mod:`interop.tal`: tal's render configuration (YAML) and the OBJ meshes

@@ -1,4 +1,5 @@
-"""docs/design.md "Where each extension goes", walked through: a scene kind added in this module alone.
+"""docs/design.md "Where each extension goes", walked through: a scene kind added in this module alone (and lit by
+the toy waveform of tests/test_waveform_walkthrough.py, whose key no project file names).
 
 The toy kind is a Lambertian tile in any pose (a rectangle of corner, u and v)
 under one point source, seen by point sensors: one dataclass that states what
@@ -25,6 +26,7 @@ from analytic.errors import SceneError, UserError
 from analytic.geometry import PointPairs, Rectangle
 from analytic.scenes.common import Illumination, Sampling
 from analytic.scenes.kinds import SCENE_KINDS, SceneKindError, is_scene, register_scene_kind
+from test_waveform_walkthrough import ramp  # noqa: F401  (the toy waveform, registered for a test)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -177,6 +179,24 @@ def test_toy_scene_kind_in_files_readers_and_reports(tile_kind, tmp_path, rng):
     assert metrics["agrees"] and (tmp_path / "check" / "report.md").is_file()
 
 
+def test_toy_scene_kind_lit_by_a_toy_waveform_with_a_key_of_its_own(tile_kind, ramp):  # noqa: F811
+    """Both doors at once, neither known to a project file: the toy tile under the toy ramp (key ``rise``). The
+    model is linear in s: over a window holding all the light, y sums to the ramp's area rise / 2 times the
+    impulse's; the metadata and the scene's tables carry the key."""
+    from analytic.files import build_meta
+    from analytic.operator.system import forward
+    from analytic.scenes.scene_file import scene_to_tables
+
+    window = Sampling(bin_width_opl=0.02, start_opl=1.6, count=60)
+    lit = Tile(illumination=Illumination(waveform="ramp", rise=0.08), sampling=window)
+    impulse = forward(Tile(sampling=window))
+    assert impulse[:, :3].max() == 0 and impulse[:, -10:].max() == 0        # the window holds every path
+    # each side within the model's tolerance (1e-6 relative) of the exact integral
+    assert forward(lit).sum(axis=1) == pytest.approx(0.04 * impulse.sum(axis=1), rel=10 * lit.tolerance)
+    meta = build_meta(lit, kind="model")
+    assert meta["illumination"] == "ramp" and meta["illumination_parameters"] == {"rise": 0.08}
+    assert scene_to_tables(lit)["illumination"] == {"waveform": "ramp", "rise": 0.08}
+
 def test_layers_written_per_kind_refuse_the_toy_kind_in_one_line(tile_kind, tmp_path):
     """The renderer and export have no handler for a kind they were not written for: a clear user error."""
     from interop.mitransient.export import export_scene
@@ -211,7 +231,7 @@ def test_registry_refuses_a_kind_that_misses_part_of_the_protocol_or_takes_a_nam
 #: The project's packages (tests may test classes freely).
 PACKAGES = ("analytic", "transient", "validation", "interop", "benchmarks", "scripts")
 #: Names whose isinstance test asks a scene's kind: the kinds' classes, and the registry's own.
-KIND_NAMES = {"Scene", "RelayWallScene", "TalScene", "_builtin_kinds", "SCENE_KINDS", *(
+KIND_NAMES = {"Scene", "RelayWallScene", "TalScene", "SCENE_KINDS", *(
     cls.__name__ for cls in SCENE_KINDS.values())}
 
 

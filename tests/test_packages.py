@@ -7,6 +7,7 @@ The references are the interpreter's own: a fresh process per check, its ``sys.m
 from __future__ import annotations
 
 import importlib
+import os
 import pkgutil
 import subprocess
 import sys
@@ -87,3 +88,32 @@ def test_the_model_never_imports_the_files_package():
                    "analytic.operator.conditioning, analytic.scenes.scene_file\nprint(sorted(m for m in sys.modules if m.startswith('analytic.files')))")
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "[]"
+
+
+def _installed_entry_points(folder: Path) -> Path:
+    """A dist-info in ``folder`` with pyproject.toml's entry points, as ``pip install`` writes them."""
+    import tomllib
+
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"]
+    info = folder / "diffuse_imaging-0.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {project['name']}\nVersion: 0\n")
+    (info / "entry_points.txt").write_text("".join(
+        f"[{group}]\n" + "".join(f"{name} = {value}\n" for name, value in points.items()) + "\n"
+        for group, points in project["entry-points"].items()))
+    return folder
+
+
+def test_a_plain_import_of_the_model_reads_other_tools_files_through_the_declared_entry_points(tmp_path):
+    """``analytic.load_scene("x.yaml")`` works without the user importing interop: the model asks its format
+    registry, which loads pyproject.toml's entry points on the first suffix it does not know, and only then."""
+    code = ("import sys, analytic\n"
+            "own = analytic.load_scene('examples/square.toml')\n"
+            "print(sorted(m for m in sys.modules if m.split('.')[0] == 'interop'))\n"
+            "tal = analytic.load_scene('examples/tal/plane-single.yaml')\n"
+            "print(own.kind, tal.kind, 'interop.tal.formats' in sys.modules)\n")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), str(_installed_entry_points(tmp_path))])}
+    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120,
+                          env=env)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split("\n")[:2] == ["[]", "plane relay_wall True"], done.stdout

@@ -1,12 +1,14 @@
 """docs/design.md, "Where each extension goes", "A waveform": a toy waveform added from this module alone.
 
 The toy (a linear ramp s(t) = t / w on [0, w], unit peak at w) is declared as
-a waveform module declares itself (NAME, SUMMARY, PARAMETERS, build) and
-registered; no project file is edited. The scene file reads it, the scene
-checks its keys, the renderer's properties carry it both ways, the plugins'
-docs list it, and ``forward`` models it: the model is linear in s, so the
-sum over a window that holds the whole response is the pulse's area w / 2
-times the impulse's sum, and the response starts where the impulse's does.
+a waveform module declares itself (NAME, SUMMARY, PARAMETERS, build), with a
+key of its own that no project file names (``rise`` = w), and registered; no
+project file is edited. The scene file reads it, the scene checks and holds
+its key (``illumination.rise``), the scene's tables, the renderer's
+properties carry it both ways, the plugins' docs list it, and ``forward``
+models it: the model is linear in s, so the sum over a window that holds the
+whole response is the pulse's area w / 2 times the impulse's sum, and the
+response starts where the impulse's does.
 """
 
 from __future__ import annotations
@@ -19,26 +21,27 @@ import pytest
 from analytic.errors import SceneError
 from analytic.operator.system import forward
 from analytic.scenes.common import Illumination, Sampling, Scene
-from analytic.scenes.scene_file import scene_from_dict
+from analytic.scenes.scene_file import scene_from_dict, scene_to_tables
 from analytic.waveforms import builders, make_waveform
 from analytic.waveforms.pieces import POLYNOMIAL, make_terms
-from analytic.waveforms.waveform import Waveform
+from analytic.waveforms.waveform import Parameter, Waveform
 
 
 def _build(illumination, period):
-    """s(t) = t / w on [0, w]: S = t² / (2w) there, w / 2 beyond (the square's ``width`` key, required)."""
+    """s(t) = t / w on [0, w]: S = t² / (2w) there, w / 2 beyond (its own ``rise`` key, required)."""
     del period
-    if illumination.width is None:
-        raise SceneError("illumination.width", "required with waveform = 'ramp'")
-    width = float(illumination.width)
+    if illumination.rise is None:
+        raise SceneError("illumination.rise", "required with waveform = 'ramp'")
+    width = float(illumination.rise)
     pieces = [(0.0, True, 0.0, POLYNOMIAL, 0.0, [0.0, 0.0, 0.5 / width]),
               (width, True, 0.5 * width, POLYNOMIAL, 0.0, [])]
     return Waveform("ramp", make_terms(pieces, duration=width), f"ramp of width {width:g} m", width,
-                    {"width": width})
+                    {"rise": width})
 
 
-RAMP = types.SimpleNamespace(NAME="ramp", SUMMARY="linear ramp up to unit peak at ``width``",
-                             PARAMETERS=(builders.parameter("width"),), build=_build)
+RAMP = types.SimpleNamespace(NAME="ramp", SUMMARY="linear ramp up to unit peak at ``rise``",
+                             PARAMETERS=(Parameter("rise", "length", "m", "required", plugin="ramp_rise"),),
+                             build=_build)
 
 
 @pytest.fixture()
@@ -54,9 +57,10 @@ def test_a_toy_waveform_registered_from_a_test_is_modelled_by_forward(ramp):
     width = 0.06
     scene = scene_from_dict({"plane": {"pixels": 6}, "sensors": {"positions": [[0.3, 0.7, 0.6]]},
                              "source": {"position": [0.6, 0.4, 0.9]},
-                             "illumination": {"waveform": "ramp", "width": width},
+                             "illumination": {"waveform": "ramp", "rise": width},
                              "sampling": {"period": 0.02, "start": 1.0, "count": 120}})
-    assert scene.illumination == Illumination(waveform="ramp", width=width)
+    assert scene.illumination == Illumination(waveform="ramp", rise=width) and scene.illumination.rise == width
+    assert scene_to_tables(scene)["illumination"] == {"waveform": "ramp", "rise": width}
     waveform = make_waveform(scene.illumination, scene.sampling.bin_width_opl)
     assert waveform.energy == pytest.approx(width / 2, rel=1e-15)
     y = forward(scene)
@@ -71,10 +75,15 @@ def test_a_toy_waveform_registered_from_a_test_is_modelled_by_forward(ramp):
 
 def test_a_toy_waveform_reaches_the_schema_the_renderer_properties_and_the_plugin_docs(ramp):
     with pytest.raises(SceneError, match="illumination.fwhm: does not apply to waveform = 'ramp'"):
-        Illumination(waveform="ramp", width=0.1, fwhm=0.1)
-    illumination = Illumination(waveform="ramp", width=0.1)
+        Illumination(waveform="ramp", rise=0.1, fwhm=0.1)
+    with pytest.raises(SceneError, match="illumination.rise: does not apply to waveform = 'gaussian'"):
+        Illumination(waveform="gaussian", fwhm=0.1, rise=0.1)
+    with pytest.raises(SceneError, match="illumination.rise"):
+        Illumination(waveform="ramp", rise=-0.1)               # a length, checked as the registry declares it
+    illumination = Illumination(waveform="ramp", rise=0.1)
+    assert illumination.fwhm is None and illumination != Illumination(waveform="ramp", rise=0.2)
     entries = builders.plugin_entries(illumination, 0.02)
-    assert entries == {"waveform": "ramp", "pulse_width": 0.1}
+    assert entries == {"waveform": "ramp", "ramp_rise": 0.1}
     options = builders.illumination_options(entries.get)
     assert Illumination(waveform=entries["waveform"], **options) == illumination
     assert "``ramp``" in builders.plugin_rows()
@@ -93,8 +102,10 @@ def test_the_scene_format_names_every_registered_waveform_and_its_keys():
 
 
 def test_the_toy_is_gone_after_the_test_and_a_name_is_registered_once():
-    assert "ramp" not in builders.WAVEFORMS
+    assert "ramp" not in builders.WAVEFORMS and "rise" not in builders.keys()
     with pytest.raises(SceneError, match="illumination.waveform: must be one of"):
-        Illumination(waveform="ramp", width=0.1)
+        Illumination(waveform="ramp")
+    with pytest.raises(TypeError, match="unexpected keyword argument 'rise'"):
+        Illumination(waveform="square", rise=0.1)
     with pytest.raises(ValueError, match="registered already"):
         builders.register(builders.WAVEFORMS["gaussian"])

@@ -35,12 +35,13 @@ from analytic.waveforms.builders import illumination_options
 from analytic.kernels import formulas as special
 from analytic.kernels.forms import POLYNOMIAL, piece_forms
 
-__all__ = ["constant_and_form", "attenuation", "height_over_cube", "sample_stream", "jittered_point", "replica_of", "deposit",
-           "reduce_mode", "per_thread_copies", "thread_copies", "block_copy", "opaque_u32", "opaque_f64", "is_diffuse", "time_axis_and_waveform"]
+__all__ = ["constant_and_form", "attenuation", "attenuation_of_distances", "height_over_cube", "sample_stream",
+           "jittered_point", "replica_of", "deposit", "reduce_mode", "per_thread_copies", "thread_copies", "block_copy", "opaque_u32", "opaque_f64", "is_diffuse", "time_axis_and_waveform"]
 
 
 #: The attenuation of analytic.attenuation, with Dr.Jit's square root: one expression for every backend.
-_formula = attenuation_formula(dr.sqrt)
+#: ``attenuation_of_distances(mode, source_height, source_squared, sensor_height, sensor_squared)``, 1/m⁴.
+attenuation_of_distances = attenuation_formula(dr.sqrt)
 
 
 def opaque_u32(value: int):
@@ -181,7 +182,7 @@ def attenuation(x, y, source, sensor, mode: int = LAMBERTIAN):
     kx, ky, sensor_height = (float(v) for v in sensor)
     source_squared = dr.square(x - sx) + dr.square(y - sy) + source_height * source_height
     sensor_squared = dr.square(x - kx) + dr.square(y - ky) + sensor_height * sensor_height
-    return _formula(mode, source_height, source_squared, sensor_height, sensor_squared)
+    return attenuation_of_distances(mode, source_height, source_squared, sensor_height, sensor_squared)
 
 
 # -- random numbers and sample points --------------------------------------------

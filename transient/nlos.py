@@ -52,12 +52,13 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from analytic.attenuation import LAMBERTIAN
 from analytic.binning import bin_index
 from analytic.scenes.relay_wall import WALL_NORMAL, grid_points
 
 from .chunks import ReplicaLayout, checked_chunk
-from .common import block_copy, deposit, is_diffuse, is_impulse, jittered_point, opaque_f64, opaque_u32, reduce_mode, \
-    replica_of, sample_stream, thread_copies, time_axis_and_waveform
+from .common import attenuation_of_distances, block_copy, deposit, is_diffuse, is_impulse, jittered_point, opaque_f64, \
+    opaque_u32, reduce_mode, replica_of, sample_stream, thread_copies, time_axis_and_waveform
 from .nlos_sampling import PixelDensity, owen_sobol_point
 from .plane import STRATEGIES, plane_frame, techniques
 from .plane_sampling import AREA, block_bounds, mixture_density, peak_ratio, warp
@@ -131,11 +132,19 @@ def _plus(value, amount: float):
     return value if amount == 0.0 else value + amount
 
 
-def _wall_factor(point: _Point, wall):
-    """(|x - w|, g_w = h_w z_x / |x - w|⁴) of each sample's point x and a wall point w = (x, y, h)."""
+class _Lit(NamedTuple):
+    """Each sample's leg to a lit wall point l: l's height h_l above the hidden plane (metres), |x - l|² (m²)
+    and |x - l| (metres), as the attenuation formula and the path length read them."""
+
+    height: object
+    squared: object
+    distance: object
+
+
+def _lit(point: _Point, wall) -> _Lit:
+    """The leg from each sample's point x to a wall point l = (x, y, h) in the hidden frame."""
     squared = dr.square(point.x - wall[0]) + dr.square(point.y - wall[1]) + dr.square(wall[2])
-    inverse = 1.0 / squared
-    return dr.sqrt(squared), wall[2] * point.z * dr.square(inverse)
+    return _Lit(wall[2], squared, dr.sqrt(squared))
 
 
 class TransientNlosIntegrator(mi.SamplingIntegrator):
@@ -357,7 +366,7 @@ class TransientNlosIntegrator(mi.SamplingIntegrator):
             shares = [opaque_f64((bounds[t + 1] - bounds[t]) / size) for t in range(len(plan))]
             # the balance heuristic: each point weighted by the density of all techniques together
             density = mixture_density(plan, shares, x, y, self.width, self.height)
-        scale = self._reflectance(hidden, x / self.width, y / self.height) / (math.pi * density)
+        scale = self._reflectance(hidden, x / self.width, y / self.height) / density   # ρ_h's 1/π: in a_k
         height = float(self.corner[2]) + x * float(self.axes[0][2]) + y * float(self.axes[1][2])  # x's z
 
         # a copy of the histogram per LLVM thread (block_copy), summed here
@@ -382,17 +391,19 @@ class TransientNlosIntegrator(mi.SamplingIntegrator):
         point : _Point
             Each sample's hidden point (hidden frame x, y; world z), metres.
         scale : mi.Float64
-            ρ_h(x) / (π p(x)), m².
+            ρ_h(x) / p(x), m² (the hidden surface's 1/π is the attenuation's).
 
         Notes
         -----
-        A wall point w seen from x contributes the factor
-        g_w = cos θ_x^w cos θ_w^x / |x - w|² = h_w z_x / |x - w|⁴ (h_w its
-        height above the hidden plane, z_x x's above the wall), so pair
-        (l, s) adds L_p ρ_h / (π p) g_l g_s at |x - l| + |x - s| (+ offsets).
-        Single scans compute l's factor once per sample, confocal ones
-        square s's, exhaustive ones compute each laser point's once per
-        laser in an outer loop. The read points are the grid's cell centres,
+        Pair (l, s) adds L_p ρ_h / p a_k(x) cos θ_l cos θ_s at |x - l| +
+        |x - s| (+ offsets): a_k is the model's Lambertian attenuation of
+        docs/design.md section 2 (:func:`~transient.common.attenuation_of_distances`,
+        from the heights h_l, h_s above the hidden plane and the squared
+        distances), and each wall end's cosine n·(x - w) / |x - w| =
+        z_x / |x - w| multiplies it (z_x: x's height above the wall), as in
+        the model's relay-wall pairs. Single scans compute l's leg once per
+        sample, exhaustive ones each laser point's once per laser in an
+        outer loop; confocal ones read l = s. The read points are the grid's cell centres,
         an affine function of (column, row) in the hidden frame: computed,
         not gathered (a gather of the loop's index costs more than the
         arithmetic on the CPU).
@@ -407,13 +418,14 @@ class TransientNlosIntegrator(mi.SamplingIntegrator):
         # read points per loop iteration: the largest divisor of the grid's width up to UNROLLED_READS
         group = max(d for d in range(1, UNROLLED_READS + 1) if grid.width % d == 0)
 
-        def deposit_reads(row, weight, base_length, laser_offset):
-            """Loop over the read points: one distance, one factor, one deposit each."""
-            if self.scan_type != "confocal":
-                weight = weight * point.z            # g_s = h_s z_x / |x - s|⁴: z_x once per sample
+        def deposit_reads(row, weight, lit, laser_offset):
+            """Loop over the read points: one distance, one attenuation, one deposit each (``lit``: l's leg,
+            None confocal)."""
+            # s's cosine z_x / |x - s|: z_x once per sample (confocal: l's too)
+            weight = weight * (dr.square(point.z) if lit is None else point.z)
             # the path's length less |x - s| (less 2 |x - s| confocal), shifted for the product below
             extra = laser_offset if self.account and laser_offset is not None else 0.0
-            base = extra if base_length is None else base_length + extra
+            base = extra if lit is None else lit.distance + extra
 
             def body(b, column, line, slot):
                 # a group of read points along a grid row, unrolled: each one's offset from the first is a literal
@@ -423,14 +435,14 @@ class TransientNlosIntegrator(mi.SamplingIntegrator):
                     dx, dy, height = (_plus(offsets[k], -j * grid.column[k] if k < 2 else j * grid.column[k])
                                       for k in range(3))
                     squared = dr.square(dx) + dr.square(dy) + dr.square(height)
-                    inverse = 1.0 / squared
                     distance = dr.sqrt(squared)
-                    if self.scan_type == "confocal":
-                        factor = height * point.z * dr.square(inverse)
-                        weight_b = weight * dr.gather(mi.Float64, self._read_leg, b + j) * dr.square(factor)
+                    if lit is None:                  # confocal: l = s, both cosines z_x / |x - s|
+                        attenuation = attenuation_of_distances(LAMBERTIAN, height, squared, height, squared)
+                        weight_b = weight * dr.gather(mi.Float64, self._read_leg, b + j) * attenuation / squared
                         length = 2.0 * distance + base
                     else:
-                        weight_b, length = weight * height * dr.square(inverse), base + distance
+                        attenuation = attenuation_of_distances(LAMBERTIAN, lit.height, lit.squared, height, squared)
+                        weight_b, length = weight * attenuation / distance, base + distance
                     if self.account:
                         length += dr.gather(mi.Float64, self._read_offset, b + j)
                     if impulse:                      # one bin (the impulse has no lead), the model's binning
@@ -456,16 +468,18 @@ class TransientNlosIntegrator(mi.SamplingIntegrator):
             deposit_reads(row_base, scale, None, None)
             return
         lasers = self._lasers
-        if len(lasers.leg) == 1:                      # single: l's factor once per sample
-            distance, factor = _wall_factor(point, [float(c[0]) for c in lasers.point])
-            deposit_reads(row_base, scale * float(lasers.leg[0]) * factor, distance, float(lasers.offset[0]))
+        if len(lasers.leg) == 1:                      # single: l's leg once per sample
+            lit = _lit(point, [float(c[0]) for c in lasers.point])
+            deposit_reads(row_base, scale * float(lasers.leg[0]) * point.z / lit.distance, lit,
+                          float(lasers.offset[0]))
             return
         tables = [mi.Float64(table) for table in (*lasers.point, lasers.leg, lasers.offset)]
 
         def body(a):
             lit_x, lit_y, lit_h, leg, offset = (dr.gather(mi.Float64, table, a) for table in tables)
-            distance, factor = _wall_factor(point, (lit_x, lit_y, lit_h))
-            deposit_reads(row_base + a * opaque_u32(len(self.read_points)), scale * leg * factor, distance, offset)
+            lit = _lit(point, (lit_x, lit_y, lit_h))
+            deposit_reads(row_base + a * opaque_u32(len(self.read_points)), scale * leg * point.z / lit.distance, lit,
+                          offset)
             return (a + 1,)
 
         dr.while_loop((mi.UInt32(0),), lambda a: a < opaque_u32(len(lasers.leg)), body, label="nlos_lasers")

@@ -18,14 +18,12 @@ from typing import Any
 import numpy as np
 
 from analytic.errors import DataError
+from analytic.formats import reader_for, writers
 from analytic.scenes.common import Scene
 from analytic.scenes.relay_wall import RelayWallScene
 
 from .atomic import discard, staged_writes
-from interop.tal.capture import read_capture, write_capture
-from interop.tal.relay_wall_capture import write_relay_wall_capture
-from .formats import (PrecisionWarning, float32_problem, json_ready, read_exr, read_npy, save_exr, save_json,
-                      save_npy)
+from .formats import PrecisionWarning, float32_problem, read_exr, read_npy, save_exr, save_json, save_npy
 
 __all__ = ["build_meta", "write_transient", "read_transient", "transient_format",
            "transient_in_folder", "UNITS", "RELAY_WALL_UNITS", "RELAY_WALL_KEYS", "KIND_KEYS",
@@ -135,7 +133,8 @@ def write_transient(out_dir: str | Path, transient: np.ndarray, meta: dict[str, 
     ``transient.h5`` is tal's HDF5 capture, readable by ``tal.io.read_capture``,
     with the metadata as its ``scene_info``: a plane's in the layout of
     :mod:`interop.tal.capture`, a relay-wall capture's in tal's NLOS layout
-    (:mod:`interop.tal.relay_wall_capture`).
+    (:mod:`interop.tal.relay_wall_capture`); it is written by the writer
+    :mod:`analytic.formats` has for it (every registered writer's file is written).
 
     Parameters
     ----------
@@ -187,17 +186,8 @@ def write_transient(out_dir: str | Path, transient: np.ndarray, meta: dict[str, 
             written["transient.exr"] = save_exr(out_dir / "transient.exr", transient, meta)
         else:
             discard(out_dir / "transient.exr")   # an earlier command's: it is not this transient
-        if meta.get("geometry") == "relay_wall":
-            if scene is None:
-                raise ValueError("write_transient: a relay-wall capture's transient.h5 needs its scene")
-            written["transient.h5"] = write_relay_wall_capture(out_dir / "transient.h5", transient, scene,
-                                                               scene_info=json_ready(meta))
-        else:
-            written["transient.h5"] = write_capture(out_dir / "transient.h5", transient,
-                                                    start_opl=meta["start_opl"],
-                                                    bin_width_opl=meta["bin_width_opl"], source=meta["source"],
-                                                    sensors=meta["sensor_positions"],
-                                                    scene_info=json_ready(meta))
+        for name, write in writers().items():   # other tools' files (tal's transient.h5: analytic.formats)
+            written[name] = write(out_dir / name, transient, meta, scene)
         written["meta.json"] = save_json(out_dir / "meta.json", meta)
     if problem is not None:
         warnings.warn(f"{out_dir / 'transient.exr'}: not written, {problem}; transient.npy (float64) is "
@@ -208,13 +198,17 @@ def write_transient(out_dir: str | Path, transient: np.ndarray, meta: dict[str, 
 #: Our transient files, in the order a reader takes them from a folder.
 TRANSIENT_FILES = ("transient.npy", "transient.exr")
 
-# File suffix (any case) -> the format of a transient file.
-_FORMATS = {".npy": "npy", ".exr": "exr", ".h5": "capture", ".hdf5": "capture"}
+# File suffix (any case) -> the format of our own transient files; others' come from analytic.formats.
+_FORMATS = {".npy": "npy", ".exr": "exr"}
 
 
 def transient_format(path: str | Path) -> str | None:
     """The format of a transient file by its suffix, in any case: "npy", "exr", "capture" (tal's HDF5) or None."""
-    return _FORMATS.get(Path(path).suffix.lower())
+    suffix = Path(path).suffix.lower()
+    if suffix in _FORMATS:
+        return _FORMATS[suffix]
+    reader = reader_for("transient", suffix)
+    return None if reader is None else reader.name
 
 
 def transient_in_folder(folder: str | Path) -> Path | None:
@@ -226,7 +220,8 @@ def read_transient(path: str | Path) -> np.ndarray:
     """Read a transient from ``.npy``, ``.exr`` (channel ``Y``) or tal's ``.h5``, or from a folder holding ours.
 
     Each format is read by its one reader (:func:`~analytic.files.read_npy`,
-    :func:`~analytic.files.read_exr`, :func:`~interop.tal.read_capture`),
+    :func:`~analytic.files.read_exr`, and for tal's ``.h5`` the transient reader of
+    :mod:`analytic.formats`: :func:`~interop.tal.read_capture`),
     the same that ``check`` and ``reconstruct`` use; the suffix may be in
     any case.
 
@@ -253,8 +248,8 @@ def read_transient(path: str | Path) -> np.ndarray:
         data = read_npy(path)
     elif kind == "exr":
         data, _ = read_exr(path)
-    elif kind == "capture":
-        data = read_capture(path).transient
+    elif kind is not None:
+        data = reader_for("transient", path.suffix).read(path)
     else:
         raise DataError(f"{path}: expected a .npy, .exr or .h5 (tal capture) transient")
     if data.ndim != 2:

@@ -32,8 +32,11 @@ import scipy.sparse
 
 from .result import NoiseLimitWarning, Problem, RankDeficiencyWarning
 
-__all__ = ["singular_values_of", "numerical_rank", "count_above_noise", "information_warning",
+__all__ = ["DEFAULT_MEMORY_LIMIT", "singular_values_of", "numerical_rank", "count_above_noise", "information_warning",
            "unseen_pixels_warning", "degrees_of_freedom", "information_summary"]
+
+
+DEFAULT_MEMORY_LIMIT = 2 * 2**30  # bytes the dense SVD route may use (Tikhonov's and TV's)
 
 
 def singular_values_of(problem: Problem, memory_limit: int) -> np.ndarray | None:

@@ -45,8 +45,8 @@ import scipy.sparse
 import scipy.sparse.linalg
 
 from ..errors import ResourceError
-from .information import (count_above_noise, degrees_of_freedom, information_warning, numerical_rank,
-                          singular_values_of, unseen_pixels_warning)
+from .information import (DEFAULT_MEMORY_LIMIT, count_above_noise, degrees_of_freedom, information_warning,
+                          numerical_rank, singular_values_of, unseen_pixels_warning)
 from .laplacian import dct2, idct2, laplacian_eigenvalues
 from .result import (Problem, RankDeficiencyWarning, Reconstruction, RegularizationWarning, parse_rule,
                      record_warning)
@@ -55,7 +55,6 @@ from .rules import RULES, choose_iterative, choose_spectral, curvature, default_
 __all__ = ["reconstruct", "reconstruct_rules", "METHODS", "DEFAULT_MEMORY_LIMIT"]
 
 METHODS = ("auto", "svd", "lsqr")
-DEFAULT_MEMORY_LIMIT = 2 * 2**30  # bytes the dense SVD route may use
 DEFAULT_GCV_PROBES = 4
 
 

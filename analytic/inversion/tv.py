@@ -14,8 +14,8 @@ import time
 
 import numpy as np
 
-from .information import (count_above_noise, information_warning, numerical_rank, singular_values_of,
-                          unseen_pixels_warning)
+from .information import (DEFAULT_MEMORY_LIMIT, count_above_noise, information_warning, numerical_rank,
+                          singular_values_of, unseen_pixels_warning)
 from .result import Problem, Reconstruction, RegularizationWarning, parse_rule, record_warning
 from .rules import edge_warning
 
@@ -178,8 +178,6 @@ def reconstruct_tv(matrix, data, pixels: int, *, rule: str | float = "oracle", t
         grid = grid / to_caller
     messages: list[str] = []
     # what the data fix (module .information): A's singular values, when σ is given and A fits in memory
-    from .tikhonov import DEFAULT_MEMORY_LIMIT
-
     values = None if sigma is None else singular_values_of(problem, DEFAULT_MEMORY_LIMIT)
     rank = None if values is None else numerical_rank(values, y.size, pixels * pixels)
     effective = None if values is None else count_above_noise(values * problem.matrix_scale, float(sigma))

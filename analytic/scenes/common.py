@@ -115,7 +115,7 @@ def _choice(key: str, value: Any, options: tuple[str, ...]) -> str:
     return value
 
 
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, init=False, eq=False, repr=False)
 class Illumination:
     """The source's intensity waveform s(t) (docs/design.md sections 2 and 8).
 
@@ -125,8 +125,9 @@ class Illumination:
         A name in :data:`WAVEFORMS` (each module's ``SUMMARY`` says what it
         is): ``impulse``, ``square``, ``butterworth``, ``gaussian``, ``emg``,
         ``sech2``, ``sampled``. Each but the impulse is scaled to unit peak
-        amplitude. The keys below are the ones the waveforms declare
-        (``PARAMETERS``); each applies only to the waveforms declaring it.
+        amplitude. The keys are the ones the registered waveforms declare
+        (``PARAMETERS``; the project's are below), each applying only to the
+        waveforms declaring it; a key not given reads as None.
     width : float, optional
         Square pulse width, metres of path length. Default: period / 5.
     cutoff : float, optional
@@ -156,65 +157,77 @@ class Illumination:
         Sampled: path length of the first sample, metres. Default 0.
     """
 
-    waveform: str = "impulse"
-    width: float | None = None
-    cutoff: float | None = None
-    duration: float | None = None
-    order: int | None = None
-    fwhm: float | None = None
-    tail: float | None = None
-    samples: Any = None
-    file: str | None = field(default=None, compare=False)
-    sample_width: float | None = None
-    sample_width_ps: float | None = None
-    start: float | None = None
+    waveform: str
+    values: tuple      # ((key, value), ...): the keys given, checked, in the registry's order; read as attributes
 
-    def __post_init__(self):
-        _choice("illumination.waveform", self.waveform, WAVEFORMS)
-        own = _registry.own_keys(self.waveform)
-        for name in _registry.keys():
-            value = getattr(self, name)
+    def __init__(self, *, waveform: str = "impulse", **keys):
+        unknown = [key for key in keys if key not in _registry.keys()]
+        if unknown:
+            raise TypeError(f"Illumination.__init__() got an unexpected keyword argument {unknown[0]!r}")
+        _choice("illumination.waveform", waveform, WAVEFORMS)
+        object.__setattr__(self, "waveform", waveform)
+        own = _registry.own_keys(waveform)
+        given = {}
+        for name in _registry.keys():          # the registry's order: the first bad key in it is named
+            value = keys.get(name)
             if value is None:
                 continue
             if name not in own:
-                raise SceneError(f"illumination.{name}",
-                                 f"does not apply to waveform = {self.waveform!r}")
+                raise SceneError(f"illumination.{name}", f"does not apply to waveform = {waveform!r}")
             kind = _registry.parameter(name).kind
             if kind == "integer":
-                object.__setattr__(self, name, _integer(f"illumination.{name}", value))
-            elif kind == "length":
-                object.__setattr__(self, name, _number(f"illumination.{name}", value, positive=True, length=True))
-            elif kind == "coordinate":
-                object.__setattr__(self, name, _number(f"illumination.{name}", value, length=True))
+                value = _integer(f"illumination.{name}", value)
+            elif kind in ("length", "coordinate"):
+                value = _number(f"illumination.{name}", value, positive=kind == "length", length=True)
             elif kind == "positive":
                 # the waveform's own bounds (analytic.waveforms.make_waveform) depend on the period
-                object.__setattr__(self, name, _number(f"illumination.{name}", value, positive=True))
-        if self.waveform == "sampled":
-            self._check_sampled()
+                value = _number(f"illumination.{name}", value, positive=True)
+            given[name] = value
+        if waveform == "sampled":
+            self._check_sampled(given)
+        object.__setattr__(self, "values", tuple((key, given[key]) for key in _registry.keys() if key in given))
 
-    def _check_sampled(self):
+    def __getattr__(self, name: str):
+        # a registered key not given is None (``illumination.fwhm``); called only where no attribute is found
+        if name.startswith("_") or name not in _registry.keys():
+            raise AttributeError(f"'Illumination' object has no attribute {name!r}")
+        return dict(self.values).get(name)
+
+    def _compared(self) -> tuple:
+        """What equality compares: a key of kind ``file`` (where the samples came from) is a label only."""
+        return self.waveform, tuple(item for item in self.values if _registry.parameter(item[0]).kind != "file")
+
+    def __eq__(self, other):
+        return self._compared() == other._compared() if type(other) is type(self) else NotImplemented
+
+    def __hash__(self):
+        return hash(self._compared())
+
+    def __repr__(self) -> str:
+        shown = (("waveform", self.waveform), *self.values)
+        return f"Illumination({', '.join(f'{key}={value!r}' for key, value in shown)})"
+
+    def _check_sampled(self, given: dict):
         """Samples from ``samples`` or ``file`` (exactly one), a spacing from exactly one key, a resolvable span."""
         from ..waveforms.measured import check_samples, finite_span, read_samples, sample_width_metres
 
-        if self.file is not None and not isinstance(self.file, str):
-            raise SceneError("illumination.file", f"expected a file name, got {self.file!r}")
-        if self.samples is None and self.file is None:
+        file, samples = given.get("file"), given.get("samples")
+        if file is not None and not isinstance(file, str):
+            raise SceneError("illumination.file", f"expected a file name, got {file!r}")
+        if samples is None and file is None:
             raise SceneError("illumination.file", "required with waveform = 'sampled' (a .npy or .csv of the "
                                                   "response's samples), or give samples = [...]")
-        if self.samples is None:
-            samples = read_samples(self.file)
-        else:
-            samples = check_samples(self.samples)
-        object.__setattr__(self, "samples", tuple(float(v) for v in samples))
-        given = [name for name in ("sample_width", "sample_width_ps") if getattr(self, name) is not None]
-        if len(given) != 1:
+        samples = read_samples(file) if samples is None else check_samples(samples)
+        given["samples"] = tuple(float(v) for v in samples)
+        stated = [name for name in ("sample_width", "sample_width_ps") if name in given]
+        if len(stated) != 1:
             raise SceneError("illumination.sample_width", "give exactly one of sample_width (metres of path) and "
-                             f"sample_width_ps (picoseconds); got {' and '.join(given) or 'neither'}")
-        width = sample_width_metres(self.sample_width, self.sample_width_ps)
+                             f"sample_width_ps (picoseconds); got {' and '.join(stated) or 'neither'}")
+        width = sample_width_metres(given.get("sample_width"), given.get("sample_width_ps"))
         if not width >= MIN_LENGTH:
-            raise SceneError(f"illumination.{given[0]}", f"{exact(width)} m is below the smallest length supported, "
+            raise SceneError(f"illumination.{stated[0]}", f"{exact(width)} m is below the smallest length supported, "
                                                          f"{MIN_LENGTH:g} m")
-        finite_span(len(samples), width, 0.0 if self.start is None else self.start, MAX_LENGTH, _BIN_RESOLUTION)
+        finite_span(len(samples), width, given.get("start", 0.0), MAX_LENGTH, _BIN_RESOLUTION)
 
 
 def illumination_keys() -> tuple:

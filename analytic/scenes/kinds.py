@@ -125,15 +125,13 @@ def register_scene_kind(cls: type) -> type:
     return cls
 
 
-def _builtin_kinds() -> tuple[type, ...]:
-    from . import common, relay_wall  # noqa: F401  (their classes register themselves)
-
-    return tuple(SCENE_KINDS.values())
-
-
 def is_scene(value) -> bool:
-    """Whether ``value`` is a scene of a registered kind."""
-    return isinstance(value, _builtin_kinds())
+    """Whether ``value`` is a scene of a registered kind.
+
+    No kind needs importing first: an object of a kind's class exists only once the class's module ran,
+    and with it its registration.
+    """
+    return isinstance(value, tuple(SCENE_KINDS.values()))
 
 
 def for_kind(handlers: Mapping[str, Handler], scene, what: str, *,

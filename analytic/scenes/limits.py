@@ -25,7 +25,8 @@ MAX_TOLERANCE = 0.1
 MAX_INTENSITY = 1e30
 #: Smallest source intensity, W/sr: below it y leaves float64's normal range (a 1e-320 W/sr source gave
 #: all-zero or two-digit subnormal transients); at it, y ∝ I holds to 1e-6 for scenes of a few metres
-#: (tests/cli/test_probe.py, "intensity law", a slow case). Far scenes reach subnormal y sooner: scale I up and y down.
+#: (tests/cli/probe/test_numbers.py, "intensity law", a slow case). Far scenes reach subnormal y sooner: scale I up
+#: and y down.
 MIN_INTENSITY = 1e-300
 
 

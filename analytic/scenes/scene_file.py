@@ -23,6 +23,7 @@ import numpy as np
 from ..measurement.detector import Detector
 from ..errors import ImageError, OptionError, SceneError
 from .kinds import is_scene
+from ..formats import reader_for
 from .reflectance import printable, read_reflectance, regular_file_problem
 from .common import (MAX_SENSORS, illumination_keys, Illumination, Noise, Sampling, Scene, _integer, _number,
                     _point, sensor_grid)
@@ -207,11 +208,11 @@ def _illumination(table: dict, base_dir) -> Illumination:
         if not isinstance(name, str) or not name:
             raise SceneError("illumination.file", f"expected a file name (.npy or .csv, relative to the scene "
                                                   f"file), got {name!r}")
-        from ..waveforms.measured import HISTOGRAM_SUFFIXES, histogram_axis, read_samples
+        from ..waveforms.measured import histogram_axis, is_histogram, read_samples
 
         path = Path(base_dir) / name
         table["samples"] = read_samples(path)
-        if path.suffix.lower() in HISTOGRAM_SUFFIXES:
+        if is_histogram(path):
             _histogram_spacing(table, *histogram_axis(path))
     return Illumination(**table)
 
@@ -325,7 +326,10 @@ def scene_to_tables(scene: Scene) -> dict:
 
 
 def load_scene(path: str | Path) -> Scene:
-    """Read a scene TOML file, or a tal render configuration (``.yaml``/``.yml``: :mod:`interop.tal.config`).
+    """Read a scene TOML file, or another tool's scene file that :mod:`analytic.formats` has a reader for.
+
+    A tal render configuration (``.yaml``/``.yml``) is read by :mod:`interop.tal.config` (registered by
+    :mod:`interop.tal.formats`); a file of any other suffix is read as TOML.
 
     Parameters
     ----------
@@ -337,10 +341,10 @@ def load_scene(path: str | Path) -> Scene:
     SceneError
         Unreadable file, bad TOML, unknown key or bad value.
     """
-    if isinstance(path, (str, Path)) and str(path) and Path(path).suffix.lower() in (".yaml", ".yml"):
-        from interop.tal.config import load_tal_config
-
-        return load_tal_config(path)           # a tal render configuration (docs/tal.md)
+    if isinstance(path, (str, Path)) and str(path) and Path(path).suffix.lower() not in ("", ".toml"):
+        reader = reader_for("scene", Path(path).suffix)
+        if reader is not None:
+            return reader.read(path)           # another tool's scene file (a tal configuration: docs/tal.md)
     data = read_toml(path, "scene")
     path = Path(path)
     return scene_from_dict(data, path.parent, name=path.stem)

@@ -3,7 +3,8 @@
 The ``sampled`` waveform (docs/design.md section 8) takes its samples from
 ``[illumination] file`` (.npy: a 1-D array; .csv or .txt: one number per
 line, blank lines and lines starting with ``#`` skipped; .h5 or .hdf5: a tal
-capture holding one histogram, whose bin centres are the samples) or inline as
+capture holding one histogram, whose bin centres are the samples, read by
+the response reader :mod:`analytic.formats` has for its suffix) or inline as
 ``[illumination] samples = [...]``. :func:`check_samples` is what the
 scene's :class:`~analytic.scenes.common.Illumination` runs on either.
 """
@@ -15,20 +16,19 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import SceneError
+from ..errors import DataError, SceneError
+from ..formats import readers, reader_for
 from ..values import exact, huge_integer
 
 __all__ = ["read_samples", "histogram_axis", "check_samples", "sample_width_metres", "finite_span", "MAX_SAMPLES",
-           "METRES_PER_PICOSECOND", "SUFFIXES"]
+           "METRES_PER_PICOSECOND", "SUFFIXES", "is_histogram"]
 
 #: Most samples accepted: each is a kink of the pulse, where the model cuts its integrals.
 MAX_SAMPLES = 100_000
 #: Path length light travels in one picosecond, metres (c = 299 792 458 m/s).
 METRES_PER_PICOSECOND = 2.99792458e-4
-#: File types read.
-SUFFIXES = (".npy", ".csv", ".txt", ".h5", ".hdf5")
-#: tal captures among them: their own time axis gives the spacing and start.
-HISTOGRAM_SUFFIXES = (".h5", ".hdf5")
+#: File types read here.
+SUFFIXES = (".npy", ".csv", ".txt")
 #: Largest file read, bytes (a text file of MAX_SAMPLES numbers is ~2.5 MB).
 _MAX_BYTES = 16 << 20
 
@@ -54,8 +54,9 @@ def read_samples(path, key: str = "illumination.file") -> np.ndarray:
     path = Path(path)
     shown = str(path)
     suffix = path.suffix.lower()
-    if suffix not in SUFFIXES:
-        raise SceneError(key, f"{shown}: expected a {', '.join(SUFFIXES)} file of samples, got {suffix or 'no suffix'!r}")
+    if suffix not in SUFFIXES and not is_histogram(path):
+        known = SUFFIXES + tuple(readers("response"))
+        raise SceneError(key, f"{shown}: expected a {', '.join(known)} file of samples, got {suffix or 'no suffix'!r}")
     if not path.is_file():
         raise SceneError(key, f"{shown}: no such file (paths are relative to the scene file)")
     if path.stat().st_size > _MAX_BYTES:
@@ -64,7 +65,7 @@ def read_samples(path, key: str = "illumination.file") -> np.ndarray:
         if suffix == ".npy":
             with open(path, "rb") as stream:
                 values = np.load(stream, allow_pickle=False)
-        elif suffix in HISTOGRAM_SUFFIXES:
+        elif suffix not in SUFFIXES:
             values = _histogram(path, key).transient[0]
         else:
             values = _read_text(path, key)
@@ -80,12 +81,17 @@ def read_samples(path, key: str = "illumination.file") -> np.ndarray:
     return check_samples(values.astype(np.float64), key)
 
 
-def _histogram(path: Path, key: str):
-    from ..errors import DataError
-    from interop.tal.capture import read_capture
+def is_histogram(path) -> bool:
+    """Whether ``path`` is another tool's histogram (a tal capture) by its suffix: its own time axis gives the
+    samples' spacing and start (:func:`histogram_axis`)."""
+    suffix = Path(path).suffix.lower()
+    return suffix not in SUFFIXES and reader_for("response", suffix) is not None
 
+
+def _histogram(path: Path, key: str):
+    """The histogram record of :mod:`analytic.formats`' response reader for ``path``'s suffix."""
     try:
-        capture = read_capture(path)
+        capture = reader_for("response", path.suffix).read(path)
     except DataError as error:
         raise SceneError(key, str(error)) from None
     if capture.transient.shape[0] != 1:

@@ -26,7 +26,7 @@ class Parameter:
     Attributes
     ----------
     name : str
-        The scene file's key (and :class:`analytic.scenes.common.Illumination`'s field).
+        The scene file's key (and an attribute of :class:`analytic.scenes.common.Illumination`).
     kind : str
         One of :data:`KINDS`: how the scene checks its value.
     unit : str

@@ -14,5 +14,5 @@ __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "export": ["export_scene", "FORMATS", "RADIUS", "SPP", "SPP_RELAY_WALL", "MITRANSIENT_IMPULSE_ONLY"],
     "export_relay_wall": ["MITRANSIENT_SCANS"],
     "nlos": ["emulated_estimates", "spawn_offset_difference", "moved_read_points", "offset_model",
-             "transient_nlos_path", "EMULATED_SAMPLES", "EDGE_POINTS"],
+             "EMULATED_SAMPLES", "EDGE_POINTS"],
 })

@@ -23,8 +23,8 @@ low near the origin, growing with the coordinates' magnitude
 :func:`spawn_offset_difference` evaluates that estimator and the exact one
 on the same points (common random numbers), in float64: their difference
 is what mitransient adds to the model, with no fitted parameter.
-:func:`transient_nlos_path` states it as a convention for ``check --expect
-transient_nlos_path``. Nothing here changes the model's own numbers.
+:func:`offset_model` is what :func:`validation.check.conventions.transient_nlos_path` states as a
+convention for ``check --expect transient_nlos_path``. Nothing here changes the model's own numbers.
 """
 
 from __future__ import annotations
@@ -36,10 +36,8 @@ import numpy as np
 from analytic.scenes.relay_wall import WALL_NORMAL, RelayWallScene
 from transient.constants import RAY_EPSILON
 
-from validation.check.conventions import Convention
-
 __all__ = ["emulated_estimates", "spawn_offset_difference", "moved_read_points", "offset_model",
-           "transient_nlos_path", "EMULATED_SAMPLES", "EDGE_POINTS"]
+           "EMULATED_SAMPLES", "EDGE_POINTS"]
 
 #: Points per edge of the line integral over the unsampled strip.
 EDGE_POINTS = 2**15
@@ -249,26 +247,3 @@ def offset_model(scene: RelayWallScene, *, world_offset=None, ray_epsilon: float
     from_o = (matrix @ scene.reflectance.ravel()).reshape(scene.sensor_count, scene.sampling.count)
     return from_o - _unsampled_strip(scene, pairs, origins, edge_points)
 
-
-def transient_nlos_path(scene: RelayWallScene, *, model: np.ndarray | None = None) -> Convention:
-    """The convention ``check --expect transient_nlos_path`` states: the model plus mitransient's ray offsets.
-
-    Parameters
-    ----------
-    scene : RelayWallScene
-        The capture exported with ``export --format mitransient`` (its scene at the origin).
-    model : numpy.ndarray, optional
-        ``forward(scene)`` if already computed.
-
-    Returns
-    -------
-    Convention
-        Scale 1, offset 0, and ``added`` = :func:`offset_model` minus the model: derived, no fitted
-        parameter.
-    """
-    from analytic.operator.system import forward
-
-    model = forward(scene) if model is None else model
-    return Convention(scale=1.0, offset_opl=0.0, added=offset_model(scene) - model,
-                      name="mitransient's transient_nlos_path: the model read from s + (1 + max|s_i|) RayEpsilon n, "
-                           "less the strip its sampling misses")

@@ -5,7 +5,8 @@
 - :mod:`.mesh`: a planar OBJ polygon as a rectangle and its indicator image;
 - :mod:`.capture`: tal's HDF5 capture (``transient.h5``), written for a plane and read for every layout;
 - :mod:`.relay_wall_capture`: a relay-wall transient in the layout ``tal render`` writes;
-- :mod:`.scene_capture`: any scene's transient in its kind's layout.
+- :mod:`.scene_capture`: any scene's transient in its kind's layout;
+- :mod:`.formats`: these files in the model's format registry (:mod:`analytic.formats`), by suffix.
 
 Names are loaded on first use (``lazy_loader``); ``__all__`` lists the public API.
 """

@@ -312,3 +312,18 @@ def test_a_pulse_in_a_one_bin_window_is_integrated_as_the_pulse():
     replicas = _render(scene, 2**18, seed=8)
     chi2, max_z, bins, passes = _agrees(replicas, _model(scene))
     assert passes and bins == scene.sensor_count, (chi2, max_z, bins)
+
+
+def test_a_pairs_weight_is_the_models_attenuation_formula(monkeypatch):
+    """One definition of a_k: the relay-wall renderer weighs each pair with attenuation_formula (in Dr.Jit), not
+    a re-derivation of it; doubling the formula there doubles every scan's render, sample for sample."""
+    for name in ("confocal", "single, tilted, Butterworth", "exhaustive, legs counted, near the wall"):
+        scene = _covering(CASES[name])
+        before = _render(scene, 2**10, seed=5)
+        import transient.nlos as nlos            # after a render: the plugins load once a variant is set
+
+        formula = nlos.attenuation_of_distances
+        monkeypatch.setattr(nlos, "attenuation_of_distances", lambda *values: 2.0 * formula(*values))
+        doubled = _render(scene, 2**10, seed=5)
+        monkeypatch.undo()
+        assert before.max() > 0 and np.allclose(doubled, 2.0 * before, rtol=1e-12, atol=0.0), name

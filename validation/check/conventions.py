@@ -26,7 +26,7 @@ from transient.constants import RAY_EPSILON as RAY_EPSILON_FLOAT32
 
 from .fit import Fit
 
-__all__ = ["Convention", "irradiancemeter", "convention", "check_expect", "diagnose", "CONVENTIONS", "KNOWN_SCALES",
+__all__ = ["Convention", "irradiancemeter", "transient_nlos_path", "convention", "check_expect", "diagnose", "CONVENTIONS", "KNOWN_SCALES",
            "RAY_EPSILON_FLOAT32"]
 
 #: The conventions stated by name (``check --expect NAME``, ``expect="NAME"``).
@@ -74,7 +74,7 @@ class Convention:
     added : numpy.ndarray or None
         ``(K, N)`` a stated difference added to the scaled, shifted model
         (units of y), derived without reference to the data (e.g.
-        :func:`~interop.mitransient.nlos.transient_nlos_path`); None for none.
+        :func:`transient_nlos_path`); None for none.
     """
 
     scale: float
@@ -213,20 +213,43 @@ def check_expect(expect, scene, radius, words) -> None:
                               f"give the scene with waveform = \"impulse\"")
 
 
+def transient_nlos_path(scene, *, model: np.ndarray | None = None) -> Convention:
+    """The convention ``check --expect transient_nlos_path`` states: the model plus mitransient's ray offsets.
+
+    Parameters
+    ----------
+    scene : RelayWallScene
+        The capture exported with ``export --format mitransient`` (its scene at the origin).
+    model : numpy.ndarray, optional
+        ``forward(scene)`` if already computed.
+
+    Returns
+    -------
+    Convention
+        Scale 1, offset 0, and ``added`` = :func:`interop.mitransient.nlos.offset_model` minus the model:
+        derived, no fitted parameter.
+    """
+    from analytic.operator.system import forward
+    from interop.mitransient.nlos import offset_model
+
+    model = forward(scene) if model is None else model
+    return Convention(scale=1.0, offset_opl=0.0, added=offset_model(scene) - model,
+                      name="mitransient's transient_nlos_path: the model read from s + (1 + max|s_i|) RayEpsilon n, "
+                           "less the strip its sampling misses")
+
+
 def convention(expect, scene, radius, words, *, model=None) -> Convention | None:
     """The :class:`Convention` that ``expect`` states for ``scene`` (checked by :func:`check_expect`).
 
     ``"irradiancemeter"``: :func:`irradiancemeter` with ``radius`` (default
     the export's, :data:`interop.mitransient.export.RADIUS`); ``"transient_nlos_path"``:
-    :func:`interop.mitransient.transient_nlos_path` (``model``: the scene's, if
+    :func:`transient_nlos_path` (``model``: the scene's, if
     computed); a Convention as itself; None for None.
     """
     check_expect(expect, scene, radius, words)
     if expect is None or isinstance(expect, Convention):
         return expect
     if expect == "transient_nlos_path":
-        from interop.mitransient.nlos import transient_nlos_path
-
         return transient_nlos_path(scene, model=model)
     from interop.mitransient.export import RADIUS
 

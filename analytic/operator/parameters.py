@@ -242,8 +242,9 @@ def with_values(scene, values: dict):
         elif stem == "sampling.start":
             changes["sampling"] = replace(scene.sampling, start_opl=value)
         elif stem.startswith("illumination."):
-            changes["illumination"] = replace(changes.get("illumination", scene.illumination),
-                                              **{stem.split(".")[1]: value})
+            light = changes.get("illumination", scene.illumination)
+            changes["illumination"] = type(light)(waveform=light.waveform,
+                                                  **{**dict(light.values), stem.split(".")[1]: value})
         elif stem == "scan.laser_point":
             point = np.array(scene.laser_points[0] if "scan" not in changes else changes["scan"].laser_point)
             point[index[0]] = value

@@ -70,7 +70,8 @@ count = 24
 #: A derivative whose largest bin is under this share of the exact column's largest is 0 (float32 rounding).
 ROUNDING = 1e-6
 
-#: Offset of the primal seeds of the derivative renders (their differential seeds are 0, 1, ...).
+#: Offset of the primal seeds of the derivative renders. Replica r renders its derivative with the
+#: differential seed r + 1 and its differences with the seed r + 1: the same paths.
 GRADIENT_SEEDS = 2**20
 
 #: The sensor mitransient's export names after sensor 0 (a sphere carrying the irradiancemeter).
@@ -167,7 +168,8 @@ class Renderer:
         return len(self.scenes[False][0].sensors())
 
     def derivative(self, motion: Motion, seed: int) -> np.ndarray:
-        """``(K, 1, 1, N, 1)`` mitransient's forward-mode derivative of each sensor's film along ``motion``."""
+        """``(K, 1, 1, N, 1)`` mitransient's forward-mode derivative of each sensor's film along ``motion``
+        (replica ``seed``: the paths of :meth:`difference`'s)."""
         import drjit as dr
 
         mi = self.mi
@@ -179,7 +181,8 @@ class Renderer:
                 dr.enable_grad(t)
                 _move(mi, params, base, motion, t)
                 # the primal pass is discarded; Mitsuba refuses a differential seed equal to the primal's
-                _, transient = mi.render(scene, params, sensor=k, seed=seed + GRADIENT_SEEDS, seed_grad=seed,
+                # and replaces a differential seed 0 by one derived from the primal's
+                _, transient = mi.render(scene, params, sensor=k, seed=seed + GRADIENT_SEEDS, seed_grad=seed + 1,
                                          spp=self.spp, spp_grad=self.spp)
                 dr.forward(t)
                 films.append(np.array(dr.grad(transient), dtype=np.float64))
@@ -196,7 +199,7 @@ class Renderer:
         try:
             for sign in (1.0, -1.0):
                 _move(mi, params, base, motion, motion.at + sign * step)
-                sides.append(np.stack([np.array(mi.render(scene, sensor=k, seed=seed, spp=self.spp)[1],
+                sides.append(np.stack([np.array(mi.render(scene, sensor=k, seed=seed + 1, spp=self.spp)[1],
                                                 dtype=np.float64) for k in range(len(scene.sensors()))]))
         finally:
             _restore(params, base)

@@ -30,7 +30,7 @@ docs/design.md section 9 in :data:`MOTIONS`, this script
    over bins telescopes away the bin-edge terms that box binning drops).
 
 Prints the markdown table of docs/mitransient-derivatives.md and writes
-results.json in --out. At the defaults: about 4 minutes on 2 busy cores.
+results.json in --out. At the defaults: about 12 minutes on 2 busy cores.
 """
 
 from __future__ import annotations
@@ -44,10 +44,10 @@ from pathlib import Path
 
 import numpy as np
 
-from analytic.files import save_json, save_npy
+from analytic.files import save_json, save_npy, save_text
 from analytic.scenes.scene_file import load_scene
 
-#: The scene studied: small, so that one derivative render of 2^22 samples takes about a second.
+#: The scene studied: small, so that one derivative render of 2^22 samples takes a few seconds.
 SCENE_TEXT = """\
 # benchmarks/mitransient_derivatives.py: mitransient's derivatives against the exact model
 [plane]
@@ -73,6 +73,9 @@ ROUNDING = 1e-6
 #: Offset of the primal seeds of the derivative renders. Replica r renders its derivative with the
 #: differential seed r + 1 and its differences with the seed r + 1: the same paths.
 GRADIENT_SEEDS = 2**20
+
+#: The reflectance of SCENE_TEXT, the scalar the second reflectance row renders.
+UNIFORM_REFLECTANCE = 0.5
 
 #: The sensor mitransient's export names after sensor 0 (a sphere carrying the irradiancemeter).
 SENSOR_SHAPE = "sensor_000000"
@@ -216,13 +219,7 @@ def _scalar_reflectance_xml(xml: Path) -> Path:
         if texture is not None:
             bsdf.remove(texture)
             ET.SubElement(bsdf, "float", name="reflectance", value=repr(UNIFORM_REFLECTANCE))
-    path = xml.with_name("scene_scalar.xml")
-    tree.write(path)
-    return path
-
-
-#: The reflectance of SCENE_TEXT, the scalar the second reflectance row renders.
-UNIFORM_REFLECTANCE = 0.5
+    return save_text(xml.with_name("scene_scalar.xml"), ET.tostring(tree.getroot(), encoding="unicode"))
 
 
 def failure_text(error: BaseException) -> str:
@@ -426,9 +423,8 @@ def main(argv=None) -> int:
     from validation.check import irradiancemeter
     from validation.runs.bench import cpu_model
 
-    args.out.mkdir(parents=True, exist_ok=True)
     scene_path = args.out / "scene.toml"
-    scene_path.write_text(SCENE_TEXT, encoding="utf-8")
+    save_text(scene_path, SCENE_TEXT)
     scene = load_scene(scene_path)
     export_scene(scene, args.out / "xml", "mitransient")
     convention = irradiancemeter(scene, RADIUS)

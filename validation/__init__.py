@@ -31,4 +31,5 @@ __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "runs.paper": ["reproduce"],
     "sweep": ["load_sweep", "run_sweep"],
     "runs.bench": ["speed_against_error"],
+    "calibration": ["calibrate", "Calibration"],
 })

@@ -22,7 +22,7 @@ by χ²/dof (the verdict of section 6 judges whether the errors are right).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -103,6 +103,12 @@ class FitProblem:
     data: np.ndarray
     stderr: np.ndarray
     free_scale: bool = True
+    reweight: object = None
+    start_scale: float | None = None
+
+
+#: Most rounds of reweighting (Poisson data: σ² from the fitted mean, until the fit stops moving).
+MAX_REWEIGHTS = 8
 
 
 @dataclass(frozen=True)
@@ -238,17 +244,41 @@ def _damped_step(problem, system, theta, scale, chi2, damping, chi2_of):
 def levenberg_marquardt(problem: FitProblem) -> FitOutcome:
     """Fit ``problem`` (see the module's docstring); a :class:`FitOutcome`.
 
+    With ``problem.reweight`` (model -> σ, Poisson data: σ² is the mean), the fit is repeated with σ from
+    the fitted model until a round starts at its minimum (iteratively reweighted least squares: its fixed
+    point solves the Poisson likelihood's score equations, Σ (c - μ) ∂μ/∂θ / μ = 0, and (AᵀA)⁻¹ is then
+    the inverse Fisher information), at most :data:`MAX_REWEIGHTS` rounds.
+
     Raises
     ------
     SceneError
         The starting values themselves are refused by the scene.
     """
+    outcome = _fit_once(problem)
+    first, rounds, total = outcome, 1, outcome.iterations
+    while problem.reweight is not None and outcome.converged and rounds < MAX_REWEIGHTS:
+        problem = replace(problem, stderr=problem.reweight(outcome.model),
+                          start=np.array([outcome.values[name] for name in problem.names]),
+                          start_scale=outcome.values[SCALE])
+        outcome = _fit_once(problem)
+        rounds, total = rounds + 1, total + outcome.iterations
+        if outcome.iterations == 1:        # the new weights moved the minimum by under STEP_TOLERANCE errors
+            break
+    else:
+        if problem.reweight is not None and outcome.converged:
+            outcome = replace(outcome, converged=False)      # the weights never settled
+    return replace(outcome, start_chi2=first.start_chi2, start_model=first.start_model, iterations=total)
+
+
+def _fit_once(problem: FitProblem) -> FitOutcome:
+    """One Levenberg-Marquardt fit with ``problem.stderr`` held."""
     mask = problem.stderr > 0
     weights = np.where(mask, 1.0 / np.where(mask, problem.stderr, 1.0) ** 2, 0.0)
     names = list(problem.names) + ([SCALE] if problem.free_scale else [])
     theta = np.array(problem.start, dtype=np.float64)
     y = problem.model(theta)
-    scale = _best_scale(problem.data, y, weights) if problem.free_scale else 1.0
+    scale = (1.0 if not problem.free_scale else problem.start_scale if problem.start_scale is not None
+             else _best_scale(problem.data, y, weights))
     start_model = scale * y
 
     def chi2_of(model):

@@ -17,7 +17,7 @@ the fit is for.
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +27,7 @@ from analytic.operator.derivatives import jacobian as exact_jacobian
 from analytic.operator.parameters import parameters, value_of, with_values
 from analytic.operator.system import forward
 from validation.check.inputs import PYTHON_WORDS, Words, read_inputs, scene_of
-from validation.judging.arrays import false_alarm_rate
+from validation.judging.arrays import false_alarm_rate, real_array
 from validation.judging.compare import Agreement, compare_transients, model_tolerance_for
 
 from .fit import SCALE, FitOutcome, FitProblem, levenberg_marquardt
@@ -195,8 +195,8 @@ def _problem(scene, keys, data, error, free_scale: bool) -> FitProblem:
                       data=data, stderr=error, free_scale=free_scale)
 
 
-def calibrate(scene, data, free, *, stderr=None, dof: int | None = None, fixed_scale: bool = False,
-              false_alarm: float = 1e-3) -> Calibration:
+def calibrate(scene, data, free, *, stderr=None, dof: int | None = None, counts: bool = False,
+              fixed_scale: bool = False, false_alarm: float = 1e-3) -> Calibration:
     """Fit the free parameters of ``scene`` (and a scale) to a capture; ``calibrate``'s work.
 
     Parameters
@@ -216,6 +216,11 @@ def calibrate(scene, data, free, *, stderr=None, dof: int | None = None, fixed_s
         ``(K, N)`` standard error of one transient, units of y.
     dof : int, optional
         Its degrees of freedom (Student's t in the verdict).
+    counts : bool
+        ``data`` is a ``(K, N)`` histogram of photon counts (an array, a ``.npy``, or a folder holding
+        ``counts.npy``) of the scene's ``[detector]`` without dead time: fitted by its Poisson likelihood
+        (reweighted least squares, σ² = the fitted mean) and judged by check's deviance test
+        (:func:`validation.check.counts.judge_counts`).
     fixed_scale : bool
         Hold the scale at 1 (data in the model's absolute units).
     false_alarm : float
@@ -230,12 +235,12 @@ def calibrate(scene, data, free, *, stderr=None, dof: int | None = None, fixed_s
     DataError, OptionError, SceneError
         What ``check`` refuses, an unknown or repeated key, a bad α.
     """
-    return calibrate_inputs(scene, data, free, stderr=stderr, dof=dof, fixed_scale=fixed_scale,
+    return calibrate_inputs(scene, data, free, stderr=stderr, dof=dof, counts=counts, fixed_scale=fixed_scale,
                             false_alarm=false_alarm)
 
 
-def calibrate_inputs(scene, data, free, *, stderr=None, dof=None, fixed_scale=False, false_alarm=1e-3,
-                     words: Words = PYTHON_WORDS, checked=None) -> Calibration:
+def calibrate_inputs(scene, data, free, *, stderr=None, dof=None, counts=False, fixed_scale=False,
+                     false_alarm=1e-3, words: Words = PYTHON_WORDS, checked=None) -> Calibration:
     """:func:`calibrate`, its messages in ``words``; ``checked``: called once the inputs are accepted."""
     scene = scene_of(scene)
     false_alarm = false_alarm_rate(false_alarm)
@@ -247,8 +252,17 @@ def calibrate_inputs(scene, data, free, *, stderr=None, dof=None, fixed_scale=Fa
         start_opl = stated_start_opl(_first_path(data))
         if start_opl is not None:
             scene = with_values(scene, {"sampling.start": start_opl})
-    inputs = read_inputs(scene, data, stderr, dof=dof, words=words)
-    values, error, degrees, replicas = _mean_and_error(inputs)
+    if counts:
+        if stderr is not None or dof is not None:
+            raise DataError(f"{words.stderr}: counts carry their own (Poisson) error; give no standard error with "
+                            f"them")
+        histogram, sources = _histogram(scene, data, words)
+        values, error, reweight = _counts_as_y(histogram, scene.detector)
+        degrees, replicas = np.inf, None
+    else:
+        inputs = read_inputs(scene, data, stderr, dof=dof, words=words)
+        values, error, degrees, replicas = _mean_and_error(inputs)
+        reweight, sources = None, inputs.sources
     if not np.any(values != 0):
         raise DataError(f"{words.data}: every value is 0, no light to fit; check the data against the scene")
     if not np.any(error > 0):
@@ -258,11 +272,87 @@ def calibrate_inputs(scene, data, free, *, stderr=None, dof=None, fixed_scale=Fa
     fitted_scene = scene if tolerance is None else scene.replace(tolerance=tolerance)
     if checked is not None:
         checked()
-    outcome = levenberg_marquardt(_problem(fitted_scene, keys, values, error, not fixed_scale))
-    agreement = compare_transients(values, error, outcome.model, dof=degrees if replicas is None else None,
-                                   replicas=replicas, false_alarm=false_alarm,
-                                   max_relative_stderr=MAX_RELATIVE_STDERR)
-    return _calibration(scene, keys, outcome, agreement, values, error, false_alarm, inputs.sources)
+    problem = _problem(fitted_scene, keys, values, error, not fixed_scale)
+    outcome = levenberg_marquardt(replace(problem, reweight=reweight))
+    if counts:
+        agreement = CountsAgreement.of(histogram, outcome.model, scene.detector, false_alarm)
+        error = reweight(outcome.model)
+    else:
+        agreement = compare_transients(values, error, outcome.model, dof=degrees if replicas is None else None,
+                                       replicas=replicas, false_alarm=false_alarm,
+                                       max_relative_stderr=MAX_RELATIVE_STDERR)
+    return _calibration(scene, keys, outcome, agreement, values, error, false_alarm, sources)
+
+
+def _histogram(scene, data, words: Words) -> tuple[np.ndarray, tuple]:
+    """The ``(K, N)`` histogram of counts ``data`` gives (an array, a .npy, a folder holding counts.npy)."""
+    from analytic.files import read_npy, reading_folder
+
+    detector = scene.detector
+    if detector is None:
+        raise DataError(f"{words.data}: counts need the scene's [detector] table to model them by; add one "
+                        f"(photons, background, cycles, dead_time; docs/detector.md)")
+    if detector.dead_time != "none":
+        raise DataError(f"{words.data}: calibrate fits counts without dead time (the scene's [detector] "
+                        f"dead_time = {detector.dead_time!r}); a first-photon histogram is not fitted yet: "
+                        f"correct it (Coates) or judge it with check --counts")
+    if isinstance(data, (str, Path)):
+        with reading_folder(data, option=words.data):
+            path = Path(data) / "counts.npy" if Path(data).is_dir() else Path(data)
+            if not path.is_file() or path.suffix.lower() != ".npy":
+                raise DataError(f"{path}: counts are read from a .npy histogram ((K, N) whole numbers) or the "
+                                f"folder holding counts.npy")
+            histogram, sources = read_npy(path), (str(path),)
+    else:
+        histogram, sources = real_array(words.data, data), ()
+    shape = (scene.sensor_count, scene.sampling.count)
+    values = np.asarray(histogram, dtype=np.float64)
+    if values.shape != shape:
+        raise DataError(f"{words.data}: counts of shape {values.shape}, the scene's rows x bins are {shape}")
+    if not np.all(np.isfinite(values)) or np.any(values < 0) or np.any(values != np.round(values)):
+        raise DataError(f"{words.data}: every count must be a finite whole number >= 0")
+    return values, sources
+
+
+def _counts_as_y(histogram, detector):
+    """Counts c as data in y's units (d = (c / C - b) / p: their mean is y without dead time), their first
+    standard errors sqrt(max(c, 1)) / (C p), and the reweighting σ(model) = sqrt(C (p y + b)) / (C p)."""
+    cycles, photons, background = detector.cycles, detector.photons, detector.background
+
+    def reweight(model):
+        return np.sqrt(cycles * (photons * np.maximum(model, 0.0) + background)) / (cycles * photons)
+
+    return ((histogram / cycles - background) / photons, np.sqrt(np.maximum(histogram, 1.0)) / (cycles * photons),
+            reweight)
+
+
+@dataclass(frozen=True)
+class CountsAgreement:
+    """Counts against the fitted expected histogram: check's deviance test, with ``Agreement``'s reading."""
+
+    verdict: object
+
+    @classmethod
+    def of(cls, histogram, model, detector, false_alarm: float) -> CountsAgreement:
+        from analytic.measurement.detector import expected_counts
+        from validation.check.counts import DEFAULT_DRAWS, judge_counts
+
+        draws = max(DEFAULT_DRAWS, int(np.ceil(20.0 / false_alarm)))     # the quantile resolved at α
+        return cls(judge_counts(histogram, expected_counts(model, detector), detector, false_alarm=false_alarm,
+                                draws=draws))
+
+    @property
+    def agrees(self) -> bool:
+        return bool(self.verdict.agrees)
+
+    def as_dict(self) -> dict:
+        return self.verdict.as_dict()
+
+    def summary(self) -> str:
+        v = self.verdict
+        return (f"{'AGREE' if v.agrees else 'DISAGREE'}: {v.statistic} deviance {v.deviance:.2f} "
+                f"{'<=' if v.agrees else '>'} {v.threshold:.2f} (the {1 - v.false_alarm:g} quantile of {v.draws} "
+                f"histograms drawn from the fitted model), p = {v.p_value:.3g}, {v.bins} bins")
 
 
 def _calibration(scene, keys, outcome: FitOutcome, agreement, values, error, false_alarm, sources) -> Calibration:

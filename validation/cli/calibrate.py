@@ -26,7 +26,10 @@ def command_calibrate(args) -> int:
                          "their error")
     refuse_unmodellable(scene)
     data = args.data[0] if len(args.data) == 1 else list(args.data)
-    result = calibrate_inputs(scene, data, args.free, stderr=args.stderr, fixed_scale=args.fixed_scale,
+    if args.counts and (args.stderr is not None or len(args.data) > 1):
+        raise UsageError("--counts: give one --data histogram, without --stderr (counts carry their own error)")
+    result = calibrate_inputs(scene, data, args.free, stderr=args.stderr, counts=args.counts,
+                              fixed_scale=args.fixed_scale,
                               false_alarm=args.false_alarm, words=COMMAND_WORDS, checked=release_warnings)
     with output_folder(args.out) as out:
         write_calibration(out, result, scene_name=scene.name, data_paths=args.data)
@@ -66,6 +69,10 @@ def add_commands(commands) -> None:
                                 "standard error come with it), a (K, N) .npy with --stderr, tal's HDF5; "
                                 "several files are independent replicas")
     calibrate.add_argument("--stderr", metavar="FILE", help="per-bin standard error of a single --data file")
+    calibrate.add_argument("--counts", action="store_true",
+                           help="--data is a histogram of photon counts (counts.npy or its folder) of the scene's "
+                                "[detector] without dead time: fitted by its Poisson likelihood, judged by "
+                                "check --counts' deviance test")
     calibrate.add_argument("--free", nargs="+", required=True, metavar="KEY",
                            help="the parameters to fit, scene-file keys (docs/design.md section 9)")
     calibrate.add_argument("--fixed-scale", action="store_true",

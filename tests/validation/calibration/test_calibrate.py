@@ -108,6 +108,9 @@ def test_a_sensor_whose_light_misses_the_window_is_not_determined():
 
 
 @pytest.mark.slow
+# analytic.jacobian's Richardson differences (until its exact route lands) assemble the model at 1e-10, which
+# some pieces of a moved scene stop short of: its warning, not this test's subject
+@pytest.mark.filterwarnings("ignore::analytic.operator.system.QuadratureWarning")
 @pytest.mark.parametrize("illumination, truth, seeds", [
     (None, TRUTH, 40),
     ({"waveform": "gaussian", "fwhm": 0.06}, {**TRUTH, "illumination.fwhm": 0.066}, 24),
@@ -130,3 +133,20 @@ def test_stated_errors_cover_at_the_normal_rate(illumination, truth, seeds):
         inside = int(np.sum(np.abs(values) < 1))
         assert low <= inside <= high, (key, inside, (low, high), values)
         assert chi2_low <= float(np.sum(values**2)) <= chi2_high, (key, np.sum(values**2), values)
+
+
+def test_photon_counts_are_fitted_by_their_poisson_likelihood():
+    """Counts without dead time: c ~ Poisson(C (p y + b)). The fit recovers time zero and the sensor within the
+    errors the Fisher information gives, and the deviance test accepts the fitted histogram."""
+    from analytic.measurement.detector import Detector, expected_counts
+
+    detector = Detector(photons=0.05, background=1e-4, cycles=2e5, dead_time="none", seed=0)
+    scene = small_scene().replace(detector=detector)
+    expected = expected_counts(forward(with_values(scene, TRUTH)), detector)
+    histogram = np.random.default_rng(8).poisson(expected).astype(np.float64)
+    result = calibrate(scene, histogram, list(TRUTH), counts=True)
+    assert result.converged and result.agrees, result.summary()
+    assert all(abs(z) < 4.5 for z in z_scores(result, TRUTH).values()), z_scores(result, TRUTH)
+    # σ² of each bin is its fitted mean (in y's units: C (p y + b) / (C p)²), not the counts' own
+    fitted = expected_counts(result.model, detector)
+    assert np.allclose(result.stderr, np.sqrt(fitted) / (detector.cycles * detector.photons), rtol=1e-12)

@@ -116,11 +116,14 @@ class Calibration:
 
     def summary(self) -> str:
         """A few lines: each parameter (start -> value ± error), the scale, χ²/dof and the verdict."""
-        lines = [f"  {name}: {start}{' -> ' if start else ''}{value}{' ± ' if error else ''}{error} {unit}"
-                 for name, start, value, error, unit in self.rows()]
+        lines = []
+        for name, start, value, error, unit in self.rows():
+            unit = "" if unit == "1" else f" {unit}"
+            start = f"{start}{unit if not error else ''} -> " if start else ""
+            lines.append(f"  {name}: {start}{value} ± {error}{unit}" if error else f"  {name}: {start}{value}")
         for entry in self.degenerate:
             lines.append(f"  not determined by the data: the direction {entry['text']}")
-        verdict = "AGREES" if self.agrees else "DISAGREES"
+        verdict = "AGREE" if self.agrees else "DISAGREE"
         state = "converged" if self.converged else "did NOT converge"
         lines.append(f"calibrate: {state} in {self.iterations} iteration(s); χ²/dof {self.start_chi2_dof:.3g} -> "
                      f"{self.chi2_dof:.3g}; the data {verdict} with the fitted model: {self.agreement.summary()}")

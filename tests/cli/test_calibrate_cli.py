@@ -30,12 +30,13 @@ count = 24
 """
 
 
-def capture(folder, *, scene_start=1.80, stated_start=1.85, true_start=1.835, seed=0):
+def capture(folder, *, scene_start=1.80, stated_start=1.85, true_start=1.835, height=1.002, seed=0):
     """A scene file (time zero ``scene_start``) and a capture of it whose meta.json states ``stated_start``
-    while its light is that of ``true_start``, with sensor 0 2 mm higher; (scene, data, stderr) paths."""
+    while its light is that of ``true_start``, with sensor 0 at ``height`` (1 m in the scene file); (scene, data,
+    stderr) paths."""
     scene_path = folder / "scene.toml"
     scene_path.write_text(SCENE.format(start=scene_start))
-    truth = with_values(load_scene(scene_path), {"sampling.start": true_start, "sensors.positions.0.z": 1.002})
+    truth = with_values(load_scene(scene_path), {"sampling.start": true_start, "sensors.positions.0.z": height})
     y = forward(truth)
     sigma = np.full(y.shape, 0.01 * y.max())
     data = folder / "capture"
@@ -92,3 +93,17 @@ def test_a_bad_key_is_one_line_before_any_file(tmp_path, capsys, free, words):
     assert status == 2 and len(lines) == 1 and lines[0].startswith("diffuse-imaging: error:"), lines
     assert words in lines[0]
     assert not out.exists()
+
+
+def test_a_fit_that_cannot_explain_the_data_exits_1_with_its_files(tmp_path, capsys):
+    """Sensor 0 is 3 cm high in the capture, but only time zero is free: the fit converges and the data
+    still disagree with it (exit 1), its files written all the same."""
+    scene, data, stderr = capture(tmp_path, scene_start=1.85, stated_start=1.85, true_start=1.85, height=1.03)
+    out = tmp_path / "out"
+    status = main(["calibrate", str(scene), "--data", str(data), "--stderr", str(stderr), "--free",
+                   "sampling.start", "--fixed-scale", "--out", str(out)])
+    printed = capsys.readouterr().out
+    content = json.loads((out / "calibration.json").read_text())
+    assert status == 1 and "DISAGREE" in printed, printed
+    assert content["converged"] and not content["agrees"] and content["scale"] == {"value": 1.0, "stderr": 0.0}
+    assert (out / "scene.toml").is_file() and (out / "report.md").is_file()

@@ -181,8 +181,13 @@ class _Whitened:
         normalised = np.zeros_like(matrix)
         normalised[:, lit] = matrix[:, lit] / self.norms[lit]
         u, singular, vt = np.linalg.svd(normalised, full_matrices=False)
+        if vt.shape[0] < matrix.shape[1]:    # fewer bins than parameters: the rest of the space is undetermined
+            from scipy.linalg import null_space
+
+            vt = np.vstack([vt, null_space(vt).T])
+            singular = np.concatenate([singular, np.zeros(vt.shape[0] - singular.size)])
         kept = singular > DEGENERATE_RATIO * max(float(singular[0]), np.finfo(float).tiny)
-        self.u, self.singular, self.v = u[:, kept], singular[kept], vt[kept].T
+        self.u, self.singular, self.v = u[:, kept[:u.shape[1]]], singular[kept], vt[kept].T
         self.null = vt[~kept].T          # (Q, d) normalised directions the data do not fix
 
     def step(self, damping: float) -> np.ndarray:
@@ -215,8 +220,10 @@ class _Whitened:
             vector = self._units(column)
             vector /= np.linalg.norm(vector)
             sign = 1.0 if vector[np.argmax(np.abs(vector))] > 0 else -1.0
-            found.append(Degenerate({name: float(sign * value) for name, value in zip(names, vector)
-                                     if abs(value) > 1e-6}))
+            # a key is involved by its share of the normalised direction (its units could hide it: an
+            # intensity of 1e8 W/sr beside a scale of 1)
+            found.append(Degenerate({name: float(sign * value) for name, value, share in zip(names, vector, column)
+                                     if abs(share) > 1e-6}))
         return found
 
 

@@ -44,6 +44,9 @@ MAX_ITERATIONS = 60
 #: the fit's covariance), so that χ² would fall by less than its square.
 STEP_TOLERANCE = 1e-3
 
+#: Most steps taken with the Jacobian of an earlier point before it is computed again.
+STALE_STEPS = 4
+
 #: Where no step lowers χ² any more (the model's error at its tolerance is what remains), converged when
 #: Gauss-Newton's step is shorter than this many standard errors: a bias the verdict could never see.
 STALL_TOLERANCE = 0.05
@@ -295,6 +298,7 @@ def _fit_once(problem: FitProblem) -> FitOutcome:
     damping, converged, iterations = 1e-3, False, 0
     derivative = problem.jacobian(theta)
     fresh = True                         # ``derivative`` is the Jacobian at ``theta`` (not an earlier point's)
+    stale = 0                            # steps taken since it was
     system = _Whitened(problem, mask, theta, scale, y, derivative)
     while iterations < MAX_ITERATIONS:
         iterations += 1
@@ -309,9 +313,13 @@ def _fit_once(problem: FitProblem) -> FitOutcome:
             damping = accepted.pop("damping")
             if accepted:
                 theta, scale, y, chi2 = accepted["theta"], accepted["scale"], accepted["y"], accepted["chi2"]
-                # the Jacobian of an earlier point serves while the model stays as linear as it predicts
-                # and the steps still gain (a fall of χ² under STEP_TOLERANCE² is what convergence leaves)
-                if gained >= 0.5 * predicted and predicted > STEP_TOLERANCE**2:
+                # the Jacobian of an earlier point serves while the model stays as linear as it predicts (the
+                # fall of χ² within a factor 2 of the predicted one: a larger fall too says the model has
+                # curved away from it) and the steps still gain (under STEP_TOLERANCE² is what convergence
+                # leaves), for at most STALE_STEPS steps
+                stale += 1
+                if (0.5 * predicted <= gained <= 2.0 * predicted and predicted > STEP_TOLERANCE**2
+                        and stale <= STALE_STEPS):
                     system = _Whitened(problem, mask, theta, scale, y, derivative)
                     fresh = False
                     continue
@@ -321,7 +329,7 @@ def _fit_once(problem: FitProblem) -> FitOutcome:
                 converged = float(np.linalg.norm(system.u.T @ system.residual)) <= STALL_TOLERANCE
                 break
         derivative = problem.jacobian(theta)
-        fresh, damping = True, min(damping, 1e-3)     # a new Jacobian is trusted afresh
+        fresh, damping, stale = True, min(damping, 1e-3), 0     # a new Jacobian is trusted afresh
         system = _Whitened(problem, mask, theta, scale, y, derivative)
     degenerate = system.degenerate(names)
     involved = {name for direction in degenerate for name in direction.names}

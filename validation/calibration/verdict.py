@@ -28,7 +28,7 @@ from analytic.operator.parameters import parameters, value_of, with_values
 from analytic.operator.system import forward
 from validation.check.inputs import PYTHON_WORDS, Words, read_inputs, scene_of
 from validation.judging.arrays import false_alarm_rate, real_array
-from validation.judging.compare import Agreement, compare_transients, model_tolerance_for
+from validation.judging.compare import Agreement, compare_transients, judged_bins, model_tolerance_for
 
 from .fit import SCALE, FitOutcome, FitProblem, levenberg_marquardt
 
@@ -275,7 +275,7 @@ def calibrate_inputs(scene, data, free, *, stderr=None, dof=None, counts=False, 
     fitted_scene = scene if tolerance is None else scene.replace(tolerance=tolerance)
     if checked is not None:
         checked()
-    problem = _problem(fitted_scene, keys, values, error, not fixed_scale)
+    problem = _problem(fitted_scene, keys, values, _fitted_errors(values, error, degrees, replicas), not fixed_scale)
     outcome = levenberg_marquardt(replace(problem, reweight=reweight))
     if counts:
         agreement = CountsAgreement.of(histogram, outcome.model, scene.detector, false_alarm)
@@ -285,6 +285,17 @@ def calibrate_inputs(scene, data, free, *, stderr=None, dof=None, counts=False, 
                                        replicas=replicas, false_alarm=false_alarm,
                                        max_relative_stderr=MAX_RELATIVE_STDERR)
     return _calibration(scene, keys, outcome, agreement, values, error, false_alarm, sources)
+
+
+def _fitted_errors(values, error, degrees, replicas) -> np.ndarray:
+    """The errors the fit weights by: zero (not fitted) outside the bins check judges where they were
+    estimated from a few replicas (their own spread, or a render's standard error with finite degrees of
+    freedom): a bin that a handful of samples reached has an error that is itself far off, and one such bin
+    can outweigh all the others (:func:`validation.judging.compare.judged_bins`). Stated Gaussian errors
+    (infinite degrees of freedom) weight every bin where they are positive."""
+    if replicas is None and np.isinf(degrees):
+        return error
+    return np.where(judged_bins(values, error, MAX_RELATIVE_STDERR, replicas), error, 0.0)
 
 
 def _histogram(scene, data, words: Words) -> tuple[np.ndarray, tuple]:

@@ -150,3 +150,19 @@ def test_photon_counts_are_fitted_by_their_poisson_likelihood():
     # σ² of each bin is its fitted mean (in y's units: C (p y + b) / (C p)²), not the counts' own
     fitted = expected_counts(result.model, detector)
     assert np.allclose(result.stderr, np.sqrt(fitted) / (detector.cycles * detector.photons), rtol=1e-12)
+
+
+@pytest.mark.slow
+def test_a_render_of_the_perturbed_scene_is_recovered():
+    """A Monte Carlo render (the project's renderer, 32 replicas) of the perturbed scene: its own errors
+    (the replicas' spread, Student's t with 31 degrees of freedom) weight the fit, which finds the sensor and
+    time zero to micrometres, within a few of the errors it states."""
+    import transient
+
+    scene = small_scene()
+    render = transient.render(with_values(scene, TRUTH), spp=2**20, seed=3)
+    result = calibrate(scene, render.replica_means, list(TRUTH))
+    assert result.converged and result.agrees, result.summary()
+    # |t| beyond 4.5 at 31 degrees of freedom: probability 1e-4 per parameter
+    assert all(abs(z) < 4.5 for z in z_scores(result, TRUTH).values()), z_scores(result, TRUTH)
+    assert result.parameters["sampling.start"]["stderr"] < 1e-4 * PERIOD

@@ -107,3 +107,12 @@ def test_a_fit_that_cannot_explain_the_data_exits_1_with_its_files(tmp_path, cap
     assert status == 1 and "DISAGREE" in printed, printed
     assert content["converged"] and not content["agrees"] and content["scale"] == {"value": 1.0, "stderr": 0.0}
     assert (out / "scene.toml").is_file() and (out / "report.md").is_file()
+
+
+def test_a_transient_without_errors_is_refused_in_calibrates_words(tmp_path, capsys):
+    scene, data, _ = capture(tmp_path)
+    status = main(["calibrate", str(scene), "--data", str(tmp_path / "stderr.npy"), "--free", "sampling.start",
+                   "--out", str(tmp_path / "out")])
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert status == 2 and len(lines) == 1 and "--stderr FILE" in lines[0] and "--counts" in lines[0], lines
+    assert "shape" not in lines[0]

@@ -263,7 +263,7 @@ def calibrate_inputs(scene, data, free, *, stderr=None, dof=None, counts=False, 
         values, error, reweight = _counts_as_y(histogram, scene.detector)
         degrees, replicas = np.inf, None
     else:
-        inputs = read_inputs(scene, data, stderr, dof=dof, words=words)
+        inputs = _read(scene, data, stderr, dof, words)
         values, error, degrees, replicas = _mean_and_error(inputs)
         reweight, sources = None, inputs.sources
     if not np.any(values != 0):
@@ -285,6 +285,18 @@ def calibrate_inputs(scene, data, free, *, stderr=None, dof=None, counts=False, 
                                        replicas=replicas, false_alarm=false_alarm,
                                        max_relative_stderr=MAX_RELATIVE_STDERR)
     return _calibration(scene, keys, outcome, agreement, values, error, false_alarm, sources)
+
+
+def _read(scene, data, stderr, dof, words: Words):
+    """:func:`read_inputs`, its refusal of a transient without errors in calibrate's words (no shape-only fit)."""
+    try:
+        return read_inputs(scene, data, stderr, dof=dof, words=words)
+    except DataError as error:
+        if not str(error).startswith("one transient without errors"):
+            raise
+        counts = "--counts" if words.stderr.startswith("--") else "counts=True"
+        raise DataError(f"one transient without errors: give its standard error ({words.stderr_value}), several "
+                        f"independent replicas, or photon counts ({counts}); a fit needs the data's errors") from None
 
 
 def _fitted_errors(values, error, degrees, replicas) -> np.ndarray:

@@ -275,7 +275,11 @@ def calibrate_inputs(scene, data, free, *, stderr=None, dof=None, counts=False, 
     fitted_scene = scene if tolerance is None else scene.replace(tolerance=tolerance)
     if checked is not None:
         checked()
-    problem = _problem(fitted_scene, keys, values, _fitted_errors(values, error, degrees, replicas), not fixed_scale)
+    weights = _fitted_errors(values, error, degrees, replicas)
+    if not np.any(weights > 0):
+        raise DataError(f"{words.data}: no bin has a standard error under {MAX_RELATIVE_STDERR:g} of its value "
+                        f"(about 100 samples), so none can weight the fit; render more samples")
+    problem = _problem(fitted_scene, keys, values, weights, not fixed_scale)
     outcome = levenberg_marquardt(replace(problem, reweight=reweight))
     if counts:
         agreement = CountsAgreement.of(histogram, outcome.model, scene.detector, false_alarm)

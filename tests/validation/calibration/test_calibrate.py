@@ -166,3 +166,15 @@ def test_a_render_of_the_perturbed_scene_is_recovered():
     # |t| beyond 4.5 at 31 degrees of freedom: probability 1e-4 per parameter
     assert all(abs(z) < 4.5 for z in z_scores(result, TRUTH).values()), z_scores(result, TRUTH)
     assert result.parameters["sampling.start"]["stderr"] < 1e-4 * PERIOD
+
+
+def test_replicas_too_noisy_to_weight_any_bin_are_refused():
+    """Replicas whose spread is over 0.1 of every bin's value: check judges none of their bins, and the fit has
+    none it could trust the error of."""
+    from analytic.errors import DataError
+
+    scene = small_scene()
+    y = forward(scene)
+    replicas = y + float(y.max()) * np.random.default_rng(9).standard_normal((8, *y.shape))
+    with pytest.raises(DataError, match="none can weight the fit"):
+        calibrate(scene, replicas, ["sampling.start"])

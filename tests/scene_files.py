@@ -74,17 +74,9 @@ def write_scene_file(folder, scene, name=None):
 
 
 def _toml_value(value) -> str:
-    import numpy as np
+    from validation.calibration.files import toml_value
 
-    if isinstance(value, (bool, np.bool_)):
-        return "true" if value else "false"
-    if isinstance(value, str):
-        return json.dumps(value)
-    if isinstance(value, (list, tuple, np.ndarray)):
-        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
-    if isinstance(value, (int, np.integer)):
-        return str(int(value))
-    return repr(float(value))
+    return toml_value(value)
 
 
 def write_relay_wall_file(folder, scene, name=None):

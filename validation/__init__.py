@@ -26,9 +26,10 @@ __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "runs.harness": ["SceneCheck", "check_scene", "data_driven_rule", "reconstruct_from_noisy_data"],
     "runs.suite": ["hard_cases", "validation_suite"],
     "runs.corner": ["check_corner"],
-    "check": ["check_transient", "assert_agrees", "CheckResult", "Convention", "irradiancemeter", "read_data"],
+    "check": ["check_transient", "check_derivative", "assert_agrees", "CheckResult", "Convention", "irradiancemeter", "read_data"],
     "runs.report": ["write_report"],
     "runs.paper": ["reproduce"],
     "sweep": ["load_sweep", "run_sweep"],
     "runs.bench": ["speed_against_error"],
+    "calibration": ["calibrate", "Calibration"],
 })

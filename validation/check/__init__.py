@@ -28,7 +28,7 @@ __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "conventions": ["Convention", "irradiancemeter", "convention", "diagnose", "CONVENTIONS", "KNOWN_SCALES",
                     "RAY_EPSILON_FLOAT32"],
     "inputs": ["read_inputs", "scene_of"],
-    "verdict": ["check_transient", "FIT_BINS", "MAX_DATA", "MAX_RELATIVE_STDERR"],
+    "verdict": ["check_transient", "check_derivative", "DerivativeColumn", "FIT_BINS", "MAX_DATA", "MAX_RELATIVE_STDERR"],
     "result": ["CheckResult"],
     "assertion": ["assert_agrees"],
     "report": ["write_check_report"],

@@ -45,7 +45,7 @@ from .fit import ShiftedModel, fit_scale_offset
 from .inputs import PYTHON_WORDS, Words, read_inputs, scene_of
 from .result import CheckResult
 
-__all__ = ["CheckResult", "check_transient", "judge", "FIT_BINS", "MAX_DATA", "MAX_RELATIVE_STDERR",
+__all__ = ["CheckResult", "check_transient", "check_derivative", "DerivativeColumn", "judge", "FIT_BINS", "MAX_DATA", "MAX_RELATIVE_STDERR",
            "DERIVATIVE_STEP"]
 
 #: Largest |y| accepted: the squares that χ² and the L2 norms form stay float64 numbers.
@@ -213,6 +213,51 @@ def check_transient(scene, data, *, stderr=None, dof: int | None = None, shape_o
     """
     return judge(scene, data, stderr=stderr, dof=dof, shape_only=shape_only, model=model, false_alarm=false_alarm,
                  shape_tolerance=shape_tolerance, expect=expect, radius=radius, evaluate=evaluate)
+
+
+class DerivativeColumn:
+    """scene -> ``(K, N)`` ∂y/∂θ of one parameter (:func:`analytic.jacobian`'s column): what
+    :func:`check_derivative` judges data against, shifted and fitted as ``check`` shifts and fits y."""
+
+    def __init__(self, key: str):
+        self.key = key
+
+    def __call__(self, scene) -> np.ndarray:
+        from analytic.operator.derivatives import jacobian
+
+        return jacobian(scene, [self.key])[..., 0]
+
+
+def check_derivative(scene, data, key: str, *, stderr=None, dof: int | None = None, false_alarm: float = 1e-3,
+                     expect=None, radius: float | None = None) -> CheckResult:
+    """Judge data that claim to be ∂y/∂θ (a differentiable renderer's forward-mode derivative) against the
+    exact column: ``check --derivative KEY``'s work.
+
+    Parameters
+    ----------
+    scene, data, stderr, dof, false_alarm, expect, radius
+        As :func:`check_transient`; ``data`` (replicas, or one array with ``stderr``) in y's units per
+        unit of θ.
+    key : str
+        The parameter θ, a key of docs/design.md section 9 (``sensors.positions.0.z``, ``sampling.start``).
+
+    Returns
+    -------
+    CheckResult
+        Its "model" is the exact column ∂y/∂θ (:class:`DerivativeColumn`), its fit a scale (a derivative
+        off by a factor) and a time offset of the column, its verdicts section 6's statistics.
+
+    Raises
+    ------
+    OptionError
+        ``key`` is no parameter of the scene; and what :func:`check_transient` raises.
+    """
+    from analytic.operator.parameters import parameter
+
+    scene = scene_of(scene)
+    column = DerivativeColumn(parameter(scene, key).key)     # a bad key: before any reading
+    return judge(scene, data, stderr=stderr, dof=dof, false_alarm=false_alarm, expect=expect, radius=radius,
+                 evaluate=column)
 
 
 def judge(scene, data, *, stderr=None, dof=None, shape_only=False, model=None, false_alarm=1e-3,

@@ -43,6 +43,7 @@ def command_check(args) -> int:
     from validation.check.verdict import judge
 
     scene = load_scene_argument(args.scene)
+    evaluate = _derivative_column(args, scene)
     if args.counts:
         return command_check_counts(args, scene)
     check_counts_options(args, scene)       # --fit / --false-alarm without --counts are refused
@@ -54,14 +55,35 @@ def command_check(args) -> int:
     refuse_unmodellable(scene)      # before the data are read: the model is what takes long
     data = args.data[0] if len(args.data) == 1 else list(args.data)
     result = judge(scene, data, stderr=args.stderr, shape_only=args.shape_only, expect=_stated(args),
-                   radius=args.radius, words=COMMAND_WORDS)
+                   radius=args.radius, words=COMMAND_WORDS, evaluate=evaluate)
     with output_folder(args.out) as out:
         announce_window(args, scene)
-        write_check_report(out, result, scene_name=scene.name, data_paths=args.data, scene=scene)
+        name = scene.name if evaluate is None else f"{scene.name}, judged as dy/d{evaluate.key}"
+        write_check_report(out, result, scene_name=name, data_paths=args.data, scene=scene)
     if not args.quiet:
+        if evaluate is not None:
+            print(f"check: --data judged as dy/d{evaluate.key} against its exact column")
         print(result.summary())
         print(f"-> {Path(args.out) / 'report.md'}")
     return 0 if result.verdict else 1
+
+
+def _derivative_column(args, scene):
+    """``--derivative KEY``: the exact column ∂y/∂KEY the data are judged against (None without it)."""
+    from analytic.errors import OptionError
+    from validation.check import DerivativeColumn
+
+    if args.derivative is None:
+        return None
+    if args.counts or args.shape_only:
+        raise UsageError(f"--derivative: judges a derivative with its standard errors (replicas or --stderr); "
+                         f"not with {'--counts' if args.counts else '--shape-only'}")
+    from analytic.operator.parameters import parameter
+
+    try:
+        return DerivativeColumn(parameter(scene, args.derivative).key)
+    except OptionError as error:
+        raise UsageError(f"--derivative: {str(error).removeprefix('parameter: ')}") from None
 
 
 def command_export(args) -> int:
@@ -176,6 +198,10 @@ def add_commands(commands) -> None:
     check.add_argument("--expect-offset", type=_finite_float("--expect-offset"), metavar="M",
                        help="judge against the model with its start_opl moved by +M metres (positive when "
                             "the data read path lengths short; default 0 with --expect-scale)")
+    check.add_argument("--derivative", metavar="KEY",
+                       help="judge --data as the derivative dy/dKEY (a differentiable renderer's, with replicas "
+                            "or --stderr) against the exact column, KEY a scene-file key of docs/design.md "
+                            "section 9 (sensors.positions.0.z, sampling.start, ...)")
     add_counts_options(check)
     check.add_argument("--out", required=True, help="output folder (report.md, metrics.json, figures)")
     add_quiet(check)

@@ -47,8 +47,9 @@ _POSITION_SLACK, _LENGTH_SLACK = 1e-10, 1e-12
 #: Thread seconds per entry of A that the offset route sums into y or writes into A, measured
 #: (benchmarks/bench_nlos.py: 25.6 million entries of a 32 x 32 confocal scan in about 0.3 s on 2 threads).
 ENTRY_SECONDS = 2.5e-8
-#: Pairs per block of the compiled kernels (a block: a fraction of a second, so that Ctrl-C stops them).
-_PAIRS_PER_BLOCK = 2**15
+#: (pixel, pair)s per block of the compiled kernels at most (a block: a fraction of a second, ~10 ns each, so
+#: that Ctrl-C stops them within about a second).
+_COMBINATIONS_PER_BLOCK = 2**22
 
 
 class OffsetPlan(NamedTuple):
@@ -165,14 +166,14 @@ def virtual_entries(plan: OffsetPlan, assemble: Callable) -> tuple:
     return starts, firsts, values
 
 
-def _blocks(count: int) -> int:
-    return max(thread_count(), -(-count // _PAIRS_PER_BLOCK))
+def _blocks(count: int, pixels: int) -> int:
+    return min(count, max(4 * thread_count(), -(-count * pixels**2 // _COMBINATIONS_PER_BLOCK)))
 
 
 def offset_matrix(plan: OffsetPlan, runs: tuple, limit: int) -> scipy.sparse.csr_array:
     """A (P N x M², CSR, columns ascending in each row) from the virtual runs, its size checked against ``limit``."""
     count, bins, pixels = len(plan.groups), plan.bins, plan.pixels
-    rows, blocks = count * bins, _blocks(count)
+    rows, blocks = count * bins, _blocks(count, pixels)
     indptr = np.zeros(rows + 1, dtype=np.int64)
     bounds = (np.arange(blocks + 1) * count) // blocks
 
@@ -205,7 +206,7 @@ def offset_forward(plan: OffsetPlan, runs: tuple, image: np.ndarray, *, bar=None
     count = len(plan.groups)
     y = np.zeros((count, plan.bins))
     image = np.ascontiguousarray(image, dtype=np.float64).ravel()
-    blocks = _blocks(count)
+    blocks = _blocks(count, plan.pixels)
     bounds = (np.arange(blocks + 1) * count) // blocks
     nonzeros = run_blocks(kernels.offset_product,
                          lambda b: (runs, plan.shape, plan.mapping, plan.scales, image, int(bounds[b]),

@@ -1,10 +1,11 @@
 """A long model says what it will cost before it starts (unless --quiet), and Ctrl-C ends it at once.
 
-The scene, 2^16 confocal pairs over 16 x 16 pixels of a tilted square (no two pairs translates of each
-other, so the general route: analytic.operator.offsets), is estimated at minutes on any machine this runs
-on; SIGINT after its assembly has started must end it with exit status 130 long before that. With half a
-GiB of memory said to be available, its A (about 0.6 GiB) would not fit: y = A f is made a block of pairs
-at a time (analytic.operator.matrix_free), said so in the estimate's line, and Ctrl-C ends it the same way.
+The scene, 2^14 confocal pairs over 32 x 32 pixels with the laser's and the sensor's legs counted (each
+pair's added path differs: no two pairs are translates, so the general route, analytic.operator.offsets),
+is estimated at minutes on any machine this runs on; SIGINT after its assembly has started must end it
+with exit status 130 long before that. With half a GiB of memory said to be available, its A (about 0.4
+GiB) would not fit in the model's quarter of a GiB: y = A f is made a block of pairs at a time
+(analytic.operator.matrix_free), said so in the estimate's line, and Ctrl-C ends it the same way.
 """
 
 import re
@@ -21,26 +22,24 @@ name = "big"
 [relay_wall]
 size = [2.0, 2.0]
 [hidden]
-pixels = 16
+pixels = 32
 reflectance = 0.5
-center = [0.1, 0.2, 1.2]
-u = [0.7020660, 0.0, 0.3835404]
-v = [0.0, -0.8, 0.0]
 [scan]
 type = "confocal"
-grid = [256, 256]
+grid = [128, 128]
+account_first_and_last_bounces = true
 [sampling]
 period = 0.05
-start = 1.9
-count = 64
+start = 2.0
+count = 140
 """
 
 #: Seconds a job may take to end after SIGINT: a few blocks of about a second each, and the exit.
 _STOP_SECONDS = 15
 
 
-#: The command line with 1 GiB of memory said to be available (half of it the model's limit).
-_SMALL_MEMORY = ("import sys, analytic.resources as resources; resources.available_memory = lambda: 2**30; "
+#: The command line with half a GiB of memory said to be available (half of it the model's limit).
+_SMALL_MEMORY = ("import sys, analytic.resources as resources; resources.available_memory = lambda: 2**29; "
                  "from validation.cli.program import main; sys.exit(main(sys.argv[1:]))")
 #: What the estimate's line says between "forward" and its figures, by route.
 _ROUTE_TEXT = {"matrix": "", "blocks": r" \(A would not fit in memory: y = A f a block of pairs at a time\)"}
@@ -80,4 +79,5 @@ def test_a_long_model_is_announced_and_ends_at_ctrl_c(tmp_path, quiet, route):
         assert match, announced
         seconds = float(match[1]) * {"s": 1, "min": 60, "h": 3600}[match[2]]
         assert seconds > 3 * _STOP_SECONDS          # it would still be running: the signal ended it
-        assert 0.1 < float(match[3]) < 2
+        # A, or y and one block of A's rows within a quarter of the model's limit
+        assert 0.1 < float(match[3]) < 2 if route == "matrix" else 0.01 < float(match[3]) < 0.25

@@ -44,7 +44,10 @@ import numpy as np
 from ..binning import bin_index
 from ..errors import ResourceError, SceneError
 from ..resources import available_memory
-from .blocks import assembly_bytes, assembly_layout
+from ..geometry import pair_table
+from ..kernels.assembly import ImageGrid
+from .blocks import assembly_bytes, assembly_layout, index_bytes
+from .offsets import ENTRY_SECONDS, offset_work
 
 __all__ = ["ModelCost", "model_cost", "impractical_illumination", "refuse_impractical_illumination",
            "refuse_unaffordable", "estimate_text", "LIMIT_SECONDS", "PAIR_LIMIT_SECONDS"]
@@ -62,6 +65,8 @@ PAIR_LIMIT_SECONDS = 0.1
 _SECONDS = {"cut": (0.0, 3e-6, 10e-6), "piece": 10e-6, "smooth": 2e-6, "listed": 3e-9, "pixel": 20e-6}
 #: Bytes of the kernels' scratch per kink listed at a bin edge (the value, its flag, the sort's order and copy).
 _LISTED_BYTES = 26
+#: Bytes per entry of the offset route's virtual A while it becomes runs (its COO copy, the sort, the runs).
+_RUN_BYTES = 48
 #: Pairs and pixels per side sampled (at most 8 x 12 x 12 (pixel, pair) ranges).
 _SAMPLED_PAIRS, _SAMPLED_SIDE = 8, 12
 
@@ -98,6 +103,11 @@ class ModelCost:
     reach : (float, float)
         The part of the waveform's support [t_0 - max d, t_N - min d] that any bin can reach from any
         sampled path length, metres (the rest changes no entry of A).
+    offset_share : float or None
+        Where the offset route runs (:mod:`analytic.operator.offsets`), the share of the (pixel, pair)s
+        it computes; None for the general route.
+    virtual_memory : float
+        The offset route's peak bytes besides A (or y): its virtual pairs' assembly and runs.
     """
 
     seconds: float
@@ -112,6 +122,8 @@ class ModelCost:
     threads: int
     listing_share: float
     reach: tuple
+    offset_share: float | None = None
+    virtual_memory: float = 0.0
 
 
 def _family_cost(terms) -> float:
@@ -246,11 +258,27 @@ def model_cost(scene, *, memory_limit: int | None = None) -> ModelCost:
                                                                                 threads=threads),
                             widest=int(widest), list_bytes=list_memory)
     reach = (start - float(ranges[:, 1].max()), start + width * count - float(ranges[:, 0].min()))
-    return ModelCost(seconds=combinations * thread_seconds / samples / threads,
+    seconds = combinations * thread_seconds / samples / threads
+    share = virtual_memory = None
+    work = offset_work(pair_table(rectangle, pairs), ImageGrid(rectangle.width, rectangle.height, pixels))
+    if work is not None:
+        # the distinct offsets' (pixel, pair)s assembled, then every entry of A summed or written from them
+        groups, side = work
+        share = groups * side**2 / combinations
+        virtual = entries * share
+        virtual_memory = (assembly_bytes(virtual, groups, count, side, assembly_layout(groups, count, side, limit,
+                                                                                         threads=threads),
+                                         widest=int(widest), list_bytes=list_memory)
+                          + _RUN_BYTES * virtual + 16 * groups * side**2)
+        seconds = seconds * share + entries * ENTRY_SECONDS / threads
+        rows = len(pairs) * count
+        memory = entries * (8 + index_bytes(int(entries), rows, pixels**2)) + 20 * (rows + 1) + virtual_memory
+    return ModelCost(seconds=seconds,
                      pair_seconds=thread_seconds / samples, entries=entries, memory=memory,
                      list_memory=list_memory, bins=bins_total / samples, pieces=pieces_total / samples,
                      kinks=int(kinks.size), span=float(waveform.duration - waveform.lead), threads=threads,
-                     listing_share=listing_seconds / thread_seconds, reach=reach)
+                     listing_share=listing_seconds / thread_seconds, reach=reach, offset_share=share,
+                     virtual_memory=virtual_memory or 0.0)
 
 
 def _duration_text(seconds: float) -> str:

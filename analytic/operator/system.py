@@ -84,7 +84,7 @@ import numpy as np
 import scipy.sparse
 
 from ..attenuation import attenuation_code
-from ..errors import OptionError, ResourceError
+from ..errors import ResourceError
 from ..geometry import PointPairs, Rectangle, pair_table
 from ..kernels import assembly
 from ..kernels.assembly import Assembly, ImageGrid, Jobs, Slots, StepAssembly, auto_entries, pair_frame_of, pixel_box
@@ -93,6 +93,7 @@ from ..kernels import routes
 from ..kernels.routes import SAFETY, Route, TimeAxis, make_scratch, pixel_bins
 from .blocks import ROUTE_SLOTS, Layout, assembly_bytes, assembly_layout, index_bytes, run_blocks
 from .general_routes import left_pairs, progress_bar, run_left, run_route
+from .offsets import offset_matrix, offset_plan, virtual_entries
 from .cost import may_be_impractical, model_cost, refuse_impractical_illumination, refuse_unaffordable
 from ..resources import available_memory
 from ..scenes.scene_file import scene_of
@@ -361,11 +362,22 @@ def rectangle_matrix(rectangle: Rectangle, pairs: PointPairs, sampling: Sampling
     tolerance = check_tolerance(tolerance)
     problem = _problem(rectangle, pairs, sampling, waveform)
     limit = _limit(memory_limit)
+    plan = offset_plan(problem) if statistics is None else None     # statistics: the general route's own
+    if plan is not None:
+        runs = virtual_entries(plan, lambda virtual: _assemble(virtual, tolerance, limit, progress, None))
+        return offset_matrix(plan, runs, limit)
+    return _assemble(problem, tolerance, limit, progress, statistics)
+
+
+def _assemble(problem: _Problem, tolerance: float, limit: int, progress: bool, statistics: dict | None,
+              tally: list | None = None):
+    """A of ``problem`` by the general route (:func:`rectangle_matrix`); its pieces that stopped refining
+    appended to ``tally`` if given, else a QuadratureWarning."""
     layout = _layout(problem, limit)
     counts = _count(problem, layout, limit, progress=progress)
-    bins = sampling.count
-    rows = len(pairs) * bins
-    columns = rectangle.pixels ** 2
+    bins = problem.axis.count
+    rows = len(problem.pairs) * bins
+    columns = problem.grid.pixels ** 2
     # each block of pixels' first slot in each row: the row's start and the earlier blocks' entries there,
     # in place; as the blocks fill, each moves to its end (the next block's start)
     cursors = np.cumsum(counts.per_block, axis=0, out=counts.per_block)
@@ -404,9 +416,11 @@ def rectangle_matrix(rectangle: Rectangle, pairs: PointPairs, sampling: Sampling
     del counts, cursors         # before the row pointers' copy and A's zeros: the peak stays the fill's
     if statistics is not None:
         statistics.update(pairs=reached, smooth_pairs=served)
-    if failures:
+    if tally is not None:
+        tally.append(failures)
+    elif failures:
         warnings.warn(f"{failures} quadrature pieces stopped refining before reaching "
-                      f"tolerance {tolerance:g}", QuadratureWarning, stacklevel=2)
+                      f"tolerance {tolerance:g}", QuadratureWarning, stacklevel=3)
     nnz = _drop_zeros(data, indices, indptr)
     return scipy.sparse.csr_array((data[:nnz], indices[:nnz], indptr.astype(index_type, copy=False)),
                                   shape=(rows, columns))
@@ -525,25 +539,9 @@ def pair_entries(scene: Scene, sensor: int, pixel: int, *, method: str = "auto",
     return run.first, data[:run.bins]
 
 
-def forward(scene: Scene, matrix=None) -> np.ndarray:
-    """The model's noiseless samples y_k[n].
+def forward(scene: Scene, matrix=None, **options) -> np.ndarray:
+    """The model's noiseless samples y_k[n], ``(K, N)``: :func:`analytic.operator.matrix_free.forward` (A
+    where it fits, else without it), or ``matrix @ f`` for a given A."""
+    from .matrix_free import forward as forward_product
 
-    Parameters
-    ----------
-    scene : Scene, RelayWallScene, str or Path
-        The scene (its reflectance image is f), or its file (TOML, or a tal YAML configuration).
-    matrix : sparse matrix, optional
-        A, if already assembled for this scene (``(K N, M^2)``).
-
-    Returns
-    -------
-    numpy.ndarray
-        ``(K, N)`` float64.
-    """
-    scene = scene_of(scene)
-    matrix, f = system_matrix(scene) if matrix is None else matrix, scene.reflectance.ravel()
-    shape = (scene.sensor_count * scene.sampling.count, f.size)
-    if getattr(matrix, "shape", None) != shape:
-        raise OptionError(f"matrix: shape {getattr(matrix, 'shape', type(matrix).__name__)} is not this scene's A, "
-                          f"{shape} (sensors x bins, pixels); give the matrix system_matrix made for it, or none")
-    return np.asarray(matrix @ f, dtype=np.float64).reshape(scene.sensor_count, scene.sampling.count)
+    return forward_product(scene, matrix, **options)

@@ -1,7 +1,11 @@
 """A long model says what it will cost before it starts (unless --quiet), and Ctrl-C ends it at once.
 
-The scene, 2^16 confocal pairs over 16 x 16 pixels, is estimated at minutes on any machine this runs on;
-SIGINT after its assembly has started must end it with exit status 130 long before that.
+The scene, 2^14 confocal pairs over 32 x 32 pixels with the laser's and the sensor's legs counted (each
+pair's added path differs: no two pairs are translates, so the general route, analytic.operator.offsets),
+is estimated at minutes on any machine this runs on; SIGINT after its assembly has started must end it
+with exit status 130 long before that. With half a GiB of memory said to be available, its A (about 0.4
+GiB) would not fit in the model's quarter of a GiB: y = A f is made a block of pairs at a time
+(analytic.operator.matrix_free), said so in the estimate's line, and Ctrl-C ends it the same way.
 """
 
 import re
@@ -18,26 +22,36 @@ name = "big"
 [relay_wall]
 size = [2.0, 2.0]
 [hidden]
-pixels = 16
+pixels = 32
 reflectance = 0.5
 [scan]
 type = "confocal"
-grid = [256, 256]
+grid = [128, 128]
+account_first_and_last_bounces = true
 [sampling]
 period = 0.05
-start = 1.9
-count = 64
+start = 2.0
+count = 140
 """
 
 #: Seconds a job may take to end after SIGINT: a few blocks of about a second each, and the exit.
 _STOP_SECONDS = 15
 
 
-@pytest.mark.parametrize("quiet", [False, True], ids=["announced", "quiet"])
-def test_a_long_model_is_announced_and_ends_at_ctrl_c(tmp_path, quiet):
+#: The command line with half a GiB of memory said to be available (half of it the model's limit).
+_SMALL_MEMORY = ("import sys, analytic.resources as resources; resources.available_memory = lambda: 2**29; "
+                 "from validation.cli.program import main; sys.exit(main(sys.argv[1:]))")
+#: What the estimate's line says between "forward" and its figures, by route.
+_ROUTE_TEXT = {"matrix": "", "blocks": r" \(A would not fit in memory: y = A f a block of pairs at a time\)"}
+
+
+@pytest.mark.parametrize("quiet, route", [(False, "matrix"), (True, "matrix"), (False, "blocks")],
+                         ids=["announced", "quiet", "without A"])
+def test_a_long_model_is_announced_and_ends_at_ctrl_c(tmp_path, quiet, route):
     scene = tmp_path / "big.toml"
     scene.write_text(_SCENE)
-    child = subprocess.Popen([sys.executable, "-m", "validation.cli", "forward", str(scene), "--out",
+    start = ["-c", _SMALL_MEMORY] if route == "blocks" else ["-m", "validation.cli"]
+    child = subprocess.Popen([sys.executable, *start, "forward", str(scene), "--out",
                               str(tmp_path / "out"), *(["--quiet"] if quiet else [])],
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                              # Ctrl-C as a terminal delivers it: a pytest-xdist worker ignores SIGINT, and a
@@ -60,9 +74,10 @@ def test_a_long_model_is_announced_and_ends_at_ctrl_c(tmp_path, quiet):
     assert errors.strip().splitlines() == ["diffuse-imaging: interrupted"]
     assert not (tmp_path / "out").exists()
     if not quiet:
-        match = re.fullmatch(r"diffuse-imaging: forward: about ([\d.]+) (s|min|h) and ([\d.]+) GiB \(estimate\)\n",
-                             announced)
+        match = re.fullmatch(rf"diffuse-imaging: forward{_ROUTE_TEXT[route]}: about ([\d.]+) (s|min|h) and "
+                             r"([\d.]+) GiB \(estimate\)\n", announced)
         assert match, announced
         seconds = float(match[1]) * {"s": 1, "min": 60, "h": 3600}[match[2]]
         assert seconds > 3 * _STOP_SECONDS          # it would still be running: the signal ended it
-        assert 0.1 < float(match[3]) < 2
+        # A, or y and one block of A's rows within a quarter of the model's limit
+        assert 0.1 < float(match[3]) < 2 if route == "matrix" else 0.01 < float(match[3]) < 0.25

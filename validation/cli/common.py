@@ -116,12 +116,17 @@ def rows_text(scene) -> str:
     return scene.describe()
 
 
-def refuse_unmodellable(scene):
+def refuse_unmodellable(scene, *, matrix: bool = True):
     """The scene's model estimate (:class:`analytic.operator.cost.ModelCost`), or a refusal in one line: an
-    illumination that makes A impractical, or an A whose assembly would not fit in memory."""
+    illumination that makes A impractical, or (``matrix``: a command that needs A itself) an A whose assembly
+    would not fit in memory. Without ``matrix`` the estimate is that of y = A f by the route
+    :func:`analytic.operator.matrix_free.forward` takes, which needs no A."""
     from analytic.operator.cost import refuse_impractical_illumination, refuse_unaffordable
+    from analytic.operator.matrix_free import forward_route
 
     cost = refuse_impractical_illumination(scene)
+    if not matrix:
+        return forward_route(scene, cost=cost)[1]
     refuse_unaffordable(cost)
     return cost
 

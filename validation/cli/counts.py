@@ -327,7 +327,7 @@ def command_check_counts(args, scene) -> int:
     from .common import announce_window
 
     names = check_counts_options(args, scene)
-    refuse_unmodellable(scene)
+    refuse_unmodellable(scene, matrix=False)       # y = A f only: no A needed
     counts = _read_counts(args.data[0], scene)
     detector = scene.detector
     alpha = DEFAULT_FALSE_ALARM if args.false_alarm is None else args.false_alarm

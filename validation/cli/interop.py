@@ -52,7 +52,7 @@ def command_check(args) -> int:
                          "spread is their error")
     if args.shape_only and (args.stderr is not None or len(args.data) > 1):
         raise UsageError("--shape-only: only for one --data file without --stderr")
-    refuse_unmodellable(scene)      # before the data are read: the model is what takes long
+    refuse_unmodellable(scene, matrix=False)    # before the data are read: the model is what takes long
     data = args.data[0] if len(args.data) == 1 else list(args.data)
     result = judge(scene, data, stderr=args.stderr, shape_only=args.shape_only, expect=_stated(args),
                    radius=args.radius, words=COMMAND_WORDS, evaluate=evaluate)

@@ -208,7 +208,7 @@ for pixels, factor in ((50, 32), (256, 8)):
 print(json.dumps(rows))
 """
 
-WARM = "{python} -c 'from analytic.scenes.common import default_scene; from analytic.operator.system import forward; " \
+WARM = "{python} -c 'from analytic.scenes.common import default_scene; from analytic.operator.matrix_free import forward; " \
        "forward(default_scene(pixels=4, noise=None))'"
 
 # What a fresh clone compiles: A's assembly (the set-up's warm-up), then the routes only the tests call

@@ -200,7 +200,7 @@ def exact_model(scene, path: Path | None, out: Path, bias: bool):
             raise SystemExit(f"{path}: not the model of this capture ({scene.name}, {scene.sensor_count} pairs x "
                              f"{scene.sampling.count} bins)")
     else:
-        from analytic.operator.system import forward
+        from analytic.operator.matrix_free import forward
 
         model, offset = forward(scene), None
     if bias and offset is None:
@@ -262,7 +262,7 @@ def near_wall_strategies(variant: str | None = None, samples: int = 2**16, seeds
     """Each strategy's variance gain over area sampling on near-wall single scans (module docstring)."""
     from analytic.scenes.relay_wall import RelayWallScene
     from analytic.scenes.common import Sampling
-    from analytic.operator.system import forward
+    from analytic.operator.matrix_free import forward
     from analytic.operator.window import pairs_range
 
     rows = []

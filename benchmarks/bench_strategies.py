@@ -24,7 +24,8 @@ import time
 import numpy as np
 
 from analytic.scenes.common import Sampling
-from analytic.operator.system import forward, system_matrix
+from analytic.operator.system import system_matrix
+from analytic.operator.matrix_free import forward
 from transient.backend import select_variant
 from validation.runs.suite import hard_cases
 

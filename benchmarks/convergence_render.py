@@ -33,7 +33,8 @@ import numpy as np
 
 from analytic.files import save_json
 from analytic.scenes.common import Sampling, Scene, default_scene
-from analytic.operator.system import QuadratureWarning, forward
+from analytic.operator.system import QuadratureWarning
+from analytic.operator.matrix_free import forward
 from transient.backend import select_variant
 from transient.chunks import ChunkPlan, ReplicaLayout
 from validation.runs.bench import plane_scene

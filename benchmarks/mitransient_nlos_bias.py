@@ -133,7 +133,7 @@ def main(argv=None) -> int:
     parser.add_argument("--pair-fits", type=float, nargs="*", default=[0.0],
                         help="the shifts whose pairs are also fitted one by one (32 fits: minutes each shift)")
     args = parser.parse_args(argv)
-    from analytic.operator.system import forward
+    from analytic.operator.matrix_free import forward
     from validation.check import ShiftedModel, check_transient
     from interop.mitransient import moved_read_points, offset_model, spawn_offset_difference
 

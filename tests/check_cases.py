@@ -8,7 +8,7 @@ import numpy as np
 import scene_files
 from analytic.files import build_meta, write_transient
 from analytic.scenes.common import Sampling, Scene
-from analytic.operator.system import forward
+from analytic.operator.matrix_free import forward
 from validation.cli import main
 
 START, WIDTH, COUNT = 1.7, 0.05, 24

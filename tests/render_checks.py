@@ -14,7 +14,7 @@ independent bins.
 import numpy as np
 
 from analytic.scenes.common import Scene
-from analytic.operator.system import forward
+from analytic.operator.matrix_free import forward
 from transient.render import render_loaded
 from validation.judging.compare import compare_transients
 

@@ -1,4 +1,4 @@
-"""Every dotted name the documentation cites resolves: ``analytic.operator.system.forward`` in a docstring or in
+"""Every dotted name the documentation cites resolves: ``analytic.operator.matrix_free.forward`` in a docstring or in
 docs/*.md must import, so that a rename or a move cannot leave a citation pointing at nothing.
 
 The reference is the interpreter: each name is imported (its longest importable prefix) and the rest looked
@@ -114,12 +114,12 @@ def _citations() -> dict[str, list[str]]:
 
 
 def test_the_checker_finds_and_refuses_wrong_names():
-    text = (":func:`analytic.operator.system.forward`, ``analytic.files.build_meta``, :mod:`.verdict`, "
+    text = (":func:`analytic.operator.matrix_free.forward`, ``analytic.files.build_meta``, :mod:`.verdict`, "
             "transient.npy and ``analytic.no_such_module.forward``; :func:`analytic.operator.system.no_such_name`")
     names = cited_names(text, "validation.check")
-    assert names == {"analytic.operator.system.forward", "analytic.files.build_meta", "validation.check.verdict",
+    assert names == {"analytic.operator.matrix_free.forward", "analytic.files.build_meta", "validation.check.verdict",
                      "analytic.no_such_module.forward", "analytic.operator.system.no_such_name"}
-    assert resolves("analytic.operator.system.forward") and resolves("analytic.files.build_meta")
+    assert resolves("analytic.operator.matrix_free.forward") and resolves("analytic.files.build_meta")
     assert resolves("validation.check.verdict") and resolves("analytic.Sampling.start_opl")   # a field
     assert not resolves("analytic.operator.system.no_such_name")
     assert not resolves("analytic.no_such_module.forward")

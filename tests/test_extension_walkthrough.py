@@ -127,7 +127,7 @@ def _brute_force(tile: Tile, steps: int = 600):
 def test_toy_scene_kind_runs_through_the_model(tile_kind):
     """The model integrates the toy kind's tile: an impulse's light summed over bins is the tile's integral of
     I ρ a_k (an independent midpoint rule), and it arrives only between the shortest and longest paths."""
-    from analytic.operator.system import forward
+    from analytic.operator.matrix_free import forward
 
     tile = Tile()
     assert is_scene(tile) and tile.pixel_size == pytest.approx((0.2, 0.2))
@@ -150,7 +150,7 @@ def test_toy_scene_kind_runs_through_the_model(tile_kind):
 def test_toy_scene_kind_in_files_readers_and_reports(tile_kind, tmp_path, rng):
     """Files, readers, ``check`` and its report take the toy kind without a line written for it."""
     from analytic.files import build_meta, write_transient
-    from analytic.operator.system import forward
+    from analytic.operator.matrix_free import forward
     from analytic.scenes.scene_file import scene_to_tables
     from validation.check import check_transient, read_data, write_check_report
     from validation.cli.common import rows_text
@@ -184,7 +184,7 @@ def test_toy_scene_kind_lit_by_a_toy_waveform_with_a_key_of_its_own(tile_kind, r
     model is linear in s: over a window holding all the light, y sums to the ramp's area rise / 2 times the
     impulse's; the metadata and the scene's tables carry the key."""
     from analytic.files import build_meta
-    from analytic.operator.system import forward
+    from analytic.operator.matrix_free import forward
     from analytic.scenes.scene_file import scene_to_tables
 
     window = Sampling(bin_width_opl=0.02, start_opl=1.6, count=60)

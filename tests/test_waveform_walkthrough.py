@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from analytic.errors import SceneError
-from analytic.operator.system import forward
+from analytic.operator.matrix_free import forward
 from analytic.scenes.common import Illumination, Sampling, Scene
 from analytic.scenes.scene_file import scene_from_dict, scene_to_tables
 from analytic.waveforms import builders, make_waveform

@@ -204,7 +204,8 @@ def crb(scene, free=(), *, matrix=None, measurement: str = "auto",
     """
     from ..operator.derivatives import jacobian
     from ..operator.parameters import parameters, value_of
-    from ..operator.system import forward, system_matrix
+    from ..operator.system import system_matrix
+    from ..operator.matrix_free import forward
     from ..scenes.scene_file import scene_of
 
     scene = scene_of(scene)

@@ -137,7 +137,7 @@ def scene_tikhonov_error(scene, matrix, lam: float):
         The error, the bound's ``(M, M)`` image (None without ``[noise]``: the bias alone, no variance), and
         :meth:`TikhonovError.summary` with a ``note``; None when M² exceeds :data:`MOST_PIXELS`.
     """
-    from ..operator.system import forward
+    from ..operator.matrix_free import forward
     from .bounds import crb
 
     if scene.pixels**2 > MOST_PIXELS:

@@ -16,6 +16,7 @@ Python side (:mod:`analytic.operator.system`, :mod:`analytic.operator.window`,
   isochrones (ellipses) of a pair in a rectangle's frame, their conics;
 - :mod:`.bins`: bins and their time kernels κ_n;
 - :mod:`.quadrature`: the adaptive Gauss ladders, their rules and integrands;
+- :mod:`.arcs`: an isochrone's arcs in a pixel and their integrals, the (τ, φ) tensor rule;
 - :mod:`.taylor`, :mod:`.moments`: kernels as Taylor polynomials, a pixel's moments;
 - :mod:`.strips`: a cut pixel as slabs between isochrones;
 - :mod:`.routes`: one (pair, pixel)'s entries of A by each quadrature route;
@@ -26,5 +27,5 @@ Python side (:mod:`analytic.operator.system`, :mod:`analytic.operator.window`,
 import lazy_loader
 
 __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submodules=[
-    "cache", "formulas", "pieces", "special", "attenuation", "isochrone", "conics", "bins", "quadrature", "taylor",
+    "cache", "formulas", "pieces", "special", "attenuation", "isochrone", "conics", "bins", "quadrature", "arcs", "taylor",
     "moments", "strips", "routes", "assembly", "offsets"])

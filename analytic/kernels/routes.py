@@ -27,9 +27,9 @@ from .bins import BinRun, KernelProblem, TimeAxis, bin_edge, bin_of, kernel_cut,
 from .isochrone import Frame, PixelBox, ellipse, first_arrival_point, path_length_at, segment_minimum
 from .cache import njit
 from .attenuation import attenuation_of_distances
-from .quadrature import (LINEAR, ROOT_BOTH, ROOT_END, ROOT_START, IsochronePiece, Workspace, adapt, implements,
-                         integrand, integrate, make_workspace, piece_map, surface_integrand,
-                         pixel_isochrone_integral, tensor_integrate)
+from .arcs import LINEAR, ROOT_BOTH, ROOT_END, ROOT_START, IsochronePiece, piece_map, pixel_isochrone_integral
+from .quadrature import (Workspace, adapt, implements, integrand, integrate, make_workspace, surface_integrand,
+                         tensor_integrate)
 from .moments import MomentProblem, bin_moments, moment_weight, smooth_by_moments
 from .strips import strip_entries
 from .taylor import MAX_TERMS, kernel_taylor
@@ -88,7 +88,7 @@ class Column(NamedTuple):
 
 
 class TauPiece(NamedTuple):
-    """One τ-piece of a cut pixel: :func:`analytic.kernels.quadrature.piece_map`'s ``kind``, [τ_a, τ_a + span]
+    """One τ-piece of a cut pixel: :func:`analytic.kernels.arcs.piece_map`'s ``kind``, [τ_a, τ_a + span]
     (metres), and the width in v below which it is not refined (its τ would only round)."""
 
     kind: int
@@ -210,7 +210,7 @@ def _pixel_breakpoints(frame, box, low, high, terms, axis, run):
     Returns (points, root): ``root[i]`` when G(τ) has a square-root
     behaviour at points[i] (an isochrone touching an edge inside it, born
     at x*, or passing a foot, where G is peaked), so that the τ-pieces
-    next to it take a :func:`analytic.kernels.quadrature.piece_map` that smooths
+    next to it take a :func:`analytic.kernels.arcs.piece_map` that smooths
     it; corners and kernel breakpoints are regular ends.
     """
     kinks = 0

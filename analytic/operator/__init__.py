@@ -16,7 +16,8 @@ loaded on first use (``lazy_loader``); ``__all__`` lists the public API.
 import lazy_loader
 
 __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
-    "system": ["system_matrix", "rectangle_matrix", "forward", "count_entries", "pair_entries", "QuadratureWarning"],
+    "system": ["system_matrix", "rectangle_matrix", "count_entries", "pair_entries", "QuadratureWarning"],
+    "matrix_free": ["forward", "forward_route"],
     "response": ["impulse_response", "binned_contour_model"],
     "window": ["response_range", "covering_sampling", "window_share", "WindowWarning"],
     "conditioning": ["singular_values", "conditioning_summary"],

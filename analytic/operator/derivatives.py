@@ -16,7 +16,7 @@ import numpy as np
 from ..errors import OptionError
 from ..scenes.scene_file import scene_of
 from .parameters import Parameter, parameter, parameters, value_of, with_values
-from .system import forward
+from .matrix_free import forward
 
 __all__ = ["jacobian", "derivative", "TOLERANCE", "STEP"]
 

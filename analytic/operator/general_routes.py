@@ -15,7 +15,7 @@ import numpy as np
 from ..kernels import assembly, routes
 from ..kernels.assembly import Assembly, Jobs
 from ..kernels.cache import compiled
-from ..kernels.quadrature import nested_integral_arguments, pixel_isochrone_integral
+from ..kernels.arcs import nested_integral_arguments, pixel_isochrone_integral
 from ..kernels.routes import Route
 from .blocks import ROUTE_SLOTS, Layout, run_blocks
 
@@ -143,7 +143,7 @@ def _subset(jobs: Jobs, chosen: np.ndarray) -> Jobs:
 
 def _compile_nested() -> None:
     """The φ-integrals that the cut routes nest in their τ-integrals, compiled first (see
-    :func:`analytic.kernels.quadrature.nested_integral_arguments`)."""
+    :func:`analytic.kernels.arcs.nested_integral_arguments`)."""
     compiled(pixel_isochrone_integral, *nested_integral_arguments())
 
 

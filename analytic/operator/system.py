@@ -42,10 +42,10 @@ four routes:
   G is smooth except where an isochrone passes a pixel corner, touches an
   edge (a square-root branch point), is born at x*, or passes a foot; the
   τ-range is cut there and at κ's breakpoints, and each piece is mapped
-  by :func:`analytic.kernels.quadrature.piece_map`, which turns a square-root end
+  by :func:`analytic.kernels.arcs.piece_map`, which turns a square-root end
   into an entire function and leaves a regular end alone. Each piece is
   integrated by the tensor rule in (τ, φ)
-  (:func:`analytic.kernels.quadrature.isochrone_rule`) under the adaptive driver,
+  (:func:`analytic.kernels.arcs.isochrone_rule`) under the adaptive driver,
 - or, near x* or a foot, or where that rule fails, by adaptive φ-integrals
   inside adaptive τ-integrals (:func:`analytic.kernels.quadrature.integrate`, the
   *adaptive* route, the slowest and most general).
@@ -100,7 +100,7 @@ from ..scenes.scene_file import scene_of
 from ..scenes.common import MAX_TOLERANCE, MIN_TOLERANCE, Sampling, Scene, check_heights, check_tolerance
 from ..waveforms import Waveform, make_waveform
 
-__all__ = ["system_matrix", "rectangle_matrix", "forward", "count_entries", "check_tolerance", "pair_entries",
+__all__ = ["system_matrix", "rectangle_matrix", "count_entries", "check_tolerance", "pair_entries",
            "METHODS", "QuadratureWarning", "MIN_TOLERANCE", "MAX_TOLERANCE"]
 
 # The tolerance's range (analytic.scenes.common.MIN_TOLERANCE, MAX_TOLERANCE): from
@@ -537,11 +537,3 @@ def pair_entries(scene: Scene, sensor: int, pixel: int, *, method: str = "auto",
         warnings.warn(f"{failures} quadrature pieces stopped refining before reaching tolerance "
                       f"{tolerance:g}", QuadratureWarning, stacklevel=2)
     return run.first, data[:run.bins]
-
-
-def forward(scene: Scene, matrix=None, **options) -> np.ndarray:
-    """The model's noiseless samples y_k[n], ``(K, N)``: :func:`analytic.operator.matrix_free.forward` (A
-    where it fits, else without it), or ``matrix @ f`` for a given A."""
-    from .matrix_free import forward as forward_product
-
-    return forward_product(scene, matrix, **options)

@@ -154,7 +154,7 @@ def window_share(scene: Scene) -> float:
     every path (so a pulse of any length needs no bin longer than the paths).
     """
     from ..scenes.common import Illumination
-    from .system import forward
+    from .matrix_free import forward
     from ..waveforms import make_waveform
 
     sampling = scene.sampling
@@ -182,7 +182,7 @@ def impulse_totals(scene: Scene) -> np.ndarray:
     min(T, ∫|s| dt) (the bin's kernel is ∫_bin s, |s| <= 1), or this for the impulse.
     """
     from ..scenes.common import Illumination
-    from .system import forward
+    from .matrix_free import forward
 
     low, high = response_range(scene)
     margin = 1e-6 * max(high - low, abs(high))

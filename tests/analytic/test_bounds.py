@@ -19,7 +19,8 @@ from reference import bin_kernel, pixel_box, pixel_entry
 from analytic.errors import SceneError
 from analytic.inversion.bounds import crb, information_bounds
 from analytic.measurement.detector import Detector, detection_probabilities, draw_counts
-from analytic.operator.system import QuadratureWarning, forward, system_matrix
+from analytic.operator.system import QuadratureWarning, system_matrix
+from analytic.operator.matrix_free import forward
 from analytic.scenes.common import Illumination, Noise, Sampling, default_scene
 
 SIGMA = 0.05

@@ -11,7 +11,8 @@ import pytest
 
 from analytic.errors import ResourceError, SceneError
 from analytic.scenes.common import Illumination, Sampling, Scene
-from analytic.operator.system import MIN_TOLERANCE, count_entries, forward, system_matrix
+from analytic.operator.system import MIN_TOLERANCE, count_entries, system_matrix
+from analytic.operator.matrix_free import forward
 
 
 def _scene(**changes):

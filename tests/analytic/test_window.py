@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from analytic.scenes.common import Illumination, Sampling, Scene, default_scene
-from analytic.operator.system import forward, system_matrix
+from analytic.operator.system import system_matrix
+from analytic.operator.matrix_free import forward
 from analytic.operator.window import FULL_SHARE, WindowWarning, covering_sampling, response_range, warn_if_cut, window_share
 
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from analytic.operator.parameters import with_values
-from analytic.operator.system import forward
+from analytic.operator.matrix_free import forward
 from analytic.scenes.scene_file import load_scene
 from validation.cli import main
 

@@ -36,7 +36,7 @@ def write_scene(folder, *, period=0.05, start=1.7, count=24):
 
 def model_of(path):
     from analytic.scenes.scene_file import load_scene
-    from analytic.operator.system import forward
+    from analytic.operator.matrix_free import forward
 
     return forward(load_scene(path))
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from analytic.scenes.scene_file import load_scene
-from analytic.operator.system import forward
+from analytic.operator.matrix_free import forward
 from scene_files import GOOD, write_scene
 from interop.mitransient.export import MITRANSIENT_IMPULSE_ONLY
 from validation.cli import main

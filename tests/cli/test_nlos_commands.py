@@ -12,7 +12,7 @@ from relay_wall_reference import brute_force_path_range, reference_bin
 
 from analytic.files import read_transient
 from analytic.scenes.scene_file import load_scene
-from analytic.operator.system import forward
+from analytic.operator.matrix_free import forward
 from validation.cli import main
 from validation.judging.compare import compare_transients
 

@@ -9,7 +9,7 @@ import pytest
 
 from interop.tal import capture as capture_module
 from analytic.scenes.scene_file import load_scene
-from analytic.operator.system import forward
+from analytic.operator.matrix_free import forward
 from scene_files import write_scene
 from validation.cli import main
 from validation.cli.plot import read_for_plot

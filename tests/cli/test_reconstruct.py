@@ -14,7 +14,7 @@ import pytest
 from analytic.files import read_transient, save_npy
 from analytic.measurement.noise import add_noise
 from analytic.scenes.scene_file import load_scene
-from analytic.operator.system import forward
+from analytic.operator.matrix_free import forward
 from validation.cli import main
 
 # reconstruct shows the inversion's warnings (a λ at the end of its grid, rank deficiency) on stderr

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from analytic.scenes.common import default_scene
-from analytic.operator.system import forward
+from analytic.operator.matrix_free import forward
 from validation.judging.compare import compare_transients
 
 SCENE = """

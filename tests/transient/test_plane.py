@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from analytic.scenes.common import Illumination, Sampling, Scene
-from analytic.operator.system import forward, system_matrix
+from analytic.operator.system import system_matrix
+from analytic.operator.matrix_free import forward
 from render_checks import agreement, model, render_dict
 from transient.render import render, render_loaded
 from validation.runs.suite import hard_cases, validation_suite

@@ -231,7 +231,7 @@ def test_combined_degrees_of_freedom():
 def test_real_renders_keep_the_stated_false_alarm_rate():
     """Many seeds of a cheap scene against the exact model: failures at about the stated rate."""
     from analytic.scenes.common import Sampling, Scene
-    from analytic.operator.system import forward
+    from analytic.operator.matrix_free import forward
     from transient.render import render
 
     scene = Scene(size=1.0, pixels=4, reflectance=np.random.default_rng(5).uniform(0.2, 0.9, (4, 4)),
@@ -282,7 +282,7 @@ def test_renders_with_correlated_bins_keep_the_stated_false_alarm_rate(pulse):
     """100 seeds against the exact model, judged with their replicas' sign flips: each test fails at
     its share α/2, within binomial error; a wide pulse makes the bins move together, and the
     independent-bins limits then fail far more often than α."""
-    from analytic.operator.system import forward
+    from analytic.operator.matrix_free import forward
     from transient.render import render
 
     scene = _pulse_scene(pulse)

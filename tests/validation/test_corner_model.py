@@ -10,7 +10,8 @@ import pytest
 
 from analytic.errors import SceneError
 from analytic.scenes.common import Illumination, Sampling, Scene
-from analytic.operator.system import forward, rectangle_matrix
+from analytic.operator.system import rectangle_matrix
+from analytic.operator.matrix_free import forward
 from analytic.waveforms import make_waveform
 from validation.runs.corner import Corner, corner_model, corner_pairs, corner_rectangles, default_corner
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from analytic.operator.system import forward
+from analytic.operator.matrix_free import forward
 from check_cases import WIDTH, shifted, small_scene
 from validation.judging.compare import compare_transients
 

@@ -5,7 +5,7 @@ import re
 import numpy as np
 import pytest
 
-from analytic.operator.system import forward
+from analytic.operator.matrix_free import forward
 from transient.render import render
 from validation.judging.compare import compare_transients
 from analytic.operator.response import binned_contour_model

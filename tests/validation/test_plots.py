@@ -144,7 +144,7 @@ def test_criterion_over_the_whole_float_range_is_drawn():
 @pytest.fixture(scope="module")
 def check_result():
     from analytic.scenes.common import Scene
-    from analytic.operator.system import forward
+    from analytic.operator.matrix_free import forward
     from validation.check import check_transient
 
     scene = Scene(pixels=6, source=(0.5, 0.5, 1.0), sensors=[(0.2, 0.7, 1.0), (0.6, 0.3, 0.8), (0.5, 0.5, 0.5)],

@@ -8,7 +8,8 @@ import pytest
 
 from analytic.geometry import PointPairs
 from analytic.scenes.relay_wall import RelayWallScene
-from analytic.operator.system import forward, rectangle_matrix
+from analytic.operator.system import rectangle_matrix
+from analytic.operator.matrix_free import forward
 from analytic.waveforms import make_waveform
 from transient.render import render
 from validation.judging.compare import MIN_CHECK_SAMPLES, compare_transients

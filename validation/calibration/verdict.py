@@ -25,7 +25,7 @@ import numpy as np
 from analytic.errors import DataError
 from analytic.operator.derivatives import jacobian as exact_jacobian
 from analytic.operator.parameters import parameters, value_of, with_values
-from analytic.operator.system import forward
+from analytic.operator.matrix_free import forward
 from validation.check.inputs import PYTHON_WORDS, Words, read_inputs, scene_of
 from validation.judging.arrays import false_alarm_rate, real_array
 from validation.judging.compare import Agreement, compare_transients, judged_bins, model_tolerance_for

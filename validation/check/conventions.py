@@ -229,7 +229,7 @@ def transient_nlos_path(scene, *, model: np.ndarray | None = None) -> Convention
         Scale 1, offset 0, and ``added`` = :func:`interop.mitransient.nlos.offset_model` minus the model:
         derived, no fitted parameter.
     """
-    from analytic.operator.system import forward
+    from analytic.operator.matrix_free import forward
     from interop.mitransient.nlos import offset_model
 
     model = forward(scene) if model is None else model

@@ -242,7 +242,7 @@ class SceneModel:
 
     def __call__(self, offset_opl: float = 0.0, fwhm: float | None = None, tail: float | None = None) -> np.ndarray:
         from analytic.scenes.common import Illumination, Sampling
-        from analytic.operator.system import forward     # Numba: loaded when a model is first needed
+        from analytic.operator.matrix_free import forward     # Numba: loaded when a model is first needed
 
         key = (float(offset_opl), fwhm, tail)
         if key not in self.cache:

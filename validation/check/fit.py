@@ -66,7 +66,7 @@ class ShiftedModel:
     model : numpy.ndarray, optional
         ``(K, N)`` ``evaluate(scene)`` when already computed (δ = 0).
     evaluate : callable, optional
-        scene -> ``(K, N)``: what is shifted (default :func:`analytic.operator.system.forward`, the model;
+        scene -> ``(K, N)``: what is shifted (default :func:`analytic.operator.matrix_free.forward`, the model;
         :func:`interop.mitransient.offset_model` judges against mitransient's estimator the same way).
 
     Attributes
@@ -82,7 +82,7 @@ class ShiftedModel:
         self.evaluations = 0
 
     def _at(self, start_opl: float, count: int) -> np.ndarray:
-        from analytic.operator.system import forward   # Numba: loaded when a model is first needed
+        from analytic.operator.matrix_free import forward   # Numba: loaded when a model is first needed
 
         sampling = Sampling(bin_width_opl=self.scene.sampling.bin_width_opl, start_opl=start_opl, count=count)
         self.evaluations += 1

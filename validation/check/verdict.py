@@ -1,7 +1,7 @@
 """The verdict of ``check``: a transient from any tool judged against the exact model, as given and after a fit.
 
 ``check_transient(scene, data, ...)`` compares y from anywhere (our render,
-another renderer, a measurement) with ``analytic.operator.system.forward(scene)``
+another renderer, a measurement) with ``analytic.operator.matrix_free.forward(scene)``
 in two steps:
 
 1. **As given.** z = (y_data - y_model) / se per bin, judged by

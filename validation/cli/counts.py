@@ -78,7 +78,7 @@ def refuse_unreachable_counts(scene, *, margin: float = 2.0) -> None:
 
     from analytic.measurement.detector import MAX_MEAN, excess_key
     from analytic.errors import SceneError
-    from analytic.operator.system import forward
+    from analytic.operator.matrix_free import forward
     from analytic.values import exact
     from analytic.operator.window import impulse_totals
 
@@ -319,7 +319,7 @@ def command_check_counts(args, scene) -> int:
 
     from analytic.measurement.detector import expected_counts
     from analytic.files import json_ready, output_folder, save_json, staged_writes
-    from analytic.operator.system import forward
+    from analytic.operator.matrix_free import forward
     from validation.check.counts import DEFAULT_FALSE_ALARM, SceneModel, fit_counts, judge_counts
     from validation.plots import save_figure
     from validation.runs.report import write_markdown

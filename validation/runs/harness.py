@@ -37,7 +37,8 @@ from analytic.errors import SceneError
 from analytic.operator.response import impulse_response
 from analytic.scenes.common import Scene
 from analytic.scenes.kinds import for_kind
-from analytic.operator.system import QuadratureWarning, forward, system_matrix
+from analytic.operator.system import QuadratureWarning, system_matrix
+from analytic.operator.matrix_free import forward
 from validation.check.fit import ShiftedModel
 from validation.check.readers import scene_of
 from validation.check.verdict import DERIVATIVE_STEP

@@ -106,7 +106,7 @@ def render_chunk(scene: Scene, fingerprint: str, seed: int, layout, chunk,
 
 def model_transient(scene: Scene) -> tuple[np.ndarray, float]:
     """The exact model's noiseless y of a scene (a Dask task); returns (y, seconds)."""
-    from analytic.operator.system import forward
+    from analytic.operator.matrix_free import forward
 
     started = time.perf_counter()
     y = forward(scene)

@@ -184,7 +184,7 @@ def test_mitransient_renders_of_the_export_agree_once_its_ray_offsets_are_stated
     estimator in closed form (``--expect transient_nlos_path``, no fitted parameter) it agrees, and a fit
     against that expectation finds scale 1 and offset 0 within their errors.
     """
-    from analytic.operator.system import forward
+    from analytic.operator.matrix_free import forward
     from validation.check import check_transient, read_data
     from interop.mitransient import offset_model
 

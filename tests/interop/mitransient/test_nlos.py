@@ -13,7 +13,7 @@ import pytest
 
 from analytic.scenes.relay_wall import RelayWallScene, Scan
 from analytic.scenes.common import Sampling
-from analytic.operator.system import forward
+from analytic.operator.matrix_free import forward
 from interop.mitransient import emulated_estimates, moved_read_points, offset_model, spawn_offset_difference
 from interop.mitransient import nlos as mitransient_nlos
 

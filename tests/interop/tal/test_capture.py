@@ -19,7 +19,7 @@ import pytest
 from interop.tal import capture as capture_module
 from interop.tal import CaptureError, read_capture, write_capture
 from analytic.scenes.common import Sampling, Scene, sensor_grid
-from analytic.operator.system import forward
+from analytic.operator.matrix_free import forward
 from analytic.errors import DataError
 from tal_env import TAL_READ, needs_tal, run_tal
 from validation.check import read_data

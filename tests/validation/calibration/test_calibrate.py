@@ -13,7 +13,7 @@ import pytest
 from scipy import stats
 
 from analytic.operator.parameters import with_values
-from analytic.operator.system import forward
+from analytic.operator.matrix_free import forward
 from analytic.scenes.scene_file import scene_from_dict
 from validation.calibration import UNDETERMINED, calibrate
 

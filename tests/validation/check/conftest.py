@@ -2,7 +2,7 @@
 
 import pytest
 
-from analytic.operator.system import forward
+from analytic.operator.matrix_free import forward
 from check_cases import small_scene, write_scene_file
 
 

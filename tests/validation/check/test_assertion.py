@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from analytic.scenes.common import Sampling
-from analytic.operator.system import forward
+from analytic.operator.matrix_free import forward
 from check_cases import START, small_scene
 from validation import assert_agrees, check_transient
 from validation.check.conventions import irradiancemeter

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from analytic.operator.system import forward
+from analytic.operator.matrix_free import forward
 from check_cases import noisy_replicas, shifted, small_scene
 from validation.check import check_transient
 

@@ -12,7 +12,7 @@ import pytest
 from analytic.errors import DataError
 from analytic.files import build_meta, save_exr, write_transient
 from analytic.scenes.common import Sampling
-from analytic.operator.system import forward
+from analytic.operator.matrix_free import forward
 from check_cases import COUNT, START, WIDTH, noisy_replicas, render_folder, run_check, small_scene
 from validation.check import check_transient, read_data, read_stderr
 from validation.cli import main

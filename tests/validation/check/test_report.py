@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 
-from analytic.operator.system import forward
+from analytic.operator.matrix_free import forward
 from check_cases import noisy_replicas, one_bin_scene, run_check
 from transient.render import render
 from validation.check import check_transient, write_check_report

@@ -8,7 +8,7 @@ import pytest
 from scipy import stats
 
 from analytic.errors import DataError
-from analytic.operator.system import forward
+from analytic.operator.matrix_free import forward
 from check_cases import noisy_replicas, one_bin_scene
 from transient.render import render
 from validation.check import check_transient

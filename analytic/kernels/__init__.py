@@ -19,11 +19,12 @@ Python side (:mod:`analytic.operator.system`, :mod:`analytic.operator.window`,
 - :mod:`.taylor`, :mod:`.moments`: kernels as Taylor polynomials, a pixel's moments;
 - :mod:`.strips`: a cut pixel as slabs between isochrones;
 - :mod:`.routes`: one (pair, pixel)'s entries of A by each quadrature route;
-- :mod:`.assembly`: A's entries counted and filled, block by block, straight into CSR.
+- :mod:`.assembly`: A's entries counted and filled, block by block, straight into CSR;
+- :mod:`.sensitivity`: the cell integrals of exact derivatives (amplitudes and their coarea at bin edges).
 """
 
 import lazy_loader
 
 __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submodules=[
     "cache", "formulas", "pieces", "special", "attenuation", "isochrone", "conics", "bins", "quadrature", "taylor",
-    "moments", "strips", "routes", "assembly"])
+    "moments", "strips", "routes", "assembly", "sensitivity"])

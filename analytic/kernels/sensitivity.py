@@ -38,10 +38,12 @@ __all__ = ["PairGeometry", "AMPLITUDES", "amplitudes", "isochrone_ellipse", "pai
 
 #: a, ∂a/∂p_s (x, y, z), ∂a/∂p_k (x, y, z), a ∂d/∂p_s (x, y, z), a ∂d/∂p_k (x, y, z).
 AMPLITUDES = 13
+#: F (the area integrals) takes the first seven (a and ∂a/∂θ), H (the coarea ones) a and the last six.
+_AREA = 7
 #: The Gauss orders climbed, one after the other, until two consecutive ones agree.
 _LADDER = np.array([2, 3, 4, 6, 8, 11])
-#: Where a cut piece's climb starts (its square-root map makes low orders agree less often by accident).
-_CUT_START = 1
+#: Where a cut piece's climb starts (G_2 judged by G_3, as a whole cell's).
+_CUT_START = 0
 _MAX_DEPTH = 24
 _STACK = 64
 
@@ -169,14 +171,15 @@ def _slice(g, ellipse, x, y0, y1, weight, rung, area, edge, amp):
         for i in range(_LADDER[rung]):
             amplitudes(g, x, bottom + height * _NODES[rung, i], amp)
             scale = weight * height * _WEIGHTS[rung, i]
-            for j in range(AMPLITUDES):
+            for j in range(_AREA):          # F needs a and ∂a/∂θ
                 area[j] += scale * amp[j]
     for root in (low, high):
         if y0 <= root <= y1:
             slope = abs(_path_dy(g, x, root))
             if slope > 0.0:
                 amplitudes(g, x, root, amp)
-                for j in range(AMPLITUDES):
+                edge[0] += weight * amp[0] / slope
+                for j in range(_AREA, AMPLITUDES):     # H needs a and a ∂d/∂θ
                     edge[j] += weight * amp[j] / slope
 
 
@@ -270,7 +273,7 @@ def _box_rule(g, x0, x1, y0, y1, rung, out, amp):
         for m in range(order):
             amplitudes(g, x, y0 + (y1 - y0) * _NODES[rung, m], amp)
             scale = (x1 - x0) * (y1 - y0) * _WEIGHTS[rung, i] * _WEIGHTS[rung, m]
-            for j in range(AMPLITUDES):
+            for j in range(_AREA):
                 out[j] += scale * amp[j]
 
 

@@ -25,6 +25,7 @@ import numpy as np
 from ..errors import OptionError
 from ..scenes.scene_file import scene_of
 from .parameters import Parameter, parameter, parameters, rotation, value_of, with_values
+from .general_routes import progress_bar
 from .sensitivity import position_derivatives, supports
 from .system import forward
 
@@ -96,7 +97,7 @@ def _exact_column(scene, item: Parameter, parts) -> np.ndarray:
             + np.einsum("knj,kj->kn", sensor, velocity[1:]))
 
 
-def jacobian(scene, keys, *, step: float | None = None, route: str = "exact") -> np.ndarray:
+def jacobian(scene, keys, *, step: float | None = None, route: str = "exact", progress: bool = False) -> np.ndarray:
     """∂y/∂θ for each named parameter θ.
 
     Parameters
@@ -112,6 +113,8 @@ def jacobian(scene, keys, *, step: float | None = None, route: str = "exact") ->
     route : {"exact", "differences"}
         "exact": the exact route for the keys it covers (:func:`exact_keys`),
         the differences for the rest; "differences": every key by differences.
+    progress : bool
+        Progress bars on stderr (the exact pass's sensors, then the keys).
 
     Returns
     -------
@@ -132,15 +135,20 @@ def jacobian(scene, keys, *, step: float | None = None, route: str = "exact") ->
     exact = exact_keys(scene, items) if route == "exact" else [False] * len(items)
     y = parts = None
     columns = []
+    bar = progress_bar(progress and not all(exact), len(items), "jacobian", "key")
     for item, closed in zip(items, exact):
+        if bar is not None:
+            bar.update(1)
         if closed and (item.stem.endswith(".reflectance") or item.unit == "W/sr"):
             y = forward(scene) if y is None else y
             columns.append(y if item.unit == "1" else y / value_of(scene, item))
         elif closed:
-            parts = position_derivatives(scene) if parts is None else parts
+            parts = position_derivatives(scene, progress=progress) if parts is None else parts
             columns.append(_exact_column(scene, item, parts))
         else:
             columns.append(_differences(scene, item, fraction * _scale(scene, item)))
+    if bar is not None:
+        bar.close()
     return np.stack(columns, axis=-1)
 
 

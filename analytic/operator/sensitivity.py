@@ -42,6 +42,7 @@ from ..attenuation import attenuation_code
 from ..kernels.formulas import LAMBERTIAN
 from ..kernels.sensitivity import AMPLITUDES, PairGeometry, pair_sums
 from .blocks import run_blocks
+from .general_routes import progress_bar
 
 __all__ = ["position_derivatives", "supports", "pair_geometry"]
 
@@ -50,7 +51,7 @@ _CELL_OF_HEIGHT = 0.25
 #: Within this many heights of a foot, cells are refined.
 _FOOT_REACH = 6.0
 #: The cell integrals' accuracy, as a fraction of the scene's tolerance.
-_SAFETY = 0.1
+_SAFETY = 0.5
 
 
 def supports(scene) -> bool:
@@ -100,13 +101,15 @@ def pair_geometry(source, sensor, attenuation: str) -> PairGeometry:
                         float(np.hypot(distance, source[2] - sensor[2])))
 
 
-def position_derivatives(scene):
+def position_derivatives(scene, *, progress: bool = False):
     """y and its exact derivatives for every position coordinate and the time zero, impulse illumination.
 
     Parameters
     ----------
     scene : Scene
         A plane scene (:func:`supports`).
+    progress : bool
+        A progress bar on stderr, one step per sensor.
 
     Returns
     -------
@@ -129,7 +132,12 @@ def position_derivatives(scene):
         return (pair_geometry(scene.source, scene.sensors[k], scene.attenuation), cells, edges, rtol,
                 sums[k, 0], sums[k, 1])
 
-    run_blocks(pair_sums, arguments, count)
+    bar = progress_bar(progress, count, "exact derivatives", "sensor")
+    try:
+        run_blocks(pair_sums, arguments, count, bar=bar)
+    finally:
+        if bar is not None:
+            bar.close()
     F, H = sums[:, 0], sums[:, 1]
     interior = np.diff(F, axis=1)                  # F(t_{n+1}) - F(t_n)
     moving = H[:, :-1] - H[:, 1:]                  # H(t_n) - H(t_{n+1})

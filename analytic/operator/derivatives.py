@@ -6,13 +6,14 @@
 - ``"exact"`` (default): the interior and bin-edge terms
   (:mod:`.sensitivity`) for a plane scene with the impulse illumination:
   ``source.position.*``, ``sensors.positions.k.*``, ``sampling.start``,
-  and the plane's rigid motions (``plane.translation.*``,
-  ``plane.rotation.*``: the points moving the other way, so the same
-  columns combined). Two parameters are exact by linearity for every scene:
-  a reflectance scale (∂y/∂s = y) and the source's intensity (∂y/∂I = y / I).
-  Every other key (``plane.size``, ``illumination.*``, every other
-  waveform, every relay-wall key but the two linear ones) still takes the
-  differences below.
+  the plane's rigid motions (``plane.translation.*``, ``plane.rotation.*``:
+  the points moving the other way, so the same columns combined) and
+  ``plane.size`` (by the model's scaling law, from the same columns and
+  the impulse response at the edges). Two parameters are exact by
+  linearity for every scene: a reflectance scale (∂y/∂s = y) and the
+  source's intensity (∂y/∂I = y / I). Every other key (every key of a
+  waveform other than the impulse, every relay-wall key but the two
+  linear ones) still takes the differences below.
 - ``"differences"``: Richardson-extrapolated central differences of the
   model assembled at tolerance :data:`TOLERANCE`, for every key (the tests'
   independent reference).
@@ -34,7 +35,8 @@ __all__ = ["jacobian", "derivative", "exact_keys", "ROUTES", "TOLERANCE", "STEP"
 #: The routes :func:`jacobian` takes.
 ROUTES = ("exact", "differences")
 #: The stems the exact route covers (for the scenes :func:`analytic.operator.sensitivity.supports`).
-_EXACT_STEMS = ("source.position", "sensors.positions", "sampling.start", "plane.translation", "plane.rotation")
+_EXACT_STEMS = ("source.position", "sensors.positions", "sampling.start", "plane.translation", "plane.rotation",
+                "plane.size")
 
 #: The model's tolerance inside the differences: its error over the step bounds the derivative's.
 TOLERANCE = 1e-10
@@ -74,7 +76,7 @@ def exact_keys(scene, items) -> list[bool]:
 
 def _exact_column(scene, item: Parameter, parts) -> np.ndarray:
     """One column from :func:`analytic.operator.sensitivity.position_derivatives`' ``parts``."""
-    _, source, sensor, start = parts
+    y, source, sensor, start, response = parts
     stem, index = item.stem, item.index
     if stem == "source.position":
         return source[..., index[0]]
@@ -84,8 +86,15 @@ def _exact_column(scene, item: Parameter, parts) -> np.ndarray:
         return column
     if stem == "sampling.start":
         return start
-    # a rigid motion of the plane is every point moving the other way: dp/dθ of each point, then the chain rule
     points = np.vstack([np.asarray(scene.source, dtype=np.float64)[None, :], np.asarray(scene.sensors)])
+    if stem == "plane.size":
+        # scaling every length by λ (plane, points, bin edges) scales y by λ^-2 (a ~ λ^-4, dx ~ λ²), so
+        # L ∂y/∂L = -2 y - Σ_points p·∂y/∂p - Σ_edges t_e ∂y/∂t_e, with ∂y_n/∂t_n = -G(t_n), ∂y_n/∂t_{n+1} = G(t_{n+1})
+        edges = np.asarray(scene.sampling.edges, dtype=np.float64)
+        moved = (np.einsum("knj,j->kn", source, points[0]) + np.einsum("knj,kj->kn", sensor, points[1:])
+                 + edges[1:] * response[:, 1:] - edges[:-1] * response[:, :-1])
+        return -(2.0 * y + moved) / float(scene.size)
+    # a rigid motion of the plane is every point moving the other way: dp/dθ of each point, then the chain rule
     if stem == "plane.translation":
         velocity = np.zeros_like(points)
         velocity[:, index[0]] = -1.0

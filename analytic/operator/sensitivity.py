@@ -121,6 +121,8 @@ def position_derivatives(scene, *, progress: bool = False):
         ``(K, N, 3)``: ∂y_k/∂sensors.positions.k.{x, y, z} (row k depends on sensor k alone).
     start : numpy.ndarray
         ``(K, N)``: ∂y/∂sampling.start, y's units per metre of path length.
+    response : numpy.ndarray
+        ``(K, N + 1)``: the impulse response I ∫ f a δ(d - t) dx at each bin edge t, y's units per metre.
     """
     cells = _cells(scene)
     edges = np.asarray(scene.sampling.edges, dtype=np.float64)
@@ -143,4 +145,4 @@ def position_derivatives(scene, *, progress: bool = False):
     moving = H[:, :-1] - H[:, 1:]                  # H(t_n) - H(t_{n+1})
     scale = float(scene.intensity)
     return (scale * interior[..., 0], scale * (interior[..., 1:4] + moving[..., 7:10]),
-            scale * (interior[..., 4:7] + moving[..., 10:13]), -scale * moving[..., 0])
+            scale * (interior[..., 4:7] + moving[..., 10:13]), -scale * moving[..., 0], scale * H[..., 0])

@@ -95,13 +95,24 @@ def test_the_scenes_tolerance_bounds_each_column_entry():
     assert _column_errors(loose, tight).max() < scene.tolerance
 
 
-def test_a_sensors_keys_move_only_its_row_and_the_plane_moving_is_the_points_moving_back():
+def test_a_sensors_keys_move_only_its_row_and_the_plane_moving_or_growing_is_the_points_moving_back():
+    """The plane's motions and its size come from the points' columns (and, for the size, the edges')."""
     scene = default_scene(pixels=8, reflectance=_image(8), sensors=[[0.3, 0.6, 0.8], [0.9, 0.2, 0.5]],
                           sampling=Sampling(bin_width_opl=0.07, start_opl=1.75, count=14), noise=None)
-    columns = jacobian(scene, ["sensors.positions.1.y", "plane.translation.y", "plane.rotation.z"])
+    keys = ["plane.translation.y", "plane.rotation.z", "plane.rotation.x", "plane.size"]
+    columns = jacobian(scene, ["sensors.positions.1.y", *keys])
     assert np.all(columns[0, :, 0] == 0.0) and np.any(columns[1, :, 0] != 0.0)
-    reference = jacobian(scene, ["plane.translation.y", "plane.rotation.z"], route="differences", step=_STEP)
+    reference = jacobian(scene, keys, route="differences", step=_STEP)
     assert _column_errors(columns[..., 1:], reference).max() < 1e-5
+
+
+@pytest.mark.parametrize("mode", ["lambertian", "paper"])
+def test_the_plane_growing_on_a_sensor_near_it(mode):
+    scene = default_scene(pixels=8, reflectance=_image(8), sensors=[[0.37, 0.61, 0.04]], attenuation=mode,
+                          sampling=Sampling(bin_width_opl=0.09, start_opl=1.0, count=14), noise=None)
+    computed = jacobian(scene, ["plane.size"])
+    reference = jacobian(scene, ["plane.size"], route="differences", step=_STEP)
+    assert _column_errors(computed, reference).max() < 1e-5
 
 
 # -- a point-like plane, by hand ------------------------------------------------------------------------------

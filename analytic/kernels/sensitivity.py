@@ -18,11 +18,12 @@ ellipse's x-extremes (square-root ends, where ∂d/∂y = 0) and the x where
 the ellipse crosses the cell's lower and upper edges, which cut the outer
 interval; each piece is mapped by x = x_a + span sin²(πv/2) (a square-root
 end becomes analytic, a regular one stays so) and integrated by a G_n
-judged by the order below it (the same order in v and in y: G_3, G_4, G_6,
-G_8, G_11 in turn until two agree), bisected in v when none do, to ``rtol``
-of the whole cell's magnitude (F: Σ_j ∫_cell |w_j|; H: that over the
-cell's diagonal, ≥ the range of d over it over 2); the tensor rule on
-whole cells the same way, split in four.
+judged by the order below it (the same order in v and in y: G_2, G_3, G_4, G_6,
+G_8, G_11 in turn until two agree), bisected in v when none do, each
+amplitude to ``rtol`` of the whole cell's ∫ |w_j| (for F_j, and for the
+derivatives at least ∫ a over the first arrival, their column's scale; for
+H, a's over the cell's diagonal, ≥ half the range of d over it); the tensor
+rule on whole cells the same way, split in four.
 """
 
 from __future__ import annotations
@@ -45,6 +46,8 @@ _LADDER = np.array([2, 3, 4, 6, 8, 11])
 #: Where a cut piece's climb starts (G_2 judged by G_3, as a whole cell's).
 _CUT_START = 0
 _MAX_DEPTH = 24
+#: Rule applications per cell (cut piece or whole cell) before the rest is kept as it is, and counted.
+_MAX_RULES = 2000
 _STACK = 64
 
 
@@ -197,29 +200,37 @@ def _piece_rule(g, ellipse, y0, y1, xa, span, v0, v1, rung, area, edge, amp):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _agree(low, high):
-    """Σ|low - high| and Σ|high| over the amplitudes."""
-    gap, size = 0.0, 0.0
+def _within(low, high, limits, scale):
+    """Whether |low_j - high_j| <= scale x limits_j for every amplitude j with a limit (limits_j >= 0)."""
     for j in range(AMPLITUDES):
-        gap += abs(low[j] - high[j])
-        size += abs(high[j])
-    return gap, size
+        if limits[j] >= 0.0 and abs(low[j] - high[j]) > scale * limits[j]:
+            return False
+    return True
 
 
 @njit(cache=True, error_model="numpy")
 def _cut_cell(g, ellipse, box, rtol, magnitude, area, edge, work):
     """Add F and H of one cell the ellipse crosses to ``area`` and ``edge``.
 
-    ``magnitude``: Σ_j ∫_cell |w_j| (of the tensor rule), the scale of F's accuracy; ``work``: float64[5, 13].
+    ``magnitude``: ∫_cell |w_j| of each amplitude (from the tensor rule), the scale of F_j's accuracy, and
+    of H's (|a ∂d/∂θ| <= a) over the cell's diagonal; ``work``: float64[7, 13]. Returns how many
+    pieces were kept unconverged (the depth or :data:`_MAX_RULES` reached).
     """
     x0, x1, y0, y1 = box[0], box[1], box[2], box[3]
-    limit_area = rtol * magnitude
-    limit_edge = limit_area / math.hypot(x1 - x0, y1 - y0)
+    failures = 0
+    limit_area, limit_edge = work[5], work[6]
+    diagonal = math.hypot(x1 - x0, y1 - y0)
+    for j in range(AMPLITUDES):
+        # a derivative's scale at least a's over the first arrival (a column's own scale), so that a
+        # derivative vanishing over the cell does not ask for more than its column needs
+        limit_area[j] = rtol * max(magnitude[j], magnitude[0] / g.first) if 0 < j < _AREA else -1.0
+        limit_edge[j] = rtol * magnitude[0] / diagonal if (j == 0 or j >= _AREA) else -1.0
+    limit_area[0] = rtol * magnitude[0]
     cx, cy, a, b = ellipse
     reach = math.sqrt((a * g.ex) ** 2 + (b * g.ey) ** 2)
     xa, xb = max(x0, cx - reach), min(x1, cx + reach)
     if not xb > xa:
-        return
+        return 0
     cuts = np.empty(6)
     cuts[0], cuts[1] = xa, xb
     count = 2
@@ -238,8 +249,10 @@ def _cut_cell(g, ellipse, box, rtol, magnitude, area, edge, work):
             continue
         lows[0], highs[0], depths[0] = 0.0, 1.0, 0
         top = 1
+        rules = 0
         while top > 0:
             top -= 1
+            rules += 1
             v0, v1, depth = lows[top], highs[top], depths[top]
             _piece_rule(g, ellipse, y0, y1, start, span, v0, v1, _CUT_START, high_area, high_edge, amp)
             done = False
@@ -247,12 +260,12 @@ def _cut_cell(g, ellipse, box, rtol, magnitude, area, edge, work):
                 low_area[:] = high_area
                 low_edge[:] = high_edge
                 _piece_rule(g, ellipse, y0, y1, start, span, v0, v1, rung, high_area, high_edge, amp)
-                gap_area, _ = _agree(low_area, high_area)
-                gap_edge, _ = _agree(low_edge, high_edge)
-                if gap_area <= limit_area and gap_edge <= limit_edge:
+                if _within(low_area, high_area, limit_area, 1.0) and _within(low_edge, high_edge, limit_edge, 1.0):
                     done = True
                     break
-            if done or depth >= _MAX_DEPTH or top + 2 > _STACK:
+            if done or depth >= _MAX_DEPTH or top + 2 > _STACK or rules >= _MAX_RULES:
+                if not done:
+                    failures += 1
                 for j in range(AMPLITUDES):
                     area[j] += high_area[j]
                     edge[j] += high_edge[j]
@@ -261,12 +274,14 @@ def _cut_cell(g, ellipse, box, rtol, magnitude, area, edge, work):
             lows[top], highs[top], depths[top] = v0, middle, depth + 1
             lows[top + 1], highs[top + 1], depths[top + 1] = middle, v1, depth + 1
             top += 2
+    return failures
 
 
 @njit(cache=True, error_model="numpy")
-def _box_rule(g, x0, x1, y0, y1, rung, out, amp):
+def _box_rule(g, x0, x1, y0, y1, rung, out, absolute, amp):
     for j in range(AMPLITUDES):
         out[j] = 0.0
+        absolute[j] = 0.0
     order = _LADDER[rung]
     for i in range(order):
         x = x0 + (x1 - x0) * _NODES[rung, i]
@@ -275,38 +290,45 @@ def _box_rule(g, x0, x1, y0, y1, rung, out, amp):
             scale = (x1 - x0) * (y1 - y0) * _WEIGHTS[rung, i] * _WEIGHTS[rung, m]
             for j in range(_AREA):
                 out[j] += scale * amp[j]
+                absolute[j] += scale * abs(amp[j])
 
 
 @njit(cache=True, error_model="numpy")
-def _full_cell(g, box, rtol, out, work):
-    """Add ∫ w over the whole cell to ``out``: G_n x G_n up the ladder until two agree, else split in four.
-
-    Returns Σ_j ∫ |w_j| of the kept rules, the cell's magnitude.
-    """
-    amp, low, high = work[0], work[1], work[3]
+def _full_cell(g, box, rtol, out, magnitude, work):
+    """Add ∫ w_j over the whole cell to ``out`` and ∫ |w_j| to ``magnitude``: G_n x G_n up the ladder until
+    two agree in every amplitude (to ``rtol`` of its ∫ |w_j|), else split in four. Returns how many
+    parts were kept unconverged."""
+    amp, low, high, absolute, limits = work[0], work[1], work[3], work[5], work[6]
+    for j in range(_AREA, AMPLITUDES):
+        limits[j] = -1.0
     boxes = np.empty((_STACK, 4))
     depths = np.empty(_STACK, dtype=np.int64)
     boxes[0, :] = box[:4]
     depths[0] = 0
     top = 1
-    magnitude = 0.0
+    rules = failures = 0
     while top > 0:
         top -= 1
+        rules += 1
         x0, x1, y0, y1 = boxes[top, 0], boxes[top, 1], boxes[top, 2], boxes[top, 3]
         depth = depths[top]
-        _box_rule(g, x0, x1, y0, y1, 0, high, amp)
+        _box_rule(g, x0, x1, y0, y1, 0, high, absolute, amp)
         done = False
         for rung in range(1, _LADDER.size):
             low[:] = high
-            _box_rule(g, x0, x1, y0, y1, rung, high, amp)
-            gap, size = _agree(low, high)
-            if gap <= rtol * size:
+            _box_rule(g, x0, x1, y0, y1, rung, high, absolute, amp)
+            for j in range(1, _AREA):
+                limits[j] = max(absolute[j], absolute[0] / g.first)
+            limits[0] = absolute[0]
+            if _within(low, high, limits, rtol):
                 done = True
                 break
-        if done or depth >= _MAX_DEPTH or top + 4 > _STACK:
+        if done or depth >= _MAX_DEPTH or top + 4 > _STACK or rules >= _MAX_RULES:
+            if not done:
+                failures += 1
             for j in range(AMPLITUDES):
                 out[j] += high[j]
-            magnitude += size
+                magnitude[j] += absolute[j]
             continue
         xm, ym = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
         for qx0, qx1 in ((x0, xm), (xm, x1)):
@@ -314,12 +336,14 @@ def _full_cell(g, box, rtol, out, work):
                 boxes[top, 0], boxes[top, 1], boxes[top, 2], boxes[top, 3] = qx0, qx1, qy0, qy1
                 depths[top] = depth + 1
                 top += 1
-    return magnitude
+    return failures
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
 def pair_sums(g, cells, edges, rtol, F, H):
     """Σ_cells f F_j(t_e) into ``F[e]`` and Σ_cells f H_j(t_e) into ``H[e]`` (both (E, 13), zeroed by the caller).
+
+    Returns how many cell integrals were kept before meeting ``rtol`` (0 normally).
 
     Parameters
     ----------
@@ -333,11 +357,12 @@ def pair_sums(g, cells, edges, rtol, F, H):
     F, H : float64[E, 13]
         Outputs: m⁻² and m⁻³ (times the amplitudes' units).
     """
+    failures = 0
     count = cells.shape[0]
-    work = np.zeros((5, AMPLITUDES))
+    work = np.zeros((7, AMPLITUDES))
     full = np.zeros((count, AMPLITUDES))
     deepest = np.empty(count)
-    magnitude = np.empty(count)
+    magnitude = np.zeros((count, AMPLITUDES))
     area, edge = np.zeros(AMPLITUDES), np.zeros(AMPLITUDES)
     nearest = np.empty(count)
     done = np.zeros(count, dtype=np.bool_)
@@ -359,7 +384,7 @@ def pair_sums(g, cells, edges, rtol, F, H):
             if nearest[c] >= t:
                 continue
             if not done[c]:
-                magnitude[c] = _full_cell(g, cells[c], rtol, full[c], work)
+                failures += _full_cell(g, cells[c], rtol, full[c], magnitude[c], work)
                 done[c] = True
             if deepest[c] < t:
                 for j in range(AMPLITUDES):
@@ -368,7 +393,8 @@ def pair_sums(g, cells, edges, rtol, F, H):
                 for j in range(AMPLITUDES):
                     area[j] = 0.0
                     edge[j] = 0.0
-                _cut_cell(g, ellipse, cells[c], rtol, magnitude[c], area, edge, work)
+                failures += _cut_cell(g, ellipse, cells[c], rtol, magnitude[c], area, edge, work)
                 for j in range(AMPLITUDES):
                     F[e, j] += f * area[j]
                     H[e, j] += f * edge[j]
+    return failures

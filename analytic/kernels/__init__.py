@@ -21,11 +21,12 @@ Python side (:mod:`analytic.operator.system`, :mod:`analytic.operator.window`,
 - :mod:`.strips`: a cut pixel as slabs between isochrones;
 - :mod:`.routes`: one (pair, pixel)'s entries of A by each quadrature route;
 - :mod:`.assembly`: A's entries counted and filled, block by block, straight into CSR;
-- :mod:`.offsets`: a translation-invariant capture's A, or y = A f, from one run per pixel offset.
+- :mod:`.offsets`: a translation-invariant capture's A, or y = A f, from one run per pixel offset;
+- :mod:`.sensitivity`: the cell integrals of exact derivatives (amplitudes and their coarea at bin edges).
 """
 
 import lazy_loader
 
 __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submodules=[
     "cache", "formulas", "pieces", "special", "attenuation", "isochrone", "conics", "bins", "quadrature", "arcs", "taylor",
-    "moments", "strips", "routes", "assembly", "offsets"])
+    "moments", "strips", "routes", "assembly", "offsets", "sensitivity"])

@@ -6,7 +6,8 @@
 - :mod:`.window`: which path lengths reach the sensors, and the share of the light a window holds;
 - :mod:`.response`: continuous impulse responses g_k(t) from the contour (coarea) form;
 - :mod:`.conditioning`: A's singular values against the array's extent and the period;
-- :mod:`.derivatives`: derivatives of y with respect to the scene's parameters;
+- :mod:`.derivatives`: derivatives of y with respect to the scene's parameters (exact or by differences);
+- :mod:`.sensitivity`: the exact route's interior and bin-edge terms for a plane scene;
 - :mod:`.parameters`: the scene's numbers named by scene-file keys (docs/design.md section 9).
 
 The compiled kernels these drive are :mod:`analytic.kernels`. Names are

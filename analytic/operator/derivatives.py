@@ -1,12 +1,22 @@
 """Derivatives of the model's samples y with respect to the scene's parameters (docs/design.md section 9).
 
 :func:`jacobian` returns ∂y/∂θ for parameters named by scene-file keys
-(:mod:`.parameters`). Two parameters are exact by linearity: a reflectance
-scale (∂y/∂s = y) and the source's intensity (∂y/∂I = y / I). The others
-are, for now, Richardson-extrapolated central differences of the model
-assembled at tolerance :data:`TOLERANCE` (``route="differences"``); the
-exact route (interior and bin-edge terms) replaces them without changing
-the callers.
+(:mod:`.parameters`), by one of two routes (docs/derivatives.md):
+
+- ``"exact"`` (default): the interior and bin-edge terms
+  (:mod:`.sensitivity`) for a plane scene with the impulse illumination:
+  ``source.position.*``, ``sensors.positions.k.*``, ``sampling.start``,
+  the plane's rigid motions (``plane.translation.*``, ``plane.rotation.*``:
+  the points moving the other way, so the same columns combined) and
+  ``plane.size`` (by the model's scaling law, from the same columns and
+  the impulse response at the edges). Two parameters are exact by
+  linearity for every scene: a reflectance scale (∂y/∂s = y) and the
+  source's intensity (∂y/∂I = y / I). Every other key (every key of a
+  waveform other than the impulse, every relay-wall key but the two
+  linear ones) still takes the differences below.
+- ``"differences"``: Richardson-extrapolated central differences of the
+  model assembled at tolerance :data:`TOLERANCE`, for every key (the tests'
+  independent reference).
 """
 
 from __future__ import annotations
@@ -15,10 +25,18 @@ import numpy as np
 
 from ..errors import OptionError
 from ..scenes.scene_file import scene_of
-from .parameters import Parameter, parameter, parameters, value_of, with_values
+from .parameters import Parameter, parameter, parameters, rotation, value_of, with_values
+from .general_routes import progress_bar
 from .matrix_free import forward
+from .sensitivity import position_derivatives, supports
 
-__all__ = ["jacobian", "derivative", "TOLERANCE", "STEP"]
+__all__ = ["jacobian", "derivative", "exact_keys", "ROUTES", "TOLERANCE", "STEP"]
+
+#: The routes :func:`jacobian` takes.
+ROUTES = ("exact", "differences")
+#: The stems the exact route covers (for the scenes :func:`analytic.operator.sensitivity.supports`).
+_EXACT_STEMS = ("source.position", "sensors.positions", "sampling.start", "plane.translation", "plane.rotation",
+                "plane.size")
 
 #: The model's tolerance inside the differences: its error over the step bounds the derivative's.
 TOLERANCE = 1e-10
@@ -49,7 +67,54 @@ def _differences(scene, item: Parameter, step: float) -> np.ndarray:
     return (4.0 * central(step / 2.0) - central(step)) / 3.0
 
 
-def jacobian(scene, keys, *, step: float | None = None) -> np.ndarray:
+#: ``plane.size`` by the scaling law only while every point is this fraction of the scene's extent above the
+#: plane: below, Σ p·∂y/∂p cancels to a few digits (6e-5 of the column at 1e-5, docs/derivatives.md).
+_SIZE_HEIGHT = 1e-3
+
+
+def exact_keys(scene, items) -> list[bool]:
+    """Whether each :class:`Parameter` takes the exact route in this scene (the linear ones always do)."""
+    plane = supports(scene)
+    if plane:
+        heights = np.vstack([np.asarray(scene.source)[None, :], np.asarray(scene.sensors)])[:, 2]
+        high = heights.min() >= _SIZE_HEIGHT * _scale(scene, parameter(scene, "source.position.x"))
+    return [item.stem.endswith(".reflectance") or item.unit == "W/sr"
+            or (plane and item.stem in _EXACT_STEMS and (item.stem != "plane.size" or high)) for item in items]
+
+
+def _exact_column(scene, item: Parameter, parts) -> np.ndarray:
+    """One column from :func:`analytic.operator.sensitivity.position_derivatives`' ``parts``."""
+    y, source, sensor, start, response = parts
+    stem, index = item.stem, item.index
+    if stem == "source.position":
+        return source[..., index[0]]
+    if stem == "sensors.positions":
+        column = np.zeros_like(start)
+        column[index[0]] = sensor[index[0], :, index[1]]
+        return column
+    if stem == "sampling.start":
+        return start
+    points = np.vstack([np.asarray(scene.source, dtype=np.float64)[None, :], np.asarray(scene.sensors)])
+    if stem == "plane.size":
+        # scaling every length by λ (plane, points, bin edges) scales y by λ^-2 (a ~ λ^-4, dx ~ λ²), so
+        # L ∂y/∂L = -2 y - Σ_points p·∂y/∂p - Σ_edges t_e ∂y/∂t_e, with ∂y_n/∂t_n = -G(t_n), ∂y_n/∂t_{n+1} = G(t_{n+1})
+        edges = np.asarray(scene.sampling.edges, dtype=np.float64)
+        moved = (np.einsum("knj,j->kn", source, points[0]) + np.einsum("knj,kj->kn", sensor, points[1:])
+                 + edges[1:] * response[:, 1:] - edges[:-1] * response[:, :-1])
+        return -(2.0 * y + moved) / float(scene.size)
+    # a rigid motion of the plane is every point moving the other way: dp/dθ of each point, then the chain rule
+    if stem == "plane.translation":
+        velocity = np.zeros_like(points)
+        velocity[:, index[0]] = -1.0
+    else:       # points turned by -θ about the axis through the plane's centre: dp/dθ = -e × (p - c)
+        centre = np.array([0.5 * scene.size, 0.5 * scene.size, 0.0])
+        generator = rotation(index[0], 1.0) - rotation(index[0], -1.0)      # 2 sin(1) [e]x
+        velocity = -(points - centre) @ (generator / (2.0 * np.sin(1.0))).T
+    return (np.einsum("knj,j->kn", source, velocity[0])
+            + np.einsum("knj,kj->kn", sensor, velocity[1:]))
+
+
+def jacobian(scene, keys, *, step: float | None = None, route: str = "exact", progress: bool = False) -> np.ndarray:
     """∂y/∂θ for each named parameter θ.
 
     Parameters
@@ -62,6 +127,11 @@ def jacobian(scene, keys, *, step: float | None = None) -> np.ndarray:
     step : float, optional
         The differences' first step as a fraction of each parameter's scale
         (default :data:`STEP`).
+    route : {"exact", "differences"}
+        "exact": the exact route for the keys it covers (:func:`exact_keys`),
+        the differences for the rest; "differences": every key by differences.
+    progress : bool
+        Progress bars on stderr (the exact pass's sensors, then the keys).
 
     Returns
     -------
@@ -77,17 +147,28 @@ def jacobian(scene, keys, *, step: float | None = None) -> np.ndarray:
     fraction = STEP if step is None else float(step)
     if not np.isfinite(fraction) or fraction <= 0.0:
         raise OptionError(f"step: expected a positive fraction, got {step!r}")
-    y = None
+    if route not in ROUTES:
+        raise OptionError(f"route: expected one of {', '.join(ROUTES)}, got {route!r}")
+    exact = exact_keys(scene, items) if route == "exact" else [False] * len(items)
+    y = parts = None
     columns = []
-    for item in items:
-        if item.stem.endswith(".reflectance") or item.unit == "W/sr":
+    bar = progress_bar(progress and not all(exact), len(items), "jacobian", "key")
+    for item, closed in zip(items, exact):
+        if bar is not None:
+            bar.update(1)
+        if closed and (item.stem.endswith(".reflectance") or item.unit == "W/sr"):
             y = forward(scene) if y is None else y
             columns.append(y if item.unit == "1" else y / value_of(scene, item))
+        elif closed:
+            parts = position_derivatives(scene, progress=progress) if parts is None else parts
+            columns.append(_exact_column(scene, item, parts))
         else:
             columns.append(_differences(scene, item, fraction * _scale(scene, item)))
+    if bar is not None:
+        bar.close()
     return np.stack(columns, axis=-1)
 
 
-def derivative(scene, key: str, *, step: float | None = None) -> np.ndarray:
+def derivative(scene, key: str, *, step: float | None = None, route: str = "exact") -> np.ndarray:
     """∂y/∂θ for one parameter: ``jacobian(scene, [key])[..., 0]``, ``(K, N)``."""
-    return jacobian(scene, [key], step=step)[..., 0]
+    return jacobian(scene, [key], step=step, route=route)[..., 0]

@@ -41,7 +41,7 @@ OWN_PACKAGES = ("analytic", "transient", "validation", "interop")
 
 def build_parser() -> OneLineParser:
     """The ``diffuse-imaging`` parser with every command."""
-    from . import bench, calibrate, checks, crb, interop, model, plot, reconstruct, render, sweep
+    from . import bench, calibrate, checks, crb, interop, jacobian, model, plot, reconstruct, render, sweep
 
     parser = OneLineParser(
         prog="diffuse-imaging",
@@ -49,7 +49,7 @@ def build_parser() -> OneLineParser:
                     "rendering, cross-check, reconstruction. Lengths in metres, time as optical "
                     "path length in metres (c = 1).")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for module in (model, render, plot, checks, reconstruct, sweep, bench, interop, crb, calibrate):
+    for module in (model, jacobian, render, plot, checks, reconstruct, sweep, bench, interop, crb, calibrate):
         module.add_commands(commands)
     return parser
 

@@ -1,0 +1,162 @@
+"""Exact ∂y/∂θ of a plane scene for the source's and sensors' positions and the time zero (docs/derivatives.md).
+
+    y_k[n] = I ∫ f a_k κ_n(d) dx,   κ_n(τ) = S(t_{n+1} - τ) - S(t_n - τ)
+
+    ∂y_k[n]/∂θ = I ∫ f ∂a_k/∂θ κ_n(d) dx  +  I ∫ f a_k ∂d/∂θ κ_n'(d) dx
+                 (interior term)              (bin-edge term)
+
+For the impulse, κ_n is the indicator of [t_n, t_{n+1}) and κ_n'(τ) =
+δ(τ - t_n) - δ(τ - t_{n+1}), so with F_w(t) = ∫_{d < t} f w dx and its
+t-derivative H_w(t) = ∫ f w δ(d - t) dx (the coarea integral along the
+isochrone d = t):
+
+    interior_n = F_{∂a/∂θ}(t_{n+1}) - F_{∂a/∂θ}(t_n),
+    edge_n     = H_{a ∂d/∂θ}(t_n) - H_{a ∂d/∂θ}(t_{n+1}),
+    ∂y_n/∂t_0  = H_a(t_{n+1}) - H_a(t_n)          (every edge moving).
+
+Both are sums over the reflectance's pixels. For a pixel the isochrone
+d = t crosses, the region d < t is the inside of an ellipse (d is convex),
+integrated in x (outer) and y (inner): the inner y-interval is clipped by
+the ellipse's two roots at x, and the outer integrand is analytic between
+the ellipse's x-extremes (square-root ends, taken by the sin² map) and the
+x where it crosses the pixel's lower and upper edges, which cut the outer
+interval. H is the same outer integral of Σ_roots w / |∂d/∂y|. A pixel
+wholly inside the ellipse (its four corners are, d being convex) is one
+tensor Gauss rule. Pixels near a foot (where a has a peak as wide as the
+height) are split in quadrants down to a quarter of their distance to it. The
+rules (:mod:`analytic.kernels.sensitivity`) are judged against higher ones
+and bisected to the scene's tolerance; tests hold the result
+to Richardson differences of the model at tolerance 1e-10 and to a
+point-like plane's closed form.
+
+All position keys of all sensors come from one pass per sensor: the
+amplitudes of the six position derivatives and of a are evaluated on the
+same nodes.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+
+from ..attenuation import attenuation_code
+from ..kernels.formulas import LAMBERTIAN
+from ..kernels.sensitivity import AMPLITUDES, PairGeometry, pair_sums
+from .blocks import run_blocks
+from .general_routes import progress_bar
+from .system import QuadratureWarning
+
+__all__ = ["position_derivatives", "supports", "pair_geometry"]
+
+#: Cells are at most this fraction of their distance to a foot's peak wide.
+_CELL_OF_HEIGHT = 0.25
+#: The cell integrals' accuracy, as a fraction of the scene's tolerance.
+_SAFETY = 1.0
+
+
+def supports(scene) -> bool:
+    """Whether :func:`position_derivatives` applies: a plane scene with the impulse illumination."""
+    return scene.kind == "plane" and scene.illumination.waveform == "impulse"
+
+
+def _needs_split(box, feet) -> bool:
+    """Whether a cell is wider than :data:`_CELL_OF_HEIGHT` of its distance to a foot's peak (gap² + h²)^½."""
+    x0, x1, y0, y1 = box
+    gap_x = np.maximum(0.0, np.maximum(x0 - feet[:, 0], feet[:, 0] - x1))
+    gap_y = np.maximum(0.0, np.maximum(y0 - feet[:, 1], feet[:, 1] - y1))
+    reach = np.sqrt(gap_x ** 2 + gap_y ** 2 + feet[:, 2] ** 2)
+    return bool(np.any(max(x1 - x0, y1 - y0) > _CELL_OF_HEIGHT * reach))
+
+
+def _cells(scene):
+    """The pixels of non-zero reflectance as boxes (x0, x1, y0, y1, f), split in quadrants near the feet.
+
+    A's amplitude has a peak as wide as the height under each source and
+    sensor (complex singularities a height away): a cell is split until it
+    is narrower than a quarter of its distance to them, so the cells shrink
+    geometrically towards a foot (a few dozen per level) however low it is.
+    """
+    size, pixels = float(scene.size), int(scene.pixels)
+    delta = size / pixels
+    image = np.asarray(scene.reflectance, dtype=np.float64)
+    rows, columns = np.nonzero(image)
+    x0, y0 = columns * delta, size - (rows + 1) * delta
+    boxes = np.stack([x0, x0 + delta, y0, y0 + delta, image[rows, columns]], axis=1)
+    feet = np.vstack([np.asarray(scene.source, dtype=np.float64)[None, :], np.asarray(scene.sensors, dtype=np.float64)])
+    near = np.array([_needs_split(box[:4], feet) for box in boxes], dtype=bool) if len(boxes) else np.zeros(0, bool)
+    if not near.any():
+        return boxes
+    split = []
+    for box in boxes[near]:
+        stack = [box]
+        while stack:
+            bx0, bx1, by0, by1, value = stack.pop()
+            if not _needs_split((bx0, bx1, by0, by1), feet):
+                split.append((bx0, bx1, by0, by1, value))
+                continue
+            xm, ym = 0.5 * (bx0 + bx1), 0.5 * (by0 + by1)
+            stack.extend([(bx0, xm, by0, ym, value), (xm, bx1, by0, ym, value), (bx0, xm, ym, by1, value),
+                          (xm, bx1, ym, by1, value)])
+    return np.vstack([boxes[~near], np.array(split)])
+
+
+def pair_geometry(source, sensor, attenuation: str) -> PairGeometry:
+    """The compiled kernels' record of a source-sensor pair above the plane z = 0."""
+    source, sensor = np.asarray(source, dtype=np.float64), np.asarray(sensor, dtype=np.float64)
+    offset = sensor[:2] - source[:2]
+    distance = float(np.hypot(*offset))
+    ex, ey = (offset / distance) if distance > 0 else (1.0, 0.0)
+    return PairGeometry(*map(float, source), *map(float, sensor), attenuation_code(attenuation) == LAMBERTIAN,
+                        float(ex), float(ey), distance, float(np.hypot(distance, source[2] + sensor[2])),
+                        float(np.hypot(distance, source[2] - sensor[2])))
+
+
+def position_derivatives(scene, *, progress: bool = False):
+    """y and its exact derivatives for every position coordinate and the time zero, impulse illumination.
+
+    Parameters
+    ----------
+    scene : Scene
+        A plane scene (:func:`supports`).
+    progress : bool
+        A progress bar on stderr, one step per sensor.
+
+    Returns
+    -------
+    y : numpy.ndarray
+        ``(K, N)``, the model's samples from the same integrals (a check on them).
+    source : numpy.ndarray
+        ``(K, N, 3)``: ∂y/∂source.position.{x, y, z}, y's units per metre.
+    sensor : numpy.ndarray
+        ``(K, N, 3)``: ∂y_k/∂sensors.positions.k.{x, y, z} (row k depends on sensor k alone).
+    start : numpy.ndarray
+        ``(K, N)``: ∂y/∂sampling.start, y's units per metre of path length.
+    response : numpy.ndarray
+        ``(K, N + 1)``: the impulse response I ∫ f a δ(d - t) dx at each bin edge t, y's units per metre.
+    """
+    cells = _cells(scene)
+    edges = np.asarray(scene.sampling.edges, dtype=np.float64)
+    count, bins = scene.sensor_count, scene.sampling.count
+    sums = np.zeros((count, 2, bins + 1, AMPLITUDES))
+    rtol = _SAFETY * float(scene.tolerance)
+
+    def arguments(k):
+        return (pair_geometry(scene.source, scene.sensors[k], scene.attenuation), cells, edges, rtol,
+                sums[k, 0], sums[k, 1])
+
+    bar = progress_bar(progress, count, "exact derivatives", "sensor")
+    try:
+        failures = sum(run_blocks(pair_sums, arguments, count, bar=bar))
+    finally:
+        if bar is not None:
+            bar.close()
+    if failures:
+        warnings.warn(f"{failures} cell integrals of the exact derivatives stopped refining before reaching "
+                      f"tolerance {rtol:g}", QuadratureWarning, stacklevel=3)
+    F, H = sums[:, 0], sums[:, 1]
+    interior = np.diff(F, axis=1)                  # F(t_{n+1}) - F(t_n)
+    moving = H[:, :-1] - H[:, 1:]                  # H(t_n) - H(t_{n+1})
+    scale = float(scene.intensity)
+    return (scale * interior[..., 0], scale * (interior[..., 1:4] + moving[..., 7:10]),
+            scale * (interior[..., 4:7] + moving[..., 10:13]), -scale * moving[..., 0], scale * H[..., 0])

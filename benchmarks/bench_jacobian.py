@@ -1,0 +1,90 @@
+"""The exact Jacobian's cost against ``forward`` and against central differences, with the error of each.
+
+    python benchmarks/bench_jacobian.py [SCENE ...] [--repeats 5]
+
+For each plane scene (default: examples/paper.toml, K = 16, M = 50, and
+examples/image.toml, K = 16, M = 32) and its 3K + 4 parameters
+``source.position.{x,y,z}``, ``sensors.positions.{k}.{x,y,z}`` and
+``sampling.start``: the best of ``--repeats`` wall times of ``forward`` and
+of ``jacobian`` (each end to end from the scene object, kernels warm: one
+untimed call of each first; and the best CPU time of all threads, the work
+done whatever the load), and of one ``route="differences"`` Jacobian
+(the default step, 4 models at tolerance 1e-10 per key); then the error of
+each, per (sensor, key) column relative to its largest entry, against
+Richardson differences with a fine step (2e-5 of the scene's extent, good
+to ~2e-6: tests/analytic/test_jacobian_exact.py) on the source's three keys,
+sensor 5's three and ``sampling.start``. Prints a Markdown table and the
+machine's load (the machine may be shared).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import time
+
+import numpy as np
+
+from analytic.operator.derivatives import jacobian
+from analytic.operator.matrix_free import forward
+from analytic.scenes.scene_file import scene_of
+
+
+def _best(call, repeats):
+    """The best wall time and the best CPU time (all threads: the work, whatever the machine's load)."""
+    call()
+    walls, cpus = [], []
+    for _ in range(repeats):
+        started, cpu = time.perf_counter(), time.process_time()
+        call()
+        walls.append(time.perf_counter() - started)
+        cpus.append(time.process_time() - cpu)
+    return min(walls), min(cpus)
+
+
+def _column_error(computed, reference):
+    scale = np.abs(reference).max(axis=1)
+    gap = np.abs(computed - reference).max(axis=1)
+    return float(np.max(np.where(scale > 0, gap / np.where(scale > 0, scale, 1.0), gap)))
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("scenes", nargs="*", default=["examples/paper.toml", "examples/image.toml"])
+    parser.add_argument("--repeats", type=int, default=5)
+    args = parser.parse_args(argv)
+    print(f"machine: {platform.node()}, {os.cpu_count()} CPUs, load {os.getloadavg()[0]:.2f} "
+          f"(1 min average, at the start)")
+    print("| scene | K, M, N | keys | forward s (CPU s) | jacobian s (CPU s) | ratio (CPU) | differences s | "
+          "error exact | error differences |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for path in args.scenes:
+        scene = scene_of(path)
+        count = scene.sensor_count
+        keys = ([f"source.position.{a}" for a in "xyz"]
+                + [f"sensors.positions.{k}.{a}" for k in range(count) for a in "xyz"] + ["sampling.start"])
+        seconds_forward, cpu_forward = _best(lambda: forward(scene), args.repeats)
+        seconds_exact, cpu_exact = _best(lambda: jacobian(scene, keys), args.repeats)
+        exact = jacobian(scene, keys)
+        started = time.perf_counter()
+        differences = jacobian(scene, keys, route="differences")
+        seconds_differences = time.perf_counter() - started
+        sensor = min(5, count - 1)
+        chosen = [0, 1, 2, 3 + 3 * sensor, 4 + 3 * sensor, 5 + 3 * sensor, len(keys) - 1]
+        reference = jacobian(scene, [keys[i] for i in chosen], route="differences", step=2e-5)
+        rows = [slice(None)] * 3 + [slice(sensor, sensor + 1)] * 3 + [slice(None)]
+        error_exact = max(_column_error(exact[row, :, i], reference[row, :, j])
+                          for j, (i, row) in enumerate(zip(chosen, rows)))
+        error_differences = max(_column_error(differences[row, :, i], reference[row, :, j])
+                                for j, (i, row) in enumerate(zip(chosen, rows)))
+        print(f"| {path} | {count}, {scene.pixels}, {scene.sampling.count} | {len(keys)} | "
+              f"{seconds_forward:.4f} ({cpu_forward:.4f}) | {seconds_exact:.4f} ({cpu_exact:.4f}) | "
+              f"{seconds_exact / seconds_forward:.1f} ({cpu_exact / cpu_forward:.1f}) | "
+              f"{seconds_differences:.1f} | {error_exact:.1e} | {error_differences:.1e} |")
+    print(f"load at the end: {os.getloadavg()[0]:.2f}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -187,7 +187,12 @@ def _slice(g, ellipse, x, y0, y1, weight, rung, area, edge, amp):
 
 
 @njit(cache=True, error_model="numpy")
-def _piece_rule(g, ellipse, y0, y1, xa, span, v0, v1, rung, area, edge, amp):
+def _piece_rule(g, ellipse, rows, piece, part, rung, area, edge, amp):
+    """One rung's F and H of the slices x(v), v in ``part`` = (v0, v1), of the cut piece ``piece`` =
+    (x_a, span) (x = x_a + span sin²(πv/2)), each slice over ``rows`` = (y0, y1)."""
+    y0, y1 = rows
+    xa, span = piece
+    v0, v1 = part
     for j in range(AMPLITUDES):
         area[j] = 0.0
         edge[j] = 0.0
@@ -254,12 +259,12 @@ def _cut_cell(g, ellipse, box, rtol, magnitude, area, edge, work):
             top -= 1
             rules += 1
             v0, v1, depth = lows[top], highs[top], depths[top]
-            _piece_rule(g, ellipse, y0, y1, start, span, v0, v1, _CUT_START, high_area, high_edge, amp)
+            _piece_rule(g, ellipse, (y0, y1), (start, span), (v0, v1), _CUT_START, high_area, high_edge, amp)
             done = False
             for rung in range(_CUT_START + 1, _LADDER.size):
                 low_area[:] = high_area
                 low_edge[:] = high_edge
-                _piece_rule(g, ellipse, y0, y1, start, span, v0, v1, rung, high_area, high_edge, amp)
+                _piece_rule(g, ellipse, (y0, y1), (start, span), (v0, v1), rung, high_area, high_edge, amp)
                 if _within(low_area, high_area, limit_area, 1.0) and _within(low_edge, high_edge, limit_edge, 1.0):
                     done = True
                     break

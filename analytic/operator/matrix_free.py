@@ -100,7 +100,7 @@ def forward(scene, matrix=None, *, progress: bool = False, memory_limit: int | N
         if getattr(matrix, "shape", None) != shape:
             raise OptionError(f"matrix: shape {getattr(matrix, 'shape', type(matrix).__name__)} is not this scene's "
                               f"A, {shape} (sensors x bins, pixels); give the matrix system_matrix made for it, or none")
-        statistics.update(route="given", nonzeros=int(matrix.nnz))
+        statistics.update(route="given", nonzeros=int(matrix.nnz if hasattr(matrix, "nnz") else np.count_nonzero(matrix)))
         return np.asarray(matrix @ f, dtype=np.float64).reshape(scene.sensor_count, scene.sampling.count)
     tolerance = check_tolerance(scene.tolerance)
     waveform = make_waveform(scene.illumination, scene.sampling.bin_width_opl)

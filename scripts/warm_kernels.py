@@ -18,6 +18,7 @@ import numpy as np
 
 
 def model(waveforms: tuple[str, ...] = ("impulse", "square")) -> None:
+    from analytic.operator.derivatives import jacobian
     from analytic.operator.response import impulse_response
     from analytic.scenes.common import Illumination, Sampling, Scene
     from analytic.operator.system import METHODS, pair_entries, system_matrix
@@ -36,8 +37,23 @@ def model(waveforms: tuple[str, ...] = ("impulse", "square")) -> None:
                 for taylor in (True, False):
                     with contextlib.suppress(ValueError):     # a route that does not apply is compiled anyway
                         pair_entries(shaped, 1, 14, method=method, taylor=taylor)
+            relay_wall(waveform)
     if "impulse" in waveforms:
         impulse_response(scene, 0, [1.2, 1.3])
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            jacobian(scene, ["source.position.z", "sensors.positions.1.x", "sampling.start"])   # the exact route
+
+
+def relay_wall(waveform: str) -> None:
+    """A confocal capture of a hidden square parallel to the wall: the offset route's kernels (y without A)."""
+    from analytic.operator.matrix_free import forward
+    from analytic.scenes.common import Illumination, Sampling
+    from analytic.scenes.relay_wall import Scan, default_relay_wall_scene
+
+    forward(default_relay_wall_scene(pixels=8, scan=Scan(type="confocal", grid=(8, 8)),
+                                     sampling=Sampling(bin_width_opl=0.05, start_opl=1.9, count=60),
+                                     illumination=Illumination(waveform=waveform)))
 
 
 def renderer() -> None:

@@ -326,8 +326,8 @@ def _locked_save(self, key, data):
 
 
 def install() -> None:
-    """Put :class:`KernelCacheLocator` first among Numba's locators, lock its saves, and listen for long
-    compiles (once)."""
+    """Put :class:`KernelCacheLocator` first among Numba's locators, lock its saves, listen for long
+    compiles, and hold SIGINT while Numba's compiler lock is held (once)."""
     if KernelCacheLocator not in CacheImpl._locator_classes:
         CacheImpl._locator_classes.insert(0, KernelCacheLocator)
         IndexDataCacheFile.save = _locked_save

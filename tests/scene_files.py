@@ -102,3 +102,26 @@ def write_relay_wall_file(folder, scene, name=None):
     path = folder / (name or f"{scene.name}.toml")
     path.write_text("\n".join(lines) + "\n")
     return path
+
+
+def tilted_relay_wall(pixels: int, grid: int) -> str:
+    """A confocal capture of a tilted hidden square (no two pairs are translates: the relay wall's general
+    route), ``pixels`` x ``pixels`` over a ``grid`` x ``grid`` scan, 64 bins."""
+    return f"""\
+name = "tilted"
+[relay_wall]
+size = [2.0, 2.0]
+[hidden]
+pixels = {pixels}
+reflectance = 0.5
+center = [0.1, 0.2, 1.2]
+u = [0.7020660, 0.0, 0.3835404]
+v = [0.0, -0.8, 0.0]
+[scan]
+type = "confocal"
+grid = [{grid}, {grid}]
+[sampling]
+period = 0.05
+start = 1.9
+count = 64
+"""

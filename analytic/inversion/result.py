@@ -85,6 +85,10 @@ class Reconstruction:
         m = K N, rows of A (all of them, zero rows included).
     seconds : float
         Wall time of the call, s (A's assembly excluded).
+    stopping : str or None
+        lsqr method: when its solves stopped (by the noise when σ was
+        given: :mod:`analytic.inversion.iterative`) and the iterations they
+        took; None for svd.
     warnings : tuple of str
         Messages of the warnings issued.
     """
@@ -106,6 +110,7 @@ class Reconstruction:
     unknowns: int
     measurements: int
     seconds: float
+    stopping: str | None = None
     warnings: tuple = field(default_factory=tuple)
 
 

@@ -212,7 +212,9 @@ def choose_iterative(solver, rule, fixed, truth, sigma, grid, messages, probes):
             residuals = np.array([solver.squared_residual_of(s) for s in solutions])
             seminorms = np.array([solver.squared_seminorm_of(s) for s in solutions])
         return solver.to_image(solution), fixed, grid, np.full(grid.shape, np.nan), residuals, seminorms
-    solutions, traces, failed = solver.sweep(grid, probes=probes if rule == "gcv" else 0)
+    # the residual grows with λ: the discrepancy rule's sweep ends where it crosses m σ² (NaN below)
+    target = solver.measurements * float(sigma) ** 2 if rule == "discrepancy" else None
+    solutions, traces, failed = solver.sweep(grid, probes=probes if rule == "gcv" else 0, until=target)
     if failed:
         record_warning(messages, f"lsqr stopped at its iteration limit for {failed} of {len(grid)} λ",
                        RegularizationWarning)
@@ -220,7 +222,6 @@ def choose_iterative(solver, rule, fixed, truth, sigma, grid, messages, probes):
     seminorms = np.array([solver.squared_seminorm_of(s) for s in solutions])
     log_grid = np.log(grid)
     if rule == "discrepancy":
-        target = solver.measurements * float(sigma) ** 2
         criterion = residuals - target
         lower, upper = discrepancy_bracket(criterion, messages)
         if lower == upper:

@@ -27,6 +27,8 @@ Two solvers, neither forms AᵀA (which would square the condition number):
     conditioned than [A; √λ D] in pixel variables (the same minimiser).
     The λ sweep runs from large λ to small with warm starts. GCV's trace is
     then estimated by Hutchinson's method (fixed-seed Rademacher probes).
+    With σ known each solve stops by the noise, and the discrepancy rule's
+    sweep ends where the residual crosses m σ² (:mod:`.iterative`).
 
 ``method="auto"`` takes ``"svd"`` when its dense matrices fit
 ``memory_limit`` and ``"lsqr"`` otherwise.
@@ -42,9 +44,9 @@ import time
 
 import numpy as np
 import scipy.sparse
-import scipy.sparse.linalg
 
 from ..errors import ResourceError
+from .iterative import IterativeSolver
 from .information import (DEFAULT_MEMORY_LIMIT, count_above_noise, degrees_of_freedom, information_warning,
                           numerical_rank, singular_values_of, unseen_pixels_warning)
 from .laplacian import dct2, idct2, laplacian_eigenvalues
@@ -160,123 +162,10 @@ class SpectralSolver:
         return np.sum((self.coefficients(lam) - truth_coefficients) ** 2, axis=1)
 
 
-class IterativeSolver:
-    """Matrix-free LSQR on the stacked, DCT-scaled system; warm starts along the sweep."""
-
-    def __init__(self, problem: Problem, *, tolerance=1e-10, iteration_limit=None):
-        matrix, y, pixels = problem.matrix, problem.y, problem.pixels
-        self.matrix = matrix if scipy.sparse.issparse(matrix) else np.asarray(matrix, dtype=np.float64)
-        self.y = y
-        self.live = problem.live
-        self.pixels = pixels
-        self.measurements = y.size
-        self.unknowns = pixels * pixels
-        mu = laplacian_eigenvalues(pixels).ravel()
-        self.scale = np.ones_like(mu)
-        self.scale[1:] = 1.0 / mu[1:]
-        self.penalised = np.ones_like(mu)
-        self.penalised[0] = 0.0
-        self.tolerance = tolerance
-        self.iteration_limit = iteration_limit or min(20 * self.unknowns, 10_000)
-        self.rank = None
-        self._sweeps = {}   # (grid, probes) -> sweep result: one sweep serves every rule
-        if not np.any(self.forward_operator(np.eye(1, self.unknowns, 0).ravel())):
-            raise ValueError("matrix: A · (constant image) = 0, the sensors see no light from the "
-                             "plane, so the Laplacian cannot fix the image's mean")
-        operator = self._standard_operator()
-        try:
-            self.largest = float(scipy.sparse.linalg.svds(operator, k=1, return_singular_vectors=False,
-                                                          rng=np.random.default_rng(0))[0])
-        except (ValueError, scipy.sparse.linalg.ArpackError):
-            # ARPACK refuses or fails on tiny operators; a dense fallback is cheap there
-            self.largest = float(np.linalg.norm(operator @ np.eye(self.unknowns), 2))
-        self.smallest = 1e-7 * self.largest
-
-    def to_image(self, v):
-        return idct2((self.scale * v).reshape(self.pixels, self.pixels))
-
-    def forward_operator(self, v):
-        return self.matrix @ self.to_image(v).ravel()
-
-    def adjoint_operator(self, r):
-        return self.scale * dct2((self.matrix.T @ r).reshape(self.pixels, self.pixels)).ravel()
-
-    def _standard_operator(self):
-        # the penalised part only, for the largest singular value
-        n = self.unknowns
-        return scipy.sparse.linalg.LinearOperator(
-            (self.measurements, n), dtype=np.float64,
-            matvec=lambda v: self.forward_operator(np.ravel(v) * self.penalised),
-            rmatvec=lambda r: self.adjoint_operator(np.ravel(r)) * self.penalised)
-
-    def solve(self, lam, rhs=None, start=None):
-        m, n = self.measurements, self.unknowns
-        root = math.sqrt(lam)
-        rhs = self.y if rhs is None else rhs
-        stacked = scipy.sparse.linalg.LinearOperator(
-            (m + n, n), dtype=np.float64,
-            matvec=lambda v: np.concatenate([self.forward_operator(np.ravel(v)),
-                                             root * self.penalised * np.ravel(v)]),
-            rmatvec=lambda r: (self.adjoint_operator(np.ravel(r)[:m])
-                               + root * self.penalised * np.ravel(r)[m:]))
-        result = scipy.sparse.linalg.lsqr(stacked, np.concatenate([rhs, np.zeros(n)]),
-                                          atol=self.tolerance, btol=self.tolerance, conlim=1e14,
-                                          iter_lim=self.iteration_limit, x0=start)
-        return result[0], result[1]
-
-    def sweep(self, lambdas, probes=0):
-        """Solutions for every λ (descending order solved, warm-started), remembered.
-
-        A sweep made with GCV's trace probes also serves requests without them.
-        """
-        key = np.asarray(lambdas, dtype=np.float64).tobytes()
-        for (grid, made_with), result in self._sweeps.items():
-            if grid == key and made_with >= probes:
-                return result
-        result = self._sweep(lambdas, probes)
-        self._sweeps[(key, probes)] = result
-        return result
-
-    def _sweep(self, lambdas, probes):
-        order = np.argsort(lambdas)[::-1]
-        solutions = np.empty((len(lambdas), self.unknowns))
-        traces = np.full(len(lambdas), np.nan)
-        generator = np.random.default_rng(0)
-        # Rademacher probes on the live rows only: GCV's trace counts those (see .rules)
-        vectors = (generator.choice([-1.0, 1.0], size=(probes, self.measurements)) * self.live
-                   if probes else None)
-        probe_starts = [None] * probes
-        start = None
-        failed = 0
-        for index in order:
-            v, stop = self.solve(lambdas[index], start=start)
-            failed += stop == 7
-            solutions[index] = start = v
-            if probes:
-                quadratic = 0.0
-                for p in range(probes):
-                    x, _ = self.solve(lambdas[index], rhs=vectors[p], start=probe_starts[p])
-                    probe_starts[p] = x
-                    quadratic += vectors[p] @ self.forward_operator(x)
-                traces[index] = int(self.live.sum()) - quadratic / probes
-        return solutions, traces, failed
-
-    def squared_residual_of(self, v, live_only=False):
-        """||A f - y||² of the solution v, over every row or over the live rows."""
-        r = self.forward_operator(v) - self.y
-        if live_only:
-            r = r[self.live]
-        return float(r @ r)
-
-    def squared_seminorm_of(self, v):
-        """||D f||² of the solution v."""
-        return float(np.sum((self.penalised * v) ** 2))  # z = μ c, so ||D f|| = ||z||
-
-
 def reconstruct(matrix, data, pixels: int, *, rule: str | float = "gcv", truth=None,
                 sigma: float | None = None, lambdas=None, method: str | None = None,
                 memory_limit: int | None = None, gcv_probes: int | None = None,
-                regularizer: str = "laplacian") -> Reconstruction:
+                regularizer: str = "laplacian", progress: bool = False) -> Reconstruction:
     """Regularised reconstruction of the image from the samples.
 
     Parameters
@@ -322,6 +211,9 @@ def reconstruct(matrix, data, pixels: int, *, rule: str | float = "gcv", truth=N
         ``"tv"`` hands over to :func:`.tv.reconstruct_tv` (rules ``oracle``,
         ``discrepancy`` or a number); giving it ``method``,
         ``memory_limit`` or ``gcv_probes`` is an error, not ignored.
+    progress : bool
+        Laplacian, lsqr method: a progress bar on stderr over the λ solved
+        (the command line shows it on a terminal).
 
     Returns
     -------
@@ -365,13 +257,13 @@ def reconstruct(matrix, data, pixels: int, *, rule: str | float = "gcv", truth=N
         raise ValueError(f"regularizer: must be 'laplacian' or 'tv', got {regularizer!r}")
     return reconstruct_rules(matrix, data, pixels, rules=(rule,), truth=truth, sigma=sigma,
                              lambdas=lambdas, method=method, memory_limit=memory_limit,
-                             gcv_probes=gcv_probes)[0]
+                             gcv_probes=gcv_probes, progress=progress)[0]
 
 
 def reconstruct_rules(matrix, data, pixels: int, *, rules=RULES, truth=None,
                       sigma: float | None = None, lambdas=None, method: str | None = None,
                       memory_limit: int | None = None,
-                      gcv_probes: int | None = None) -> list[Reconstruction]:
+                      gcv_probes: int | None = None, progress: bool = False) -> list[Reconstruction]:
     """:func:`reconstruct` (Laplacian) for several λ rules sharing one factorisation.
 
     Parameters are those of :func:`reconstruct`, with ``rules`` a sequence of
@@ -416,7 +308,8 @@ def reconstruct_rules(matrix, data, pixels: int, *, rules=RULES, truth=None,
     elif method == "svd" and svd_bytes > memory_limit:
         raise ResourceError(f"method svd: its dense matrices need {svd_bytes / 2**30:.2f} GiB, more than "
                             f"memory_limit ({memory_limit / 2**30:.2f} GiB); use method lsqr or raise the limit")
-    solver = SpectralSolver(problem) if method == "svd" else IterativeSolver(problem)
+    solver = (SpectralSolver(problem) if method == "svd" else
+              IterativeSolver(problem, sigma=scaled_sigma, progress=progress))
     live_rows = int(problem.live.sum())
     # what the data fix at their noise needs A's own singular values (the solver's are of A C diag(1/μ))
     values = None if sigma is None else singular_values_of(problem, memory_limit)
@@ -470,7 +363,7 @@ def reconstruct_rules(matrix, data, pixels: int, *, rules=RULES, truth=None,
                 idct2(-laplacian_eigenvalues(pixels) * dct2(image)))),
             method=method, rank=rank, effective_rank=effective, sigma=None if sigma is None else float(sigma),
             degrees_of_freedom=degrees_of_freedom(solver.filters(lam)) if method == "svd" else None,
-            unknowns=unknowns, measurements=rows,
+            unknowns=unknowns, measurements=rows, stopping=None if method == "svd" else solver.stopping(),
             seconds=shared + time.perf_counter() - begun, warnings=tuple(messages)))
     return results
 

@@ -25,6 +25,14 @@ rules make that cache serve users (docs/benchmarks.md, "Cold start"):
   point for given arguments under its lock file in the cache folder, so that
   processes starting together (Dask workers, pytest-xdist workers) compile
   it once and the others load it.
+- **Interrupted only between compiles.** While Numba holds its compiler lock
+  (a compile, or a load from the cache), LLVM calls back into Python
+  (llvmlite's object-cache hooks, through ctypes): a KeyboardInterrupt
+  raised there is dropped by ctypes and LLVM goes on with what the callback
+  never produced, a crash (exit -11) instead of Ctrl-C's exit. :func:`install`
+  therefore holds SIGINT in the main thread while the lock is held and
+  delivers it as soon as the lock is released (a load takes milliseconds, a
+  compile seconds, which the compile notice announces).
 
 Each stamp gets its own folder under that root (:func:`cache_folder`): the
 caches of other sources (an older release, another checkout) are never
@@ -40,6 +48,7 @@ import contextlib
 import functools
 import hashlib
 import os
+import signal
 import sys
 import tempfile
 import threading
@@ -208,6 +217,47 @@ class _Listener(event.Listener):
 _NOTICE = _CompileNotice()
 
 
+class _HeldInterrupts(event.Listener):
+    """Holds SIGINT in the main thread while Numba's compiler lock is held, and delivers it on release.
+
+    The lock is re-entrant (a compile loads or compiles the kernels it calls): only the outermost
+    acquisition swaps the handler. A handler that is not Python's (ignored, or the default action) is
+    left alone: it never raises inside a callback.
+    """
+
+    def __init__(self):
+        self.depth = 0
+        self.saved = None
+        self.caught = False
+
+    def _hold(self, number, frame):
+        self.caught = True
+
+    def on_start(self, record):
+        if threading.current_thread() is not threading.main_thread():
+            return
+        self.depth += 1
+        if self.depth == 1:
+            handler = signal.getsignal(signal.SIGINT)
+            if callable(handler):
+                self.saved, self.caught = handler, False
+                signal.signal(signal.SIGINT, self._hold)
+
+    def on_end(self, record):
+        if threading.current_thread() is not threading.main_thread() or self.depth == 0:
+            return
+        self.depth -= 1
+        if self.depth == 0 and self.saved is not None:
+            saved, self.saved = self.saved, None
+            signal.signal(signal.SIGINT, saved)
+            if self.caught:
+                # delivered as the terminal would have: the handler runs at Python's next instruction
+                signal.raise_signal(signal.SIGINT)
+
+
+_HELD = _HeldInterrupts()
+
+
 @contextlib.contextmanager
 def _compile_lock(name: str):
     """An exclusive lock file in the cache folder while kernel ``name`` is compiled or loaded (POSIX; else none).
@@ -276,12 +326,13 @@ def _locked_save(self, key, data):
 
 
 def install() -> None:
-    """Put :class:`KernelCacheLocator` first among Numba's locators, lock its saves, and listen for long
-    compiles (once)."""
+    """Put :class:`KernelCacheLocator` first among Numba's locators, lock its saves, listen for long
+    compiles, and hold SIGINT while Numba's compiler lock is held (once)."""
     if KernelCacheLocator not in CacheImpl._locator_classes:
         CacheImpl._locator_classes.insert(0, KernelCacheLocator)
         IndexDataCacheFile.save = _locked_save
         event.register("numba:compile", _Listener(_NOTICE))
+        event.register("numba:compiler_lock", _HELD)
 
 
 install()

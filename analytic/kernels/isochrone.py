@@ -44,13 +44,16 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
+import numpy as np
+
 from .cache import njit
 
 from .attenuation import attenuation_at
 from .formulas import LAMBERTIAN, PAPER
 
 __all__ = ["Frame", "Isochrone", "PixelBox", "make_frame", "pair_frame", "ellipse", "point_on_ellipse", "jacobian", "path_length_at",
-           "first_arrival_point", "segment_minimum", "rectangle_range", "range_bound", "rectangle_crossings",
+           "first_arrival_point", "segment_minimum", "rectangle_range", "table_ranges", "range_bound",
+           "rectangle_crossings",
            "LAMBERTIAN", "PAPER", "attenuation_at"]
 
 class PixelBox(NamedTuple):
@@ -280,6 +283,34 @@ def rectangle_range(frame, box):
     low = min(low, segment_minimum(frame, x0, y1, x1, y1)[0])
     low = min(low, segment_minimum(frame, x0, y0, x0, y1)[0])
     return low, top
+
+
+
+@njit(cache=True, error_model="numpy")
+def table_ranges(table, boxes, mode):
+    """``(P, B, 2)`` [min, max] of d over each box for each pair of a pair table, metres (offsets not added).
+
+    The loop over :func:`pair_frame` and :func:`rectangle_range` compiled whole: a :class:`Frame` boxed for
+    Python calls Python's NamedTuple constructor from compiled code, and a KeyboardInterrupt raised there
+    crashed the process.
+
+    Parameters
+    ----------
+    table : numpy.ndarray
+        ``(P,)`` records of :data:`analytic.geometry.PAIR_DTYPE`.
+    boxes : numpy.ndarray
+        ``(B, 4)`` boxes, rows (x0, x1, y0, y1) as :class:`PixelBox`, metres.
+    mode : int
+        Attenuation code, :data:`LAMBERTIAN` or :data:`PAPER`.
+    """
+    out = np.empty((table.shape[0], boxes.shape[0], 2))
+    for p in range(table.shape[0]):
+        frame = pair_frame(table[p], mode)
+        for b in range(boxes.shape[0]):
+            low, high = rectangle_range(frame, PixelBox(boxes[b, 0], boxes[b, 1], boxes[b, 2], boxes[b, 3]))
+            out[p, b, 0] = low
+            out[p, b, 1] = high
+    return out
 
 
 #: Relative slack of :func:`range_bound` over the rounding of d (a few dozen roundings of a path length).

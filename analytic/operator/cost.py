@@ -146,22 +146,18 @@ def _ranges(rectangle, pairs, pixels: int) -> np.ndarray:
     """``(S, 2)`` [d_lo, d_hi] + the pair's offset of a sample of (pixel, pair), metres."""
     from ..geometry import pair_table
     from ..kernels.formulas import LAMBERTIAN
-    from ..kernels.isochrone import PixelBox, pair_frame, rectangle_range
+    from ..kernels.isochrone import table_ranges
 
     count = len(pairs)
     chosen = np.unique(np.linspace(0, count - 1, min(count, _SAMPLED_PAIRS)).round().astype(int))
     side = np.unique(np.linspace(0, pixels - 1, min(pixels, _SAMPLED_SIDE)).round().astype(int))
     dx, dy = rectangle.width / pixels, rectangle.height / pixels
-    ranges = []
-    for index in chosen:
-        pair = pair_table(rectangle, pairs.block(int(index), int(index) + 1))[0]
-        frame = pair_frame(pair, LAMBERTIAN)
-        for column in side:
-            for row in side:
-                box = PixelBox(column * dx, (column + 1) * dx, row * dy, (row + 1) * dy)
-                low, high = rectangle_range(frame, box)
-                ranges.append((float(low) + pair["offset"], float(high) + pair["offset"]))
-    return np.array(ranges)
+    columns, rows = np.repeat(side, side.size), np.tile(side, side.size)       # column-major, as before
+    boxes = np.stack([columns * dx, (columns + 1) * dx, rows * dy, (rows + 1) * dy], axis=1)
+    table = np.concatenate([pair_table(rectangle, pairs.block(int(index), int(index) + 1)) for index in chosen])
+    # compiled whole: no Frame boxed for Python (analytic.kernels.isochrone.table_ranges)
+    ranges = table_ranges(table, boxes, LAMBERTIAN) + table["offset"][:, None, None]
+    return ranges.reshape(-1, 2)
 
 
 def _bin_of(length: float, sampling) -> int:

@@ -28,7 +28,7 @@ import numpy as np
 
 from ..geometry import PointPairs, Rectangle, pair_table
 from ..kernels.formulas import LAMBERTIAN
-from ..kernels.isochrone import PixelBox, pair_frame, rectangle_range
+from ..kernels.isochrone import table_ranges
 from ..scenes.common import Sampling, Scene, SceneError
 
 __all__ = ["response_range", "pairs_range", "covering_sampling", "auto_sampling", "window_share", "empty_bins",
@@ -53,12 +53,11 @@ def response_range(scene: Scene) -> tuple[float, float]:
 
 def pairs_range(rectangle: Rectangle, pairs: PointPairs) -> tuple[float, float]:
     """(first, last) path length over the rectangle of any pair, its added length included, metres (exact)."""
-    whole = PixelBox(0.0, rectangle.width, 0.0, rectangle.height)
-    low, high = math.inf, -math.inf
-    for pair in pair_table(rectangle, pairs):
-        first, last = rectangle_range(pair_frame(pair, LAMBERTIAN), whole)
-        low, high = min(low, float(first) + pair["offset"]), max(high, float(last) + pair["offset"])
-    return low, high
+    table = pair_table(rectangle, pairs)
+    if table.size == 0:
+        return math.inf, -math.inf
+    ranges = table_ranges(table, np.array([[0.0, rectangle.width, 0.0, rectangle.height]]), LAMBERTIAN)[:, 0]
+    return float(np.min(ranges[:, 0] + table["offset"])), float(np.max(ranges[:, 1] + table["offset"]))
 
 
 def covering_sampling(scene: Scene, bin_width_opl: float, *, margin: int = 0) -> Sampling:

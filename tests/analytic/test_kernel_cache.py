@@ -11,6 +11,7 @@ from numba.core.caching import CacheImpl
 
 from analytic.kernels import cache
 from analytic.kernels.cache import KernelCacheLocator, sources_stamp
+from scene_files import tilted_relay_wall
 
 KERNELS = Path(cache.__file__).resolve().parent
 PACKAGE = KERNELS.parent
@@ -18,7 +19,7 @@ ROOT = PACKAGE.parent
 #: What a kernel module may import besides its siblings: compiled code and constants only.
 ALLOWED = {"__future__", "math", "typing", "numpy", "numba", "numba.extending", "numba.core",
            "numba.core.caching", "numba.core.config", "contextlib", "functools", "hashlib", "os", "sys", "tempfile",
-           "threading", "pathlib", "fcntl", "lazy_loader"}
+           "threading", "pathlib", "fcntl", "lazy_loader", "signal"}
 
 
 def test_the_kernels_import_only_each_other_numpy_numba_and_the_standard_library():
@@ -166,3 +167,60 @@ def test_a_save_into_the_kernels_cache_holds_the_index_lock(monkeypatch, tmp_pat
     elsewhere = SimpleNamespace(_cache_path=str(tmp_path), _index_path=str(tmp_path / "other.nbi"))
     IndexDataCacheFile.save(elsewhere, "key", b"data")             # another package's cache: no lock of ours
     assert held == [True, False]
+
+
+#: A child that models a tilted hidden square (the relay wall's general route: many kernels loaded on first
+#: use) while another thread sends it SIGINT every few milliseconds; each KeyboardInterrupt is caught and the model
+#: started again, until one whole run ends (the interrupts stop after 2 s). Ctrl-C while Numba loads or
+#: compiles a kernel used to reach Python inside LLVM's callback into llvmlite, which dropped the exception
+#: and crashed (exit -11).
+_BARRAGE = """\
+import os, random, signal, sys, threading, time
+from analytic import forward
+from analytic.scenes.scene_file import load_scene
+
+scene = load_scene(sys.argv[1])
+done = threading.Event()
+inside = False
+interrupts = 0
+
+def interrupt(number, frame):
+    # Ctrl-C's KeyboardInterrupt, raised once per attempt, only inside its try (not in this loop's own code)
+    global inside, interrupts
+    if inside:
+        inside = False
+        interrupts += 1
+        raise KeyboardInterrupt
+
+def send():
+    # for 2 s, while the first kernels load, at random moments (then the model runs through)
+    pause = random.Random(int(sys.argv[2])).uniform
+    ends = time.monotonic() + 2.0
+    while time.monotonic() < ends and not done.wait(pause(0.0002, 0.005)):
+        os.kill(os.getpid(), signal.SIGINT)
+
+signal.signal(signal.SIGINT, interrupt)
+threading.Thread(target=send, daemon=True).start()
+while True:
+    try:
+        inside = True
+        y = forward(scene)
+        inside = False
+        break
+    except KeyboardInterrupt:
+        pass
+done.set()
+print(interrupts, float(abs(y).sum()) > 0)
+"""
+
+
+
+def test_ctrl_c_while_the_kernels_load_waits_for_the_load_and_never_crashes(tmp_path):
+    scene = tmp_path / "tilted.toml"
+    scene.write_text(tilted_relay_wall(4, 4))
+    for seed in range(1):       # a fresh process: every kernel is loaded anew under the barrage
+        child = subprocess.run([sys.executable, "-c", _BARRAGE, str(scene), str(seed)], capture_output=True, text=True,
+                               timeout=300)
+        assert child.returncode == 0, child.stderr[-2000:]
+        interrupts, finite = child.stdout.split()
+        assert int(interrupts) > 0 and finite == "True"      # interrupted, and then it ran to its end

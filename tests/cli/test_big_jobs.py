@@ -17,6 +17,8 @@ import time
 
 import pytest
 
+from scene_files import tilted_relay_wall
+
 _SCENE = """\
 name = "big"
 [relay_wall]
@@ -81,3 +83,29 @@ def test_a_long_model_is_announced_and_ends_at_ctrl_c(tmp_path, quiet, route):
         assert seconds > 3 * _STOP_SECONDS          # it would still be running: the signal ended it
         # A, or y and one block of A's rows within a quarter of the model's limit
         assert 0.1 < float(match[3]) < 2 if route == "matrix" else 0.01 < float(match[3]) < 0.25
+
+
+@pytest.mark.slow
+def test_ctrl_c_of_a_tilted_square_ends_with_one_line_every_time(tmp_path):
+    # a tilted square (the general route): Ctrl-C in the first second after the estimate's line, while its kernels
+    # load and its window's ranges are found, crashed it now and then (exit -11, nothing said): the kernels'
+    # loads now hold SIGINT (analytic.kernels.cache), and no Frame is boxed for Python (isochrone.table_ranges)
+    scene = tmp_path / "tilted.toml"
+    scene.write_text(tilted_relay_wall(16, 256))
+    for delay in (0.1, 0.25, 0.4, 0.55, 0.7, 0.85, 1.0, 1.5):    # seconds after the estimate's line
+        child = subprocess.Popen([sys.executable, "-m", "validation.cli", "forward", str(scene), "--out",
+                                  str(tmp_path / "out")], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                 preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+        try:
+            ready, _, _ = select.select([child.stderr], [], [], 60)
+            announced = child.stderr.readline() if ready else "(nothing on stderr within a minute)"
+            time.sleep(delay)
+            child.send_signal(signal.SIGINT)
+            _, errors = child.communicate(timeout=_STOP_SECONDS)
+        finally:
+            child.kill()
+            child.wait()
+        assert announced.startswith("diffuse-imaging: forward: about"), announced
+        assert child.returncode == 130, f"{delay} s: {child.returncode}\n{errors[-3000:]}"
+        assert errors.strip().splitlines() == ["diffuse-imaging: interrupted"], f"{delay} s"
+        assert not (tmp_path / "out").exists()

@@ -101,7 +101,7 @@ def command_reconstruct(args) -> int:
                                          "the hidden rectangle), nothing to reconstruct; widen [sampling] "
                                          "start/count")
         truth = np.asarray(scene.reflectance, dtype=np.float64)
-        options = {} if args.regularizer == "tv" else {"method": args.method}
+        options = {} if args.regularizer == "tv" else {"method": args.method, "progress": show_progress(args)}
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             result = reconstruct(matrix, data, scene.pixels, rule=rule, truth=truth, sigma=known_sigma,
@@ -118,7 +118,7 @@ def command_reconstruct(args) -> int:
             "residual_norm": result.residual_norm, "seminorm": result.seminorm, "rank": result.rank,
             "effective_rank": result.effective_rank, "degrees_of_freedom": result.degrees_of_freedom,
             "unknowns": result.unknowns, "measurements": result.measurements, "sigma": known_sigma,
-            "seconds": result.seconds, "assembly_seconds": assembly,
+            "seconds": result.seconds, "assembly_seconds": assembly, "stopping": result.stopping,
             "regularizer": ("squared 5-point Laplacian, reflecting (Neumann) boundaries, unit spacing"
                             if args.regularizer == "laplacian" else
                             "isotropic total variation (½||Af − y||² + λ TV), Neumann edges, PDHG"),
@@ -249,6 +249,8 @@ def _result_table(result, metrics: dict, sigma: float | None, regularizer: str, 
                                         "lets the data set (svd method)"),
         ("m", f"{result.measurements}", "measurements: sensors (or pairs) x bins, the rows of A"),
     ]
+    if result.stopping is not None:
+        rows.append(("solver", result.stopping, "when the iterative solves stopped (docs/model.md, Reconstruction)"))
     return (["| quantity | value |", "|---|---|"] + [f"| {name} | {value} |" for name, value, _ in rows]
             + [""] + [f"- **{name}**: {meaning}." for name, _, meaning in rows])
 

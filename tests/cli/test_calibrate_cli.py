@@ -90,7 +90,7 @@ def test_a_bad_key_is_one_line_before_any_file(tmp_path, capsys, free, words):
     status = main(["calibrate", str(scene), "--data", str(data), "--stderr", str(stderr), "--free", *free,
                    "--out", str(out)])
     lines = capsys.readouterr().err.strip().splitlines()
-    assert status == 2 and len(lines) == 1 and lines[0].startswith("diffuse-imaging: error:"), lines
+    assert status == 2 and len(lines) == 1 and lines[0].startswith("diffuse-imaging: error: --free: "), lines
     assert words in lines[0]
     assert not out.exists()
 

@@ -62,7 +62,7 @@ def test_counts_with_dead_time_are_bounded(tmp_path):
 
 @pytest.mark.parametrize("extra, args, word", [
     ("", [], "noise"),                                           # exact data have no bound
-    ("[noise]\nsigma = 0.1\n", ["--free", "source.bogus"], "source.bogus"),
+    ("[noise]\nsigma = 0.1\n", ["--free", "source.bogus"], "--free: 'source.bogus'"),
     ("[noise]\nsigma = 0.1\n", ["--measurement", "detector"], "detector"),
 ])
 def test_bad_input_exits_2_with_one_line_and_no_files(tmp_path, capsys, extra, args, word):

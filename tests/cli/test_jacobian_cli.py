@@ -38,5 +38,5 @@ def test_a_bad_key_exits_2_with_one_line_and_no_files(tmp_path, capsys, keys, wo
     out = tmp_path / "out"
     assert main(["jacobian", str(path), "--parameters", *keys, "--out", str(out)]) == 2
     (line,) = capsys.readouterr().err.strip().splitlines()
-    assert line.startswith("diffuse-imaging: error:") and words in line
+    assert line.startswith("diffuse-imaging: error: --parameters: ") and words in line
     assert not out.exists()

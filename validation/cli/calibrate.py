@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .common import UsageError, add_quiet, load_scene_argument, refuse_unmodellable, release_warnings
+from .common import (UsageError, add_quiet, load_scene_argument, parameter_option, refuse_unmodellable,
+                     release_warnings)
 
 __all__ = ["add_commands", "command_calibrate"]
 
@@ -25,6 +26,7 @@ def command_calibrate(args) -> int:
         raise UsageError("--stderr: give it with one --data file; several files are replicas whose spread is "
                          "their error")
     refuse_unmodellable(scene)
+    parameter_option(scene, args.free, "--free")       # a bad key names the option, before any reading
     data = args.data[0] if len(args.data) == 1 else list(args.data)
     if args.counts and (args.stderr is not None or len(args.data) > 1):
         raise UsageError("--counts: give one --data histogram, without --stderr (counts carry their own error)")

@@ -94,6 +94,20 @@ def positive_float_type(option: str):
     return parse
 
 
+def parameter_option(scene, keys, option: str) -> list:
+    """``keys`` read as the scene's parameters (:func:`analytic.operator.parameters.parameters`) for ``option``.
+
+    A bad key ends the command with the option's name in its one line (``--free: 'x' is no parameter ...``)
+    instead of the Python API's ``parameter:``.
+    """
+    from analytic.operator.parameters import parameters
+
+    try:
+        return parameters(scene, [keys] if isinstance(keys, str) else list(keys))
+    except OptionError as error:
+        raise UsageError(f"{option}: {re.sub(r'^parameters?: ', '', str(error))}") from None
+
+
 def release_warnings() -> None:
     """A command has accepted its inputs: print the warnings held while it checked them (program.main holds
     them, so that a refused command's stderr is its one error line)."""

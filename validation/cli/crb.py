@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import sys
 
-from .common import add_quiet, announce_model, load_scene_argument, refuse_unmodellable, release_warnings
+from .common import (add_quiet, announce_model, load_scene_argument, parameter_option, refuse_unmodellable,
+                     release_warnings)
 
 __all__ = ["add_commands", "command_crb"]
 
@@ -16,7 +17,6 @@ def command_crb(args) -> int:
     from analytic.files import output_folder, save_json, save_npy, staged_writes
     from analytic.inversion.bounds import crb
     from analytic.measurement.fisher import measurement_of
-    from analytic.operator.parameters import parameters
     from analytic.operator.system import system_matrix
     from validation.plots import save_figure
     from validation.plots.bounds import bound_image_figure, whitened_spectrum_figure
@@ -25,7 +25,7 @@ def command_crb(args) -> int:
     cost = refuse_unmodellable(scene)
     measurement_of(scene, args.measurement)             # the inputs, checked before any file
     if args.free:
-        parameters(scene, args.free)
+        parameter_option(scene, args.free, "--free")
     release_warnings()
     with output_folder(args.out) as out:
         announce_model(args, cost, "crb")

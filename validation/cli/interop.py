@@ -8,7 +8,7 @@ import math
 import os
 from pathlib import Path
 
-from .common import (UsageError, add_quiet, announce_window, load_scene_argument, positive_float_type,
+from .common import (UsageError, add_quiet, announce_window, load_scene_argument, parameter_option, positive_float_type,
                      refuse_unmodellable)
 from .counts import add_counts_options, check_counts_options, command_check_counts
 
@@ -70,7 +70,6 @@ def command_check(args) -> int:
 
 def _derivative_column(args, scene):
     """``--derivative KEY``: the exact column ∂y/∂KEY the data are judged against (None without it)."""
-    from analytic.errors import OptionError
     from validation.check import DerivativeColumn
 
     if args.derivative is None:
@@ -78,12 +77,7 @@ def _derivative_column(args, scene):
     if args.counts or args.shape_only:
         raise UsageError(f"--derivative: judges a derivative with its standard errors (replicas or --stderr); "
                          f"not with {'--counts' if args.counts else '--shape-only'}")
-    from analytic.operator.parameters import parameter
-
-    try:
-        return DerivativeColumn(parameter(scene, args.derivative).key)
-    except OptionError as error:
-        raise UsageError(f"--derivative: {str(error).removeprefix('parameter: ')}") from None
+    return DerivativeColumn(parameter_option(scene, args.derivative, "--derivative")[0].key)
 
 
 def command_export(args) -> int:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from .common import add_quiet, load_scene_argument, positive_float_type, rows_text, show_progress
+from .common import add_quiet, load_scene_argument, parameter_option, positive_float_type, rows_text, show_progress
 
 __all__ = ["add_commands", "command_jacobian"]
 
@@ -14,12 +14,11 @@ def command_jacobian(args) -> int:
     """Write jacobian.npy ``(K, N, P)`` and meta.json naming the keys and their units; exit status 0."""
     from analytic.files import build_meta, output_folder, save_json, save_npy, staged_writes
     from analytic.operator.derivatives import exact_keys, jacobian
-    from analytic.operator.parameters import parameters
 
     scene = load_scene_argument(args.scene)
     if args.tolerance is not None:
         scene = scene.replace(tolerance=args.tolerance)
-    items = parameters(scene, args.parameters)         # a bad key: one line, exit 2, before any file
+    items = parameter_option(scene, args.parameters, "--parameters")   # a bad key: one line, before any file
     exact = exact_keys(scene, items)
     with output_folder(args.out) as out:
         started = time.perf_counter()

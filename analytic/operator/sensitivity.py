@@ -18,9 +18,9 @@ Both are sums over the reflectance's pixels. For a pixel the isochrone
 d = t crosses, the region d < t is the inside of an ellipse (d is convex),
 integrated in x (outer) and y (inner): the inner y-interval is clipped by
 the ellipse's two roots at x, and the outer integrand is analytic between
-the ellipse's x-extremes (square-root ends, taken by the map x = c_x - reach cos(πv) anchored at both extremes) and the
-x where it crosses the pixel's lower and upper edges, which cut the outer
-interval. H is the same outer integral of Σ_roots w / |∂d/∂y|. A pixel
+the ellipse's x-extremes (square-root ends, made analytic by the map
+x = c_x - reach cos(πv) anchored at both) and the x where it crosses the
+pixel's lower and upper edges, which cut the outer interval. H is the same outer integral of Σ_roots w / |∂d/∂y|. A pixel
 wholly inside the ellipse (its four corners are, d being convex) is one
 tensor Gauss rule. Pixels near a foot (where a has a peak as wide as the
 height) are split in quadrants down to a quarter of their distance to it. The

@@ -44,15 +44,15 @@ def command_jacobian(args) -> int:
 
 def _error(column, bound, closed: bool) -> dict:
     """meta.json's error bound of one key: per row (sensor or pair), in the column's units and relative to the
-    row's largest |entry|, and what it is (docs/derivatives.md "Error estimates")."""
+    row's largest |entry| (null where the column is zero), and what it is (docs/derivatives.md "Error estimates")."""
     import numpy as np
 
     largest = np.abs(column).max(axis=-1)
-    relative = np.where(largest > 0, bound / np.where(largest > 0, largest, 1.0), 0.0)
+    relative = [float(b / top) if top > 0 else None for b, top in zip(bound, largest)]    # None: a zero column
     basis = ("the scene's tolerance of the column's largest entry (what the exact route's integrals are judged to)"
              if closed else "Richardson pair's disagreement or the stencil's second-difference change times the "
                             "step, whichever is larger, plus the model's tolerance over the step")
-    return {"bound": [float(b) for b in bound], "relative": [float(r) for r in relative], "basis": basis}
+    return {"bound": [float(b) for b in bound], "relative": relative, "basis": basis}
 
 
 def add_commands(subparsers) -> None:

@@ -16,8 +16,11 @@ clipped by the ellipse's two roots at x, and H the outer integral of
 Σ_roots w / |∂d/∂y|; the outer integrand is analytic between the
 ellipse's x-extremes (square-root ends, where ∂d/∂y = 0) and the x where
 the ellipse crosses the cell's lower and upper edges, which cut the outer
-interval; each piece is mapped by x = x_a + span sin²(πv/2) (a square-root
-end becomes analytic, a regular one stays so) and integrated by a G_n
+interval; every piece is mapped by x = c_x - reach cos(πv), the ellipse's
+x-extremes at v = 0 and 1 (its square-root ends become analytic, in every
+piece, whether the extreme ends it or lies just beyond it; a piece far from
+them stays nearly linear in v), its roots taken from v (no discriminant
+that cancels near an extreme), and integrated by a G_n
 judged by the order below it (the same order in v and in y: G_2, G_3, G_4, G_6,
 G_8, G_11 in turn until two agree), bisected in v when none do, each
 amplitude to ``rtol`` of the whole cell's ∫ |w_j| (for F_j, and for the
@@ -163,11 +166,11 @@ def _line_roots(g, ellipse, along_y, level):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _slice(g, ellipse, x, y0, y1, weight, rung, area, edge, amp):
-    """Add weight x (∫ w dy over the cell's y-interval inside the ellipse at x; Σ_roots w / |∂d/∂y|)."""
-    low, high = _line_roots(g, ellipse, True, x)
-    if not low <= high:
-        return
+def _slice(g, x, roots, rows, weight, rung, area, edge, amp):
+    """Add weight x (∫ w dy over the cell's y-interval ``rows`` inside the ellipse, whose ``roots`` at x are
+    (low, high); Σ_roots w / |∂d/∂y|)."""
+    low, high = roots
+    y0, y1 = rows
     bottom, top = max(y0, low), min(y1, high)
     if top > bottom:
         height = top - bottom
@@ -187,21 +190,25 @@ def _slice(g, ellipse, x, y0, y1, weight, rung, area, edge, amp):
 
 
 @njit(cache=True, error_model="numpy")
-def _piece_rule(g, ellipse, rows, piece, part, rung, area, edge, amp):
-    """One rung's F and H of the slices x(v), v in ``part`` = (v0, v1), of the cut piece ``piece`` =
-    (x_a, span) (x = x_a + span sin²(πv/2)), each slice over ``rows`` = (y0, y1)."""
-    y0, y1 = rows
-    xa, span = piece
+def _piece_rule(g, chords, rows, part, rung, area, edge, amp):
+    """One rung's F and H of the slices at x(v) = c_x - reach cos(πv), v in ``part`` = (v0, v1), each over
+    ``rows`` = (y0, y1). ``chords`` = (c_x, reach, c_y, tilt, half): the ellipse meets the line x = x(v)
+    at y = c_y + tilt (x - c_x) ± half sin(πv). The ellipse's x-extremes, its roots' square-root branch
+    points, are v = 0 and 1 whatever the piece, so that every slice is analytic in v (a piece far from
+    them is nearly linear in v, and low orders suffice); the roots, taken from v rather than from a
+    discriminant that cancels near an extreme, are exact to rounding however near one a node is."""
+    cx, reach, cy, tilt, half = chords
     v0, v1 = part
     for j in range(AMPLITUDES):
         area[j] = 0.0
         edge[j] = 0.0
     for i in range(_LADDER[rung]):
         v = v0 + (v1 - v0) * _NODES[rung, i]
-        s = math.sin(0.5 * math.pi * v)
-        x = xa + span * s * s
-        weight = (v1 - v0) * _WEIGHTS[rung, i] * 0.5 * math.pi * span * math.sin(math.pi * v)
-        _slice(g, ellipse, x, y0, y1, weight, rung, area, edge, amp)
+        sine = math.sin(math.pi * v)
+        offset = -reach * math.cos(math.pi * v)
+        middle, chord = cy + tilt * offset, half * sine
+        weight = (v1 - v0) * _WEIGHTS[rung, i] * math.pi * reach * sine
+        _slice(g, cx + offset, (middle - chord, middle + chord), rows, weight, rung, area, edge, amp)
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -246,25 +253,33 @@ def _cut_cell(g, ellipse, box, rtol, magnitude, area, edge, work):
                 cuts[count] = root
                 count += 1
     cuts[:count].sort()
+    first_end, last_end = cx - reach >= x0, cx + reach <= x1
+    # the ellipse's chords along y: midpoints on a line, half-lengths sqrt(reach² - (x - c_x)²) / (reach √q)
+    q = (g.ey / a) ** 2 + (g.ex / b) ** 2
+    chords = (cx, reach, cy, g.ex * g.ey * (1.0 / (b * b) - 1.0 / (a * a)) / q, 1.0 / math.sqrt(q))
     amp, low_area, low_edge, high_area, high_edge = work[0], work[1], work[2], work[3], work[4]
     lows, highs, depths = np.empty(_STACK), np.empty(_STACK), np.empty(_STACK, dtype=np.int64)
     for p in range(count - 1):
-        start, span = cuts[p], cuts[p + 1] - cuts[p]
-        if not span > 0.0:
+        if not cuts[p + 1] > cuts[p]:
             continue
-        lows[0], highs[0], depths[0] = 0.0, 1.0, 0
+        # the piece in the map's v; an extreme exactly at v = 0 or 1 (acos there is off by √ε, which
+        # would leave out a sliver of H's integrand as large: 5e-7 of a cell's H, seen)
+        ends = min(1.0, max(-1.0, (cx - cuts[p]) / reach)), min(1.0, max(-1.0, (cx - cuts[p + 1]) / reach))
+        vstart = 0.0 if p == 0 and first_end else math.acos(ends[0]) / math.pi
+        vend = 1.0 if p == count - 2 and last_end else math.acos(ends[1]) / math.pi
+        lows[0], highs[0], depths[0] = vstart, vend, 0
         top = 1
         rules = 0
         while top > 0:
             top -= 1
             rules += 1
             v0, v1, depth = lows[top], highs[top], depths[top]
-            _piece_rule(g, ellipse, (y0, y1), (start, span), (v0, v1), _CUT_START, high_area, high_edge, amp)
+            _piece_rule(g, chords, (y0, y1), (v0, v1), _CUT_START, high_area, high_edge, amp)
             done = False
             for rung in range(_CUT_START + 1, _LADDER.size):
                 low_area[:] = high_area
                 low_edge[:] = high_edge
-                _piece_rule(g, ellipse, (y0, y1), (start, span), (v0, v1), rung, high_area, high_edge, amp)
+                _piece_rule(g, chords, (y0, y1), (v0, v1), rung, high_area, high_edge, amp)
                 if _within(low_area, high_area, limit_area, 1.0) and _within(low_edge, high_edge, limit_edge, 1.0):
                     done = True
                     break

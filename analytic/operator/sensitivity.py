@@ -18,9 +18,9 @@ Both are sums over the reflectance's pixels. For a pixel the isochrone
 d = t crosses, the region d < t is the inside of an ellipse (d is convex),
 integrated in x (outer) and y (inner): the inner y-interval is clipped by
 the ellipse's two roots at x, and the outer integrand is analytic between
-the ellipse's x-extremes (square-root ends, taken by the sin² map) and the
-x where it crosses the pixel's lower and upper edges, which cut the outer
-interval. H is the same outer integral of Σ_roots w / |∂d/∂y|. A pixel
+the ellipse's x-extremes (square-root ends, made analytic by the map
+x = c_x - reach cos(πv) anchored at both) and the x where it crosses the
+pixel's lower and upper edges, which cut the outer interval. H is the same outer integral of Σ_roots w / |∂d/∂y|. A pixel
 wholly inside the ellipse (its four corners are, d being convex) is one
 tensor Gauss rule. Pixels near a foot (where a has a peak as wide as the
 height) are split in quadrants down to a quarter of their distance to it. The
@@ -60,13 +60,14 @@ def supports(scene) -> bool:
     return scene.kind == "plane" and scene.illumination.waveform == "impulse"
 
 
-def _needs_split(box, feet) -> bool:
-    """Whether a cell is wider than :data:`_CELL_OF_HEIGHT` of its distance to a foot's peak (gap² + h²)^½."""
-    x0, x1, y0, y1 = box
+def _near(boxes, feet) -> np.ndarray:
+    """Which cells (rows x0, x1, y0, y1) are wider than :data:`_CELL_OF_HEIGHT` of their distance to a
+    foot's peak, (gap² + h²)^½ for each foot (x, y, h)."""
+    x0, x1, y0, y1 = (boxes[:, i, None] for i in range(4))
     gap_x = np.maximum(0.0, np.maximum(x0 - feet[:, 0], feet[:, 0] - x1))
     gap_y = np.maximum(0.0, np.maximum(y0 - feet[:, 1], feet[:, 1] - y1))
     reach = np.sqrt(gap_x ** 2 + gap_y ** 2 + feet[:, 2] ** 2)
-    return bool(np.any(max(x1 - x0, y1 - y0) > _CELL_OF_HEIGHT * reach))
+    return np.any(np.maximum(x1 - x0, y1 - y0) > _CELL_OF_HEIGHT * reach, axis=1)
 
 
 def _cells(scene):
@@ -76,6 +77,7 @@ def _cells(scene):
     sensor (complex singularities a height away): a cell is split until it
     is narrower than a quarter of its distance to them, so the cells shrink
     geometrically towards a foot (a few dozen per level) however low it is.
+    Whole arrays at a time, one level of splitting after the other.
     """
     size, pixels = float(scene.size), int(scene.pixels)
     delta = size / pixels
@@ -84,21 +86,16 @@ def _cells(scene):
     x0, y0 = columns * delta, size - (rows + 1) * delta
     boxes = np.stack([x0, x0 + delta, y0, y0 + delta, image[rows, columns]], axis=1)
     feet = np.vstack([np.asarray(scene.source, dtype=np.float64)[None, :], np.asarray(scene.sensors, dtype=np.float64)])
-    near = np.array([_needs_split(box[:4], feet) for box in boxes], dtype=bool) if len(boxes) else np.zeros(0, bool)
-    if not near.any():
-        return boxes
-    split = []
-    for box in boxes[near]:
-        stack = [box]
-        while stack:
-            bx0, bx1, by0, by1, value = stack.pop()
-            if not _needs_split((bx0, bx1, by0, by1), feet):
-                split.append((bx0, bx1, by0, by1, value))
-                continue
-            xm, ym = 0.5 * (bx0 + bx1), 0.5 * (by0 + by1)
-            stack.extend([(bx0, xm, by0, ym, value), (xm, bx1, by0, ym, value), (bx0, xm, ym, by1, value),
-                          (xm, bx1, ym, by1, value)])
-    return np.vstack([boxes[~near], np.array(split)])
+    kept, pending = [], boxes
+    while len(pending):
+        near = _near(pending, feet)
+        kept.append(pending[~near])
+        split = pending[near]
+        xm, ym = 0.5 * (split[:, 0] + split[:, 1]), 0.5 * (split[:, 2] + split[:, 3])
+        pending = np.concatenate([np.stack([a, b, c, d, split[:, 4]], axis=1) for a, b in
+                                  ((split[:, 0], xm), (xm, split[:, 1])) for c, d in
+                                  ((split[:, 2], ym), (ym, split[:, 3]))])
+    return np.concatenate(kept) if kept else boxes
 
 
 def pair_geometry(source, sensor, attenuation: str) -> PairGeometry:

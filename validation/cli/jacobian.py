@@ -11,7 +11,8 @@ __all__ = ["add_commands", "command_jacobian"]
 
 
 def command_jacobian(args) -> int:
-    """Write jacobian.npy ``(K, N, P)`` and meta.json naming the keys and their units; exit status 0."""
+    """Write jacobian.npy ``(K, N, P)`` and meta.json naming the keys, their units and each column's error
+    bound; exit status 0."""
     from analytic.files import build_meta, output_folder, save_json, save_npy, staged_writes
     from analytic.operator.derivatives import exact_keys, jacobian
 
@@ -22,13 +23,14 @@ def command_jacobian(args) -> int:
     exact = exact_keys(scene, items)
     with output_folder(args.out) as out:
         started = time.perf_counter()
-        values = jacobian(scene, [item.key for item in items], progress=show_progress(args))
+        values, bounds = jacobian(scene, [item.key for item in items], progress=show_progress(args), errors=True)
         seconds = time.perf_counter() - started
         meta = build_meta(scene, kind="model", jacobian={
             "shape": list(values.shape), "axes": ["row (sensor or pair)", "bin", "parameter"],
             "parameters": [{"key": item.key, "unit": item.unit, "route": "exact" if closed else "differences",
-                            "column_unit": f"y per {item.unit}" if item.unit != "1" else "y per unit scale"}
-                           for item, closed in zip(items, exact)],
+                            "column_unit": f"y per {item.unit}" if item.unit != "1" else "y per unit scale",
+                            "error": _error(values[..., p], bounds[:, p], closed)}
+                           for p, (item, closed) in enumerate(zip(items, exact))],
             "seconds": seconds})
         with staged_writes():
             save_npy(out / "jacobian.npy", values)
@@ -38,6 +40,19 @@ def command_jacobian(args) -> int:
         print(f"jacobian: {rows_text(scene)} x {scene.sampling.count} bins x {len(items)} parameters "
               f"({routes} exact, {len(items) - routes} by differences) in {seconds:.2f} s -> {Path(args.out)}")
     return 0
+
+
+def _error(column, bound, closed: bool) -> dict:
+    """meta.json's error bound of one key: per row (sensor or pair), in the column's units and relative to the
+    row's largest |entry| (null where the column is zero), and what it is (docs/derivatives.md "Error estimates")."""
+    import numpy as np
+
+    largest = np.abs(column).max(axis=-1)
+    relative = [float(b / top) if top > 0 else None for b, top in zip(bound, largest)]    # None: a zero column
+    basis = ("the scene's tolerance of the column's largest entry (what the exact route's integrals are judged to)"
+             if closed else "Richardson pair's disagreement or the stencil's second-difference change times the "
+                            "step, whichever is larger, plus the model's tolerance over the step")
+    return {"bound": [float(b) for b in bound], "relative": relative, "basis": basis}
 
 
 def add_commands(subparsers) -> None:

@@ -11,9 +11,11 @@
   ``plane.size`` (by the model's scaling law, from the same columns and
   the impulse response at the edges). Two parameters are exact by
   linearity for every scene: a reflectance scale (∂y/∂s = y) and the
-  source's intensity (∂y/∂I = y / I). Every other key (every key of a
-  waveform other than the impulse, every relay-wall key but the two
-  linear ones) still takes the differences below.
+  source's intensity (∂y/∂I = y / I). A relay wall's ``laser.position.*``
+  and ``sensor.position.*`` are exact through the laser leg's factor
+  (:mod:`.relay_wall_legs`) unless the end legs are counted. Every other
+  key (every key of a waveform other than the impulse, the relay wall's
+  other geometric keys) still takes the differences below.
 - ``"differences"``: Richardson-extrapolated central differences of the
   model assembled at tolerance :data:`TOLERANCE`, for every key (the tests'
   independent reference).
@@ -31,6 +33,7 @@ from ..scenes.scene_file import scene_of
 from .parameters import Parameter, parameter, parameters, rotation, value_of, with_values
 from .general_routes import progress_bar
 from .matrix_free import forward
+from .relay_wall_legs import leg_column, supports_leg
 from .sensitivity import position_derivatives, supports
 
 __all__ = ["jacobian", "derivative", "exact_keys", "ROUTES", "TOLERANCE", "STEP"]
@@ -109,7 +112,7 @@ def exact_keys(scene, items) -> list[bool]:
     if plane:
         heights = np.vstack([np.asarray(scene.source)[None, :], np.asarray(scene.sensors)])[:, 2]
         high = heights.min() >= _SIZE_HEIGHT * _scale(scene, parameter(scene, "source.position.x"))
-    return [item.stem.endswith(".reflectance") or item.unit == "W/sr"
+    return [item.stem.endswith(".reflectance") or item.unit == "W/sr" or supports_leg(scene, item.stem)
             or (plane and item.stem in _EXACT_STEMS and (item.stem != "plane.size" or high)) for item in items]
 
 
@@ -200,6 +203,9 @@ def jacobian(scene, keys, *, step: float | None = None, route: str = "exact", pr
         if closed and (item.stem.endswith(".reflectance") or item.unit == "W/sr"):
             y = forward(scene) if y is None else y
             columns.append(y if item.unit == "1" else y / value_of(scene, item))
+        elif closed and supports_leg(scene, item.stem):
+            y = forward(scene) if y is None else y
+            columns.append(leg_column(scene, item.stem, item.index[0], y))
         elif closed:
             parts = position_derivatives(scene, progress=progress) if parts is None else parts
             columns.append(_exact_column(scene, item, parts))

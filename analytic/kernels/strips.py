@@ -35,7 +35,7 @@ import numpy as np
 
 from .attenuation import attenuation_of_distances
 from .bins import BinRun, KernelProblem, bin_edge, bin_of, kernel_values
-from .conics import across, crossings, inner_roots, isochrone_conic, ordered, turns_inside
+from .conics import across, crossings, inner_roots, inner_roots_within, isochrone_conic, ordered, turns_inside
 from .cache import njit
 from .quadrature import GAUSS_NODES, GAUSS_WEIGHTS
 from .pieces import ROUNDING
@@ -202,7 +202,7 @@ def _cut_node(frame, conic, tau, across, ua, ub, order, ju):
     """
     hu = 0.5 * (ub - ua)
     u = 0.5 * (ua + ub) + hu * GAUSS_NODES[order, ju]
-    low, high, real = inner_roots(frame, conic, tau, u, across.swap)
+    low, high, real = inner_roots_within(frame, conic, tau, u, across.swap, across.w0, across.w1)
     if not real:        # the row lies wholly above
         low, high = np.inf, np.inf
     w0, w1 = across.w0, across.w1
@@ -263,9 +263,9 @@ def cut_pieces(frame, conic, tau, sides, u0, u1):
 
 @njit(cache=True, error_model="numpy", forceinline=True)
 def cut_rung(frame, conic, tau, sides, u0, u1, ends, order, above_too):
-    """(below, above, below_size, above_size): ∫ a_k and ∫ |a_k| over the pixel's parts d <= τ and d >= τ by G_order
-    x G_order on the u-pieces between ``ends`` (:func:`cut_pieces`); ``above_too`` False leaves the part above
-    (zeros), saving two rows of three."""
+    """(below, above, below_size, above_size): ∫ a_k and ∫ |a_k| over the pixel's parts d <= τ and d >= τ by
+    G_order x G_order on the u-pieces between ``ends`` (:func:`cut_pieces`); ``above_too`` False leaves the part
+    above (zeros), saving two rows of three."""
     below, above, below_size, above_size = 0.0, 0.0, 0.0, 0.0
     start = u0
     for stop in (ends[0], ends[1], ends[2], ends[3], u1):

@@ -1,6 +1,7 @@
 """The exact relay-wall model at the size of real NLOS captures: before and after the offset route, in one run.
 
     python benchmarks/bench_nlos_size.py --out out/bench_nlos_size [--before-64]
+    python benchmarks/bench_nlos_size.py --out out/bench_nlos_size --strips 57117e2 [--repeat 2]
 
 The captures (issue 43): a 1 m x 1 m hidden square 0.9 m in front of a 2 m x 2 m relay wall (laser and
 sensor at (-0.5, 0, 0.25)), impulse illumination, tolerance 1e-6, bins of 5 mm from 1.8 m:
@@ -16,6 +17,12 @@ sensor at (-0.5, 0, 0.25)), impulse illumination, tolerance 1e-6, bins of 5 mm f
    1024 bins (whose A, ~750 million entries, would not fit in half this machine's memory): wall seconds and
    the command's peak resident memory; the 32 x 32 scan also by the general route (before), and with
    ``--before-64`` the 64 x 64 scan too (several minutes).
+
+``--strips REV`` runs only A's build by the general route (the relay wall's offset route switched off),
+for the plane and the relay wall, by the project at git revision REV (before: ``git archive`` into a
+temporary folder, :func:`bench_model.checkout`) and by this one (after), alternating, ``--repeat`` times:
+wall and CPU seconds of the build, µs per (pair, pixel) and per non-zero, the load average around each
+(issue 43: the impulse's pixels that several 5 mm bins cut, once the general strip route's).
 
 Prints markdown tables and the load average (the machine is shared: timings are provisional) and writes
 ``results.json`` in --out.
@@ -36,7 +43,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from analytic.files import save_json  # noqa: E402
-from bench_model import load, machine, table  # noqa: E402
+from bench_model import checkout, load, machine, table  # noqa: E402
 
 SCENE = """name = "nlos-size"
 [relay_wall]
@@ -79,9 +86,11 @@ else:
     scene = RelayWallScene(pixels=64, reflectance=0.5, center=(0.0, 0.0, 0.9), scan=Scan(type="confocal",
                            grid=(32, 32)), sampling=sampling)
 system_matrix(scene.replace(pixels=2, reflectance=0.5))
-wall = time.perf_counter()
+load = " ".join(open("/proc/loadavg").read().split()[:3])
+wall, cpu = time.perf_counter(), time.process_time()
 matrix = system_matrix(scene)
-print(json.dumps(dict(seconds=time.perf_counter() - wall, nnz=int(matrix.nnz), pairs=int(scene.sensor_count))))
+print(json.dumps(dict(seconds=time.perf_counter() - wall, cpu=time.process_time() - cpu, nnz=int(matrix.nnz),
+                      pairs=int(scene.sensor_count), load=[load, " ".join(open("/proc/loadavg").read().split()[:3])])))
 """
 
 #: Section 2's command line by the general route (the offset route switched off).
@@ -93,11 +102,31 @@ def _environment() -> dict:
     return dict(os.environ, PYTHONPATH=str(ROOT))
 
 
-def build(plane: bool, general: bool) -> dict:
+def build(plane: bool, general: bool, root: Path = ROOT) -> dict:
     code = BUILD.format(plane=plane, general=general)
-    done = subprocess.run([sys.executable, "-c", code], check=True, env=_environment(), capture_output=True,
-                          text=True, cwd=ROOT)
+    done = subprocess.run([sys.executable, "-c", code], check=True, env=dict(os.environ, PYTHONPATH=str(root)),
+                          capture_output=True, text=True, cwd=root)
     return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def strips(revision: str, repeat: int, results: dict) -> None:
+    """A's build by the general route, before (the project at ``revision``) and after (this one), alternating."""
+    before = checkout(revision)
+    rows = []
+    for _ in range(repeat):
+        for scene, plane in (("plane, 32 x 32 sensors", True), ("relay wall, 32 x 32 confocal", False)):
+            for label, root in ((f"before ({revision})", before), ("after", ROOT)):
+                entry = dict(build(plane, True, root), scene=scene, code=label)
+                results["builds"].append(entry)
+                work = entry["pairs"] * 64**2
+                rows.append([scene, label, f"{entry['seconds']:.2f}", f"{entry['cpu']:.2f}", f"{entry['nnz']:,}",
+                             f"{1e6 * entry['seconds'] / work:.3f}", f"{1e6 * entry['cpu'] / work:.3f}",
+                             f"{1e6 * entry['seconds'] / entry['nnz']:.3f}", f"{1e6 * entry['cpu'] / entry['nnz']:.3f}",
+                             " / ".join(entry["load"])])
+    print("A's build by the general route, 64 x 64 pixels, 512 bins of 5 mm, a fresh process after a warm-up call "
+          "(wall and CPU: 2 threads):\n")
+    table(["scene", "code", "wall (s)", "CPU (s)", "non-zeros", "µs per (pair, pixel)", "CPU µs per (pair, pixel)",
+           "µs per non-zero", "CPU µs per non-zero", "load average before / after"], rows)
 
 
 def forward(folder: Path, grid: int, pixels: int, bins: int, general: bool) -> dict:
@@ -125,11 +154,19 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default="out/bench_nlos_size")
     parser.add_argument("--before-64", action="store_true", help="the 64 x 64 scan by the general route too")
+    parser.add_argument("--strips", metavar="REV", help="only A's general-route build, at REV and here")
+    parser.add_argument("--repeat", type=int, default=1, help="--strips: rounds of before and after")
     args = parser.parse_args()
     (out := Path(args.out)).mkdir(parents=True, exist_ok=True)
     results = {"machine": machine(), "load_average_start": load(), "builds": [], "forwards": []}
     print(f"machine: {results['machine']}; load average at start {results['load_average_start']} "
           f"(shared machine: timings provisional)\n")
+    if args.strips:
+        strips(args.strips, args.repeat, results)
+        results["load_average_end"] = load()
+        save_json(out / "strips.json", results)
+        print(f"load average at the end {results['load_average_end']}; -> {out / 'strips.json'}")
+        return
     subprocess.run([sys.executable, "-m", "validation.cli", "forward", "examples/nlos.toml", "--out",
                     str(out / "warm"), "--quiet"], env=_environment(), check=True, cwd=ROOT)   # kernels loaded
     rows = []

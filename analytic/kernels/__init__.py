@@ -19,6 +19,7 @@ Python side (:mod:`analytic.operator.system`, :mod:`analytic.operator.window`,
 - :mod:`.arcs`: an isochrone's arcs in a pixel and their integrals, the (τ, φ) tensor rule;
 - :mod:`.taylor`, :mod:`.moments`: kernels as Taylor polynomials, a pixel's moments;
 - :mod:`.strips`: a cut pixel as slabs between isochrones;
+- :mod:`.cuts`: for the impulse, those slabs from the parts below each isochrone;
 - :mod:`.routes`: one (pair, pixel)'s entries of A by each quadrature route;
 - :mod:`.assembly`: A's entries counted and filled, block by block, straight into CSR;
 - :mod:`.offsets`: a translation-invariant capture's A, or y = A f, from one run per pixel offset;
@@ -29,4 +30,4 @@ import lazy_loader
 
 __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submodules=[
     "cache", "formulas", "pieces", "special", "attenuation", "isochrone", "conics", "bins", "quadrature", "arcs", "taylor",
-    "moments", "strips", "routes", "assembly", "offsets", "sensitivity"])
+    "moments", "strips", "cuts", "routes", "assembly", "offsets", "sensitivity"])

@@ -23,9 +23,9 @@ kernels' constant values (one set per settled segment) times ∫_pixel a
 (:func:`analytic.kernels.moments.pixel_integral`, a few nodes for a small pixel),
 otherwise its moments over the bound
 (:func:`analytic.kernels.moments.smooth_by_moments`). For a step-function S, a pixel
-clear of the feet and of x* that one kernel breakpoint's isochrone cuts takes
-:func:`analytic.kernels.strips.single_cut` (the two parts' ∫ a), its kernels
-once per part; a pixel clear of the feet whose exact range no breakpoint
+clear of the feet and of x* that kernel breakpoints' isochrones cut takes
+:func:`analytic.kernels.cuts.cut_entries` (each slab's ∫ a from the parts below
+each isochrone), its kernels once per slab; a pixel clear of the feet whose exact range no breakpoint
 cuts takes its moments over that range.
 
 Every other (pixel, pair) is *left* by the first pass: its slots hold NaN
@@ -52,7 +52,7 @@ from .isochrone import PixelBox, pair_frame, range_bound, rectangle_range
 from .moments import pixel_integral, smooth_by_moments
 from .pieces import WaveformTerms
 from .routes import SERVED, Column, clear_of_feet, clear_of_birth, make_scratch, route_entries, scratch_failures
-from .strips import single_cut
+from .cuts import cut_entries, cut_table
 
 __all__ = ["ImageGrid", "Assembly", "StepAssembly", "Slots", "Jobs", "pixel_box", "settled_run", "pixel_run", "SEGMENT",
            "auto_entries", "count_block", "fill_block", "run_jobs", "job_routes", "pair_frame_of", "DIRECT_APPLIES",
@@ -209,38 +209,6 @@ def _step_column(frame, box, table, terms, axis, rtol, out):
 
 
 @njit(cache=True, error_model="numpy", forceinline=True)
-def _single_cut_column(frame, box, column, table, axis, rtol, out, upper):
-    """Whether a step-function S's (pixel, pair) that one kernel breakpoint cuts was served by :func:`single_cut`.
-
-    ``column`` holds the pixel's exact range of d; ``upper`` a second array as long as ``out``. When
-    served, out[:run.bins] holds the entries: each part's constant kernels (their values at the
-    middle of its range of d, as :func:`analytic.kernels.strips.strip_entries` takes them) times its
-    ∫ a_k. False (out left as it is) when no breakpoint or more than one lies inside (low, high),
-    the pixel is near a foot or x*, or :func:`single_cut` does not serve.
-    """
-    run, low, high = column.run, column.low, column.high
-    kinked = table.kinked
-    tau = 0.0
-    cuts = 0
-    for n in range(run.first, run.first + run.bins + 1):
-        edge = bin_edge(axis, n)
-        for i in range(kinked.size):
-            if low < edge - kinked[i] < high:
-                tau = edge - kinked[i]
-                cuts += 1
-    if cuts != 1 or not clear_of_birth(frame, box, clear_of_feet(frame, box)):
-        return False
-    below, above, served = single_cut(frame, box, tau, rtol)
-    if not served:
-        return False
-    step_kernels(table.starts, table.constants, table.forms, axis, run, 0.5 * (low + tau), below, out)
-    step_kernels(table.starts, table.constants, table.forms, axis, run, 0.5 * (tau + high), above, upper)
-    for i in range(run.bins):
-        out[i] += upper[i]
-    return True
-
-
-@njit(cache=True, error_model="numpy", forceinline=True)
 def _finish(outcome, frame, box, column, terms, axis, rtol, out, scratch):
     """(served, exact column): the moments of what :func:`_step_column` left; ``served`` False leaves it.
 
@@ -347,7 +315,8 @@ def auto_entries(frame, box, terms, axis, rtol, out, scratch):
     if run.bins == 0 or outcome == _SERVED:
         return column, True, run.bins > 0
     if (table.steps and column.exact
-            and _single_cut_column(frame, box, column, table, axis, rtol, out, np.empty(run.bins))):
+            and cut_entries(frame, box, column, table, axis, rtol, out, np.empty(run.bins),
+                            cut_table(table, run.bins))):
         return column, True, False
     if table.steps:
         served, column = _finish_steps(frame, box, column, table, axis, rtol, out)
@@ -417,6 +386,7 @@ def fill_block(problem, begin, end, width, slots):
     frames, offsets = _frames(problem.pairs, problem.mode)
     terms, grid, axis, rtol = problem.terms, problem.grid, problem.axis, problem.rtol
     table = step_table(terms)
+    cuts = cut_table(table, width)
     cursor, indices, data = slots.cursor, slots.indices, slots.data
     lead, duration = terms.lead, terms.duration
     length = _segment_length(grid, axis) if table.steps else 1
@@ -455,8 +425,8 @@ def fill_block(problem, begin, end, width, slots):
                     if run.bins == 0:
                         continue
                     smooth = outcome == _SERVED
-                    done = smooth or (table.steps and column.exact and _single_cut_column(
-                        frame, box, column, table, pair_axis, rtol, values, upper))
+                    done = smooth or (table.steps and column.exact and cut_entries(
+                        frame, box, column, table, pair_axis, rtol, values, upper, cuts))
                     if not done:
                         smooth, column = _left_smooth(problem, outcome, frame, box, column, table, pair_axis, values,
                                                       scratch)

@@ -35,13 +35,13 @@ import numpy as np
 
 from .attenuation import attenuation_of_distances
 from .bins import BinRun, KernelProblem, bin_edge, bin_of, kernel_values
-from .conics import across, crossings, inner_roots, isochrone_conic, ordered, turns_inside
+from .conics import across, crossings, inner_roots, inner_roots_within, isochrone_conic, ordered, turns_inside
 from .cache import njit
 from .quadrature import GAUSS_NODES, GAUSS_WEIGHTS
 from .pieces import ROUNDING
 
-__all__ = ["strip_entries", "single_cut", "Across", "Slab", "Sums", "HIGH_ORDER", "LOW_ORDER", "FIRST_RUNG",
-           "LAST_RUNG"]
+__all__ = ["strip_entries", "single_cut", "cut_pieces", "cut_rung", "Across", "Slab", "Sums", "HIGH_ORDER",
+           "LOW_ORDER", "FIRST_RUNG", "LAST_RUNG"]
 
 class Across(NamedTuple):
     """The pixel in the axes the strips integrate in: rows along w at each u (``swap``: u is y, w is x)."""
@@ -202,7 +202,7 @@ def _cut_node(frame, conic, tau, across, ua, ub, order, ju):
     """
     hu = 0.5 * (ub - ua)
     u = 0.5 * (ua + ub) + hu * GAUSS_NODES[order, ju]
-    low, high, real = inner_roots(frame, conic, tau, u, across.swap)
+    low, high, real = inner_roots_within(frame, conic, tau, u, across.swap, across.w0, across.w1)
     if not real:        # the row lies wholly above
         low, high = np.inf, np.inf
     w0, w1 = across.w0, across.w1
@@ -248,6 +248,43 @@ def _row_integral(frame, swap, u, wa, wb, order):
     return total, size
 
 
+@njit(cache=True, error_model="numpy", forceinline=True)
+def cut_pieces(frame, conic, tau, sides, u0, u1):
+    """The u in (u0, u1) where the side d = τ crosses the pixel's w-edges, in order (inf: none): u-pieces' ends."""
+    a, b = crossings(frame, conic, tau, sides.w0, u0, u1, sides.swap)
+    c, d = crossings(frame, conic, tau, sides.w1, u0, u1, sides.swap)
+    a, b = ordered(a, b)
+    c, d = ordered(c, d)
+    a, c = ordered(a, c)
+    b, d = ordered(b, d)
+    b, c = ordered(b, c)
+    return a, b, c, d
+
+
+@njit(cache=True, error_model="numpy", forceinline=True)
+def cut_rung(frame, conic, tau, sides, u0, u1, ends, order, above_too):
+    """(below, above, below_size, above_size): ∫ a_k and ∫ |a_k| over the pixel's parts d <= τ and d >= τ by
+    G_order x G_order on the u-pieces between ``ends`` (:func:`cut_pieces`); ``above_too`` False leaves the part
+    above (zeros), saving two rows of three."""
+    below, above, below_size, above_size = 0.0, 0.0, 0.0, 0.0
+    start = u0
+    for stop in (ends[0], ends[1], ends[2], ends[3], u1):
+        if not start < stop <= u1:
+            continue
+        for ju in range(order):
+            u, wu, rows = _cut_node(frame, conic, tau, sides, start, stop, order, ju)
+            for row in range(3 if above_too else 1):
+                value, size = _row_integral(frame, sides.swap, u, rows[row][0], rows[row][1], order)
+                if row == 0:
+                    below += wu * value
+                    below_size += wu * size
+                else:
+                    above += wu * value
+                    above_size += wu * size
+        start = stop
+    return below, above, below_size, above_size
+
+
 @njit(cache=True, error_model="numpy")
 def single_cut(frame, box, tau, rtol):
     """(below, above, served): ∫ a_k over the pixel's parts d <= τ and d >= τ, when one isochrone cuts it.
@@ -278,32 +315,10 @@ def single_cut(frame, box, tau, rtol):
     conic = isochrone_conic(frame, tau, swap)
     if conic[2] == 0.0 or turns_inside(conic, u0, u1, w0, w1):
         return 0.0, 0.0, False
-    # the u-pieces: the crossings of the w-edges, in order (inf: none)
-    a, b = crossings(frame, conic, tau, w0, u0, u1, swap)
-    c, d = crossings(frame, conic, tau, w1, u0, u1, swap)
-    a, b = ordered(a, b)
-    c, d = ordered(c, d)
-    a, c = ordered(a, c)
-    b, d = ordered(b, d)
-    b, c = ordered(b, c)
+    ends = cut_pieces(frame, conic, tau, sides, u0, u1)
     previous_below, previous_above = 0.0, 0.0
     for order in range(FIRST_RUNG - 1, LAST_RUNG + 1):
-        below, above, below_size, above_size = 0.0, 0.0, 0.0, 0.0
-        start = u0
-        for stop in (a, b, c, d, u1):
-            if not start < stop <= u1:
-                continue
-            for ju in range(order):
-                u, wu, rows = _cut_node(frame, conic, tau, sides, start, stop, order, ju)
-                for row in range(3):
-                    value, size = _row_integral(frame, swap, u, rows[row][0], rows[row][1], order)
-                    if row == 0:
-                        below += wu * value
-                        below_size += wu * size
-                    else:
-                        above += wu * value
-                        above_size += wu * size
-            start = stop
+        below, above, below_size, above_size = cut_rung(frame, conic, tau, sides, u0, u1, ends, order, True)
         if (order >= FIRST_RUNG
                 and abs(below - previous_below) <= rtol * abs(below) + 8.0 * ROUNDING * below_size
                 and abs(above - previous_above) <= rtol * abs(above) + 8.0 * ROUNDING * above_size):

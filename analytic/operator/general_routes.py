@@ -57,7 +57,8 @@ def _window_jobs(starts: np.ndarray, ends: np.ndarray, first_row: int, indices: 
     bin_index = bin_index[order]
     pixels = pixels[order]
     del order
-    begins = np.flatnonzero(np.concatenate([[True], (pairs[1:] != pairs[:-1]) | (pixels[1:] != pixels[:-1])]))
+    # a window may hold no left slot (its block's left pairs lie in its other windows)
+    begins = np.flatnonzero(np.concatenate([[slots.size > 0], (pairs[1:] != pairs[:-1]) | (pixels[1:] != pixels[:-1])]))
     offsets = np.append(begins, slots.size).astype(np.int64)
     return Jobs(pairs[begins], pixels[begins], bin_index[begins], offsets, slots, np.empty(begins.size),
                 np.empty(begins.size))

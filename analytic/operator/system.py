@@ -32,11 +32,13 @@ four routes:
   closed-form (:mod:`analytic.kernels.strips`), by G_4 x G_4 judged by G_3 x G_3;
   when that rule does not meet the tolerance, the next route. For the
   impulse (the one waveform whose S is a step, so each κ_n is constant on
-  either side of a breakpoint; the square pulse's S is a ramp) and a pixel
-  that one breakpoint cuts, the common case for small pixels, first the
-  two parts' ∫ a alone by a
-  ladder from G_3 x G_3 judged by G_2 x G_2 (:func:`analytic.kernels.strips.single_cut`),
-  each part's constant kernels taken once.
+  either side of a breakpoint; the square pulse's S is a ramp), assembly's
+  first pass takes such a pixel first: the part below each breakpoint's
+  isochrone by a ladder from G_3 x G_3 judged by G_2 x G_2
+  (:func:`analytic.kernels.strips.single_cut` for one,
+  :func:`analytic.kernels.cuts.multi_cut` for several: a slab is the difference
+  of two parts, judged by the sum of their error estimates), each slab's
+  constant kernels taken once.
 - *Cut pixels*: in isochrone coordinates (τ, φ) (see :mod:`analytic.kernels.isochrone`)
   the entry is ∫ κ_n(τ) G(τ) dτ with G(τ) = ∫_{isochrone ∩ pixel} a J dφ.
   G is smooth except where an isochrone passes a pixel corner, touches an

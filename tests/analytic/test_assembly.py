@@ -23,6 +23,7 @@ import scipy.sparse
 
 from analytic.kernels.isochrone import make_frame, range_bound, rectangle_range, PixelBox
 from analytic.scenes.common import Illumination, Sampling, Scene
+from analytic.operator.general_routes import _window_jobs
 from analytic.operator.system import pair_entries, system_matrix
 
 
@@ -141,3 +142,19 @@ def test_tiny_pixels_inside_one_bin_are_the_integral_of_the_attenuation(rng):
             assert abs(column[first] - expected) <= 1e-6 * expected, (sensor, pixel)
             checked += 1
     assert checked >= 80
+
+
+def test_a_window_of_slots_without_left_pairs_gives_no_jobs():
+    """The general routes gather a block's left pairs window by window; a window where the first pass served every
+    pair (its block's left pairs lie in its other windows: common once cut pixels are served there) holds no NaN
+    and gives no job, and a NaN slot gives its (pair, pixel, bin)."""
+    bins = 4
+    starts, ends = np.array([0, 2, 4, 6]), np.array([2, 4, 6, 8])      # one pair's four rows, two slots each
+    data = np.arange(8.0)
+    indices = np.arange(10, 18, dtype=np.int32)
+    jobs = _window_jobs(starts, ends, 4, indices, data, bins)
+    assert jobs.pairs.size == 0 and list(jobs.offsets) == [0] and jobs.slots.size == 0
+    data[5] = np.nan
+    jobs = _window_jobs(starts, ends, 4, indices, data, bins)
+    assert (list(jobs.pairs), list(jobs.pixels), list(jobs.firsts), list(jobs.slots)) == ([1], [15], [2], [5])
+

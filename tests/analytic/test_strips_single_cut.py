@@ -8,7 +8,9 @@ near a foot) and at three tolerances, to a converged reference written here
 (composite Gauss-Legendre between the isochrone's crossings of the pixel's
 sides, found by root search: no conic formula), to the adaptive (τ, φ) route,
 which shares none of its code, and to tests/reference.py's nested QUADPACK
-integrals with their own root search.
+integrals with their own root search. A pixel that several edges cut (short bins
+over a larger pixel: analytic.kernels.cuts.multi_cut, each slab from the parts below
+its two isochrones) is held to the same references, its thin slabs included.
 """
 
 import math
@@ -22,6 +24,8 @@ from analytic.kernels.isochrone import PixelBox, make_frame
 from analytic.kernels.routes import clear_of_birth, clear_of_feet
 from analytic.scenes.common import Illumination, Sampling, Scene
 from analytic.kernels.strips import single_cut
+from analytic.kernels.cuts import CUT_COLUMNS, PART, TAU, multi_cut
+import analytic.operator.system as system
 from analytic.operator.system import QuadratureWarning, pair_entries
 from reference import attenuation, bin_kernel, distance_sum, pixel_box, pixel_entry
 
@@ -256,3 +260,70 @@ def test_cut_pixel_entries_match_adaptive_and_reference(name, source, sensor, pi
         reference = scene.intensity * pixel_entry(pixel_box(1.0, PIXELS, pixel), source, sensor, kernel,
                                                   breakpoints)
         assert abs(value - reference) <= rtol * abs(reference) + AGREEMENT * scale, (name, i, value, reference)
+
+
+def _several_cuts():
+    """(name, source, sensor, pixel, edges): several edges in one pixel's range of d, as fractions of it."""
+    far = ((0.3, 0.4, 0.5), (0.7, 0.6, 0.5))
+    middle = _pixel_of(0.21, 0.83)
+    return [("three", *far, middle, (0.2, 0.5, 0.8)), ("sliver and middle", *far, middle, (0.02, 0.5)),
+            ("thin slab", *far, middle, (0.3, 0.33, 0.7)), ("five", *far, middle, (0.1, 0.3, 0.5, 0.7, 0.9)),
+            ("near x*", *far, _pixel_of(0.5 + 2.5 / PIXELS, 0.5), (0.4, 0.6))]
+
+
+SEVERAL = _several_cuts()
+
+
+@pytest.mark.parametrize("rtol", RTOLS)
+@pytest.mark.parametrize("name, source, sensor, pixel, fractions", SEVERAL, ids=[case[0] for case in SEVERAL])
+def test_multi_cut_slabs_within_rtol(name, source, sensor, pixel, fractions, rtol):
+    """Each slab between consecutive edges within rtol of the converged reference's (G_48 by root search, no
+    conic); served at every rtol away from x*, and where one edge cuts, single_cut's numbers exactly."""
+    box = pixel_box(1.0, PIXELS, pixel)
+    lowest, highest = _range(box, source, sensor)
+    edges = [lowest + f * (highest - lowest) for f in fractions]
+    frame = make_frame(np.asarray(source, float), np.asarray(sensor, float), 0)
+    cuts = np.zeros((len(edges) + 1, CUT_COLUMNS))
+    cuts[:len(edges), TAU] = edges
+    served = multi_cut(frame, PixelBox(*box), cuts, len(edges), rtol)
+    assert served or name == "near x*", (name, rtol)
+    if not served:
+        return
+    below = [0.0] + [converged_parts(box, edge, source, sensor)[0][0] for edge in edges]
+    whole = below[-1] + converged_parts(box, edges[-1], source, sensor)[0][1]
+    reference = np.diff(below + [whole])
+    slabs = cuts[:len(edges) + 1, PART]
+    assert np.all(np.abs(slabs - reference) <= rtol * reference + 1e-13 * whole), (name, rtol, slabs, reference)
+    one = np.zeros((2, CUT_COLUMNS))
+    one[0, TAU] = edges[0]
+    assert multi_cut(frame, PixelBox(*box), one, 1, rtol) == single_cut(frame, PixelBox(*box), edges[0], rtol)[2]
+    if one[0, PART] != 0.0 or one[1, PART] != 0.0:
+        assert tuple(one[:2, PART]) == single_cut(frame, PixelBox(*box), edges[0], rtol)[:2]
+
+
+@pytest.mark.parametrize("rtol", (1e-6, 1e-10))
+def test_pixel_of_short_bins_is_served_by_assembly_and_matches_the_references(rtol, monkeypatch):
+    """A pixel over which four impulse bins' edges pass: assembly's first pass serves it (the general routes are
+    never called), every entry within rtol of QUADPACK's and of the adaptive route's."""
+    name, source, sensor, pixel, _ = SEVERAL[0]
+    box = pixel_box(1.0, PIXELS, pixel)
+    lowest, highest = _range(box, source, sensor)
+    period = (highest - lowest) / 3.5
+    scene = Scene(pixels=PIXELS, source=source, sensors=[sensor],
+                  sampling=Sampling(bin_width_opl=period, start_opl=lowest + 0.2 * period - 10 * period, count=30))
+
+    def refused(*arguments):
+        raise AssertionError("the general routes were asked")
+
+    with monkeypatch.context() as patch:
+        patch.setattr(system, "run_left", refused)
+        first, values = pair_entries(scene, 0, pixel, method="auto", tolerance=rtol)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadratureWarning)
+        adaptive_first, adaptive = pair_entries(scene, 0, pixel, method="adaptive", tolerance=TOLERANCE, taylor=False)
+    assert first == adaptive_first and len(values) == len(adaptive) == 5
+    assert np.all(np.abs(values - adaptive) <= rtol * adaptive + AGREEMENT * np.max(adaptive))
+    for i, value in enumerate(values):
+        kernel, breakpoints = bin_kernel(scene.illumination, scene.sampling.start_opl, period, first + i)
+        reference = scene.intensity * pixel_entry(box, source, sensor, kernel, breakpoints)
+        assert abs(value - reference) <= rtol * abs(reference) + AGREEMENT * np.max(adaptive), (i, value, reference)

@@ -1,6 +1,6 @@
 """The exact Jacobian's cost against ``forward`` and against central differences, with the error of each.
 
-    python benchmarks/bench_jacobian.py [SCENE ...] [--repeats 5]
+    python benchmarks/bench_jacobian.py [SCENE ...] [--repeats 5] [--gaussian FWHM]
 
 For each plane scene (default: examples/paper.toml, K = 16, M = 50, and
 examples/image.toml, K = 16, M = 32) and its 3K + 4 parameters
@@ -13,7 +13,8 @@ done whatever the load), and of one ``route="differences"`` Jacobian
 each, per (sensor, key) column relative to its largest entry, against
 Richardson differences with a fine step (2e-5 of the scene's extent, good
 to ~2e-6: tests/analytic/test_jacobian_exact.py) on the source's three keys,
-sensor 5's three and ``sampling.start``. Prints a Markdown table and the
+sensor 5's three and ``sampling.start``. ``--gaussian FWHM`` replaces each scene's illumination by a
+Gaussian pulse of that FWHM (metres; the exact route of the other waveforms). Prints a Markdown table and the
 machine's load (the machine may be shared).
 """
 
@@ -28,6 +29,7 @@ import numpy as np
 
 from analytic.operator.derivatives import jacobian
 from analytic.operator.matrix_free import forward
+from analytic.scenes.common import Illumination
 from analytic.scenes.scene_file import scene_of
 
 
@@ -53,6 +55,8 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("scenes", nargs="*", default=["examples/paper.toml", "examples/image.toml"])
     parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--gaussian", type=float, default=None, metavar="FWHM",
+                        help="a Gaussian pulse of this FWHM (metres) instead of the scenes' illumination")
     args = parser.parse_args(argv)
     print(f"machine: {platform.node()}, {os.cpu_count()} CPUs, load {os.getloadavg()[0]:.2f} "
           f"(1 min average, at the start)")
@@ -61,6 +65,8 @@ def main(argv=None) -> int:
     print("|---|---|---|---|---|---|---|---|---|")
     for path in args.scenes:
         scene = scene_of(path)
+        if args.gaussian is not None:
+            scene = scene.replace(illumination=Illumination(waveform="gaussian", fwhm=args.gaussian))
         count = scene.sensor_count
         keys = ([f"source.position.{a}" for a in "xyz"]
                 + [f"sensors.positions.{k}.{a}" for k in range(count) for a in "xyz"] + ["sampling.start"])
@@ -78,7 +84,8 @@ def main(argv=None) -> int:
                           for j, (i, row) in enumerate(zip(chosen, rows)))
         error_differences = max(_column_error(differences[row, :, i], reference[row, :, j])
                                 for j, (i, row) in enumerate(zip(chosen, rows)))
-        print(f"| {path} | {count}, {scene.pixels}, {scene.sampling.count} | {len(keys)} | "
+        name = path if args.gaussian is None else f"{path}, Gaussian {args.gaussian:g} m"
+        print(f"| {name} | {count}, {scene.pixels}, {scene.sampling.count} | {len(keys)} | "
               f"{seconds_forward:.4f} ({cpu_forward:.4f}) | {seconds_exact:.4f} ({cpu_exact:.4f}) | "
               f"{seconds_exact / seconds_forward:.1f} ({cpu_exact / cpu_forward:.1f}) | "
               f"{seconds_differences:.1f} | {error_exact:.1e} | {error_differences:.1e} |")

@@ -1,6 +1,6 @@
 """The exact Jacobian's cost against ``forward`` and against central differences, with the error of each.
 
-    python benchmarks/bench_jacobian.py [SCENE ...] [--repeats 5] [--baseline REF]
+    python benchmarks/bench_jacobian.py [SCENE ...] [--repeats 5] [--baseline REF] [--gaussian FWHM]
 
 For each plane scene (default: examples/paper.toml, K = 16, M = 50, and
 examples/image.toml, K = 16, M = 32) and its 3K + 4 parameters
@@ -13,7 +13,8 @@ done whatever the load), and of one ``route="differences"`` Jacobian
 each, per (sensor, key) column relative to its largest entry, against
 Richardson differences with a fine step (2e-5 of the scene's extent, good
 to ~2e-6: tests/analytic/test_jacobian_exact.py) on the source's three keys,
-sensor 5's three and ``sampling.start``. Prints a Markdown table and the
+sensor 5's three and ``sampling.start``. ``--gaussian FWHM`` replaces each scene's illumination by a
+Gaussian pulse of that FWHM (metres; the exact route of the other waveforms). Prints a Markdown table and the
 machine's load (the machine may be shared). ``--baseline REF`` (a git
 revision, e.g. ``main``) times the same two calls of that revision's
 ``analytic`` (``git archive`` into a temporary folder, in a subprocess, kernels
@@ -37,6 +38,7 @@ import numpy as np
 
 from analytic.operator.derivatives import jacobian
 from analytic.operator.matrix_free import forward
+from analytic.scenes.common import Illumination
 from analytic.scenes.scene_file import scene_of
 
 
@@ -58,14 +60,19 @@ def _keys(scene):
             + [f"sensors.positions.{k}.{a}" for k in range(scene.sensor_count) for a in "xyz"] + ["sampling.start"])
 
 
-def _timings(path, repeats):
-    """(forward wall, forward CPU, jacobian wall, jacobian CPU), seconds, best of ``repeats``."""
+def _scene(path, gaussian=None):
     scene = scene_of(path)
+    return scene if gaussian is None else scene.replace(illumination=Illumination(waveform="gaussian", fwhm=gaussian))
+
+
+def _timings(path, repeats, gaussian=None):
+    """(forward wall, forward CPU, jacobian wall, jacobian CPU), seconds, best of ``repeats``."""
+    scene = _scene(path, gaussian)
     keys = _keys(scene)
     return (*_best(lambda: forward(scene), repeats), *_best(lambda: jacobian(scene, keys), repeats))
 
 
-def _baseline_timings(revision, paths, repeats):
+def _baseline_timings(revision, paths, repeats, gaussian=None):
     """:func:`_timings` of each scene with ``revision``'s ``analytic`` (a subprocess on a ``git archive`` copy)."""
     root = Path(__file__).resolve().parent.parent
     with tempfile.TemporaryDirectory(prefix="bench-jacobian-") as folder:
@@ -73,7 +80,8 @@ def _baseline_timings(revision, paths, repeats):
                                  capture_output=True).stdout
         subprocess.run(["tar", "-x", "-C", folder], input=archive, check=True)
         environment = dict(os.environ, PYTHONPATH=folder)
-        result = subprocess.run([sys.executable, __file__, *paths, "--repeats", str(repeats), "--timings-only"],
+        result = subprocess.run([sys.executable, __file__, *paths, "--repeats", str(repeats), "--timings-only",
+                                 *([] if gaussian is None else ["--gaussian", str(gaussian)])],
                                 env=environment, check=True, capture_output=True, text=True)
     return json.loads(result.stdout)
 
@@ -90,9 +98,11 @@ def main(argv=None) -> int:
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--baseline", metavar="REF", help="also time this git revision's analytic (e.g. main)")
     parser.add_argument("--timings-only", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--gaussian", type=float, default=None, metavar="FWHM",
+                        help="a Gaussian pulse of this FWHM (metres) instead of the scenes' illumination")
     args = parser.parse_args(argv)
     if args.timings_only:       # the baseline's subprocess: the timings as JSON, nothing else
-        print(json.dumps({path: _timings(path, args.repeats) for path in args.scenes}))
+        print(json.dumps({path: _timings(path, args.repeats, args.gaussian) for path in args.scenes}))
         return 0
     print(f"machine: {platform.node()}, {os.cpu_count()} CPUs, load {os.getloadavg()[0]:.2f} "
           f"(1 min average, at the start)")
@@ -100,10 +110,10 @@ def main(argv=None) -> int:
           "error exact | error differences |")
     print("|---|---|---|---|---|---|---|---|---|")
     for path in args.scenes:
-        scene = scene_of(path)
+        scene = _scene(path, args.gaussian)
         count = scene.sensor_count
         keys = _keys(scene)
-        seconds_forward, cpu_forward, seconds_exact, cpu_exact = _timings(path, args.repeats)
+        seconds_forward, cpu_forward, seconds_exact, cpu_exact = _timings(path, args.repeats, args.gaussian)
         exact = jacobian(scene, keys)
         started = time.perf_counter()
         differences = jacobian(scene, keys, route="differences")
@@ -116,13 +126,14 @@ def main(argv=None) -> int:
                           for j, (i, row) in enumerate(zip(chosen, rows)))
         error_differences = max(_column_error(differences[row, :, i], reference[row, :, j])
                                 for j, (i, row) in enumerate(zip(chosen, rows)))
-        print(f"| {path} | {count}, {scene.pixels}, {scene.sampling.count} | {len(keys)} | "
+        name = path if args.gaussian is None else f"{path}, Gaussian {args.gaussian:g} m"
+        print(f"| {name} | {count}, {scene.pixels}, {scene.sampling.count} | {len(keys)} | "
               f"{seconds_forward:.4f} ({cpu_forward:.4f}) | {seconds_exact:.4f} ({cpu_exact:.4f}) | "
               f"{seconds_exact / seconds_forward:.1f} ({cpu_exact / cpu_forward:.1f}) | "
               f"{seconds_differences:.1f} | {error_exact:.1e} | {error_differences:.1e} |")
     if args.baseline:
-        current = {path: _timings(path, args.repeats) for path in args.scenes}
-        baseline = _baseline_timings(args.baseline, args.scenes, args.repeats)
+        current = {path: _timings(path, args.repeats, args.gaussian) for path in args.scenes}
+        baseline = _baseline_timings(args.baseline, args.scenes, args.repeats, args.gaussian)
         print(f"\nthis code and {args.baseline}, timed one after the other (load {os.getloadavg()[0]:.2f}):\n")
         print("| scene | code | forward s (CPU s) | jacobian s (CPU s) | ratio (CPU) |")
         print("|---|---|---|---|---|")

@@ -23,11 +23,13 @@ Python side (:mod:`analytic.operator.system`, :mod:`analytic.operator.window`,
 - :mod:`.routes`: one (pair, pixel)'s entries of A by each quadrature route;
 - :mod:`.assembly`: A's entries counted and filled, block by block, straight into CSR;
 - :mod:`.offsets`: a translation-invariant capture's A, or y = A f, from one run per pixel offset;
-- :mod:`.sensitivity`: the cell integrals of exact derivatives (amplitudes and their coarea at bin edges).
+- :mod:`.sensitivity`: the cell integrals of exact derivatives (amplitudes and their coarea at bin edges);
+- :mod:`.sensitivity_waveform`: the same derivatives under any other waveform (cells cut at its kinks' isochrones).
 """
 
 import lazy_loader
 
 __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submodules=[
     "cache", "formulas", "pieces", "special", "attenuation", "isochrone", "conics", "bins", "quadrature", "arcs", "taylor",
-    "moments", "strips", "cuts", "routes", "assembly", "offsets", "sensitivity"])
+    "moments", "strips", "cuts", "routes", "assembly", "offsets", "sensitivity",
+    "sensitivity_waveform"])

@@ -3,19 +3,19 @@
 :func:`jacobian` returns ∂y/∂θ for parameters named by scene-file keys
 (:mod:`.parameters`), by one of two routes (docs/derivatives.md):
 
-- ``"exact"`` (default): the interior and bin-edge terms
-  (:mod:`.sensitivity`) for a plane scene with the impulse illumination:
-  ``source.position.*``, ``sensors.positions.k.*``, ``sampling.start``,
-  the plane's rigid motions (``plane.translation.*``, ``plane.rotation.*``:
-  the points moving the other way, so the same columns combined) and
-  ``plane.size`` (by the model's scaling law, from the same columns and
-  the impulse response at the edges). Two parameters are exact by
-  linearity for every scene: a reflectance scale (∂y/∂s = y) and the
-  source's intensity (∂y/∂I = y / I). A relay wall's ``laser.position.*``
-  and ``sensor.position.*`` are exact through the laser leg's factor
-  (:mod:`.relay_wall_legs`) unless the end legs are counted. Every other
-  key (every key of a waveform other than the impulse, the relay wall's
-  other geometric keys) still takes the differences below.
+- ``"exact"`` (default): the interior and bin-edge terms for a plane
+  scene, every waveform (:mod:`.sensitivity` for the impulse,
+  :mod:`.waveform_sensitivity` for the others): ``source.position.*``,
+  ``sensors.positions.k.*``, ``sampling.start``, the plane's rigid motions
+  (``plane.translation.*``, ``plane.rotation.*``: the points moving the
+  other way, so the same columns combined) and ``plane.size`` (by the
+  model's scaling law, from the same columns and the moment -∫ f a d κ_n').
+  Two parameters are exact by linearity for every scene: a reflectance
+  scale (∂y/∂s = y) and the source's intensity (∂y/∂I = y / I). A relay
+  wall's ``laser.position.*`` and ``sensor.position.*`` are exact through
+  the laser leg's factor (:mod:`.relay_wall_legs`) unless the end legs are
+  counted. Every other key (``illumination.*``, the relay wall's other
+  geometric keys) still takes the differences below.
 - ``"differences"``: Richardson-extrapolated central differences of the
   model assembled at tolerance :data:`TOLERANCE`, for every key (the tests'
   independent reference).
@@ -30,17 +30,19 @@ import numpy as np
 
 from ..errors import OptionError
 from ..scenes.scene_file import scene_of
+from ..waveforms import make_waveform
 from .parameters import Parameter, parameter, parameters, rotation, value_of, with_values
 from .general_routes import progress_bar
 from .matrix_free import forward
 from .relay_wall_legs import leg_column, supports_leg
-from .sensitivity import position_derivatives, supports
+from .sensitivity import position_derivatives
+from .waveform_sensitivity import waveform_derivatives
 
 __all__ = ["jacobian", "derivative", "exact_keys", "ROUTES", "TOLERANCE", "STEP"]
 
 #: The routes :func:`jacobian` takes.
 ROUTES = ("exact", "differences")
-#: The stems the exact route covers (for the scenes :func:`analytic.operator.sensitivity.supports`).
+#: The stems the exact route covers (plane scenes, :func:`_exact_plane`).
 _EXACT_STEMS = ("source.position", "sensors.positions", "sampling.start", "plane.translation", "plane.rotation",
                 "plane.size")
 
@@ -106,9 +108,28 @@ def _differences(scene, item: Parameter, step: float, centre=None):
 _SIZE_HEIGHT = 1e-3
 
 
+def _exact_plane(scene) -> bool:
+    """A plane scene whose waveform one of the exact routes takes (every one but a step S other than the impulse)."""
+    if scene.kind != "plane":
+        return False
+    if scene.illumination.waveform == "impulse":
+        return True
+    return make_waveform(scene.illumination, scene.sampling.bin_width_opl).terms.degree != 0
+
+
+def _position_parts(scene, progress: bool):
+    """(y, ∂y/∂p_s, ∂y/∂p_k, ∂y/∂t_0, moment) of :func:`.waveform_sensitivity.waveform_derivatives`, any waveform."""
+    if scene.illumination.waveform != "impulse":
+        return waveform_derivatives(scene, progress=progress)
+    y, source, sensor, start, response = position_derivatives(scene, progress=progress)
+    edges = np.asarray(scene.sampling.edges, dtype=np.float64)
+    # -I ∫ f a d κ_n'(d) dx with κ_n' = δ(d - t_n) - δ(d - t_{n+1}): t_{n+1} G(t_{n+1}) - t_n G(t_n)
+    return y, source, sensor, start, edges[1:] * response[:, 1:] - edges[:-1] * response[:, :-1]
+
+
 def exact_keys(scene, items) -> list[bool]:
     """Whether each :class:`Parameter` takes the exact route in this scene (the linear ones always do)."""
-    plane = supports(scene)
+    plane = _exact_plane(scene)
     if plane:
         heights = np.vstack([np.asarray(scene.source)[None, :], np.asarray(scene.sensors)])[:, 2]
         high = heights.min() >= _SIZE_HEIGHT * _scale(scene, parameter(scene, "source.position.x"))
@@ -118,7 +139,7 @@ def exact_keys(scene, items) -> list[bool]:
 
 def _exact_column(scene, item: Parameter, parts) -> np.ndarray:
     """One column from :func:`analytic.operator.sensitivity.position_derivatives`' ``parts``."""
-    y, source, sensor, start, response = parts
+    y, source, sensor, start, moment = parts
     stem, index = item.stem, item.index
     if stem == "source.position":
         return source[..., index[0]]
@@ -130,11 +151,10 @@ def _exact_column(scene, item: Parameter, parts) -> np.ndarray:
         return start
     points = np.vstack([np.asarray(scene.source, dtype=np.float64)[None, :], np.asarray(scene.sensors)])
     if stem == "plane.size":
-        # scaling every length by λ (plane, points, bin edges) scales y by λ^-2 (a ~ λ^-4, dx ~ λ²), so
-        # L ∂y/∂L = -2 y - Σ_points p·∂y/∂p - Σ_edges t_e ∂y/∂t_e, with ∂y_n/∂t_n = -G(t_n), ∂y_n/∂t_{n+1} = G(t_{n+1})
-        edges = np.asarray(scene.sampling.edges, dtype=np.float64)
-        moved = (np.einsum("knj,j->kn", source, points[0]) + np.einsum("knj,kj->kn", sensor, points[1:])
-                 + edges[1:] * response[:, 1:] - edges[:-1] * response[:, :-1])
+        # scaling every length by λ (plane, points, bin edges, the waveform's time axis) scales y by λ^-2
+        # (a ~ λ^-4, dx ~ λ²), so L ∂y/∂L = -2 y - Σ_points p·∂y/∂p - [the edges' and waveform's share], the
+        # last -I ∫ f a d κ_n'(d) dx (κ_n(d) = S(t_{n+1} - d) - S(t_n - d) depends on them through t_e - d alone)
+        moved = (np.einsum("knj,j->kn", source, points[0]) + np.einsum("knj,kj->kn", sensor, points[1:]) + moment)
         return -(2.0 * y + moved) / float(scene.size)
     # a rigid motion of the plane is every point moving the other way: dp/dθ of each point, then the chain rule
     if stem == "plane.translation":
@@ -207,7 +227,7 @@ def jacobian(scene, keys, *, step: float | None = None, route: str = "exact", pr
             y = forward(scene) if y is None else y
             columns.append(leg_column(scene, item.stem, item.index[0], y))
         elif closed:
-            parts = position_derivatives(scene, progress=progress) if parts is None else parts
+            parts = _position_parts(scene, progress) if parts is None else parts
             columns.append(_exact_column(scene, item, parts))
         else:
             if errors and centre is None:

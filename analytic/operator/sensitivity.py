@@ -47,7 +47,7 @@ from .blocks import run_blocks
 from .general_routes import progress_bar
 from .system import QuadratureWarning
 
-__all__ = ["position_derivatives", "supports", "pair_geometry"]
+__all__ = ["position_derivatives", "supports", "pair_geometry", "run_sensors"]
 
 #: Cells are at most this fraction of their distance to a foot's peak wide.
 _CELL_OF_HEIGHT = 0.25
@@ -109,6 +109,19 @@ def pair_geometry(source, sensor, attenuation: str) -> PairGeometry:
                         float(np.hypot(distance, source[2] - sensor[2])))
 
 
+def run_sensors(kernel, arguments, count: int, rtol: float, progress: bool) -> None:
+    """``kernel(*arguments(k))`` for each sensor k (threads, a progress bar); warns of pieces left unconverged."""
+    bar = progress_bar(progress, count, "exact derivatives", "sensor")
+    try:
+        failures = sum(run_blocks(kernel, arguments, count, bar=bar))
+    finally:
+        if bar is not None:
+            bar.close()
+    if failures:
+        warnings.warn(f"{failures} cell integrals of the exact derivatives stopped refining before reaching "
+                      f"tolerance {rtol:g}", QuadratureWarning, stacklevel=4)
+
+
 def position_derivatives(scene, *, progress: bool = False):
     """y and its exact derivatives for every position coordinate and the time zero, impulse illumination.
 
@@ -142,15 +155,7 @@ def position_derivatives(scene, *, progress: bool = False):
         return (pair_geometry(scene.source, scene.sensors[k], scene.attenuation), cells, edges, rtol,
                 sums[k, 0], sums[k, 1])
 
-    bar = progress_bar(progress, count, "exact derivatives", "sensor")
-    try:
-        failures = sum(run_blocks(pair_sums, arguments, count, bar=bar))
-    finally:
-        if bar is not None:
-            bar.close()
-    if failures:
-        warnings.warn(f"{failures} cell integrals of the exact derivatives stopped refining before reaching "
-                      f"tolerance {rtol:g}", QuadratureWarning, stacklevel=3)
+    run_sensors(pair_sums, arguments, count, rtol, progress)
     F, H = sums[:, 0], sums[:, 1]
     interior = np.diff(F, axis=1)                  # F(t_{n+1}) - F(t_n)
     moving = H[:, :-1] - H[:, 1:]                  # H(t_n) - H(t_{n+1})

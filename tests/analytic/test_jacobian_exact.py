@@ -19,11 +19,11 @@
 import numpy as np
 import pytest
 
-from analytic.attenuation import attenuation
 from analytic.operator.derivatives import jacobian
 from analytic.operator.matrix_free import forward
 from analytic.operator.sensitivity import position_derivatives
 from analytic.scenes.common import Sampling, default_scene
+from point_plane import centre_and_spread, expected_columns, trapezoid
 
 _POSITIONS = ["source.position.x", "source.position.y", "source.position.z", "sensors.positions.{k}.x",
               "sensors.positions.{k}.y", "sensors.positions.{k}.z", "sampling.start"]
@@ -123,14 +123,6 @@ def test_the_plane_growing_on_a_sensor_near_it(mode):
 # -- a point-like plane, by hand ------------------------------------------------------------------------------
 
 
-def _trapezoid(tau, alpha, beta):
-    """Density and distribution of g_x u + g_y v, u, v uniform on [-s/2, s/2] (alpha = |g_x| s/2, beta = |g_y| s/2)."""
-    corners = [(1.0, alpha + beta), (-1.0, alpha - beta), (-1.0, beta - alpha), (1.0, -alpha - beta)]
-    area = sum(sign * np.maximum(tau + shift, 0.0) ** 2 / 2.0 for sign, shift in corners)
-    slope = sum(sign * np.maximum(tau + shift, 0.0) for sign, shift in corners)
-    return slope / (4.0 * alpha * beta), area / (4.0 * alpha * beta)
-
-
 @pytest.mark.parametrize("mode", ["lambertian", "paper"])
 def test_a_point_like_plane_against_its_closed_form(mode):
     side = 2e-4
@@ -142,27 +134,9 @@ def test_a_point_like_plane_against_its_closed_form(mode):
                           sensors=[tuple(sensor)], attenuation=mode, noise=None,
                           sampling=Sampling(bin_width_opl=side / 3.0, start_opl=length - 1.3 * side, count=8))
     computed = jacobian(scene, [key.format(k=0) for key in _POSITIONS])[0]
-    gradient = ((centre - source) / np.linalg.norm(centre - source)
-                + (centre - sensor) / np.linalg.norm(centre - sensor))[:2]
-    alpha, beta = np.abs(gradient) * side / 2.0
-    edges = scene.sampling.edges - length
-    density, distribution = _trapezoid(edges, alpha, beta)
-    share, moving = np.diff(distribution), density[:-1] - density[1:]
-
-    def a(p_source, p_sensor):
-        return attenuation(centre[None, :2], p_source, p_sensor, mode)[0]
-
-    expected = np.zeros((scene.sampling.count, 7))
-    h = 1e-6
-    for j in range(3):
-        step = np.eye(3)[j] * h
-        partial_source = (a(source + step, sensor) - a(source - step, sensor)) / (2 * h)
-        partial_sensor = (a(source, sensor + step) - a(source, sensor - step)) / (2 * h)
-        along_source = (source - centre)[j] / np.linalg.norm(source - centre)     # ∂L/∂p_s
-        along_sensor = (sensor - centre)[j] / np.linalg.norm(sensor - centre)
-        expected[:, j] = partial_source * share + a(source, sensor) * along_source * moving
-        expected[:, 3 + j] = partial_sensor * share + a(source, sensor) * along_sensor * moving
-    expected[:, 6] = -a(source, sensor) * moving                                   # every edge moving by +dt
-    expected *= scene.intensity * side * side
+    _, length, alpha, beta = centre_and_spread(scene)
+    # the impulse: K_n the share of the plane in bin n, K'_n = p(t_n - L) - p(t_{n+1} - L)
+    density, distribution = trapezoid(scene.sampling.edges - length, alpha, beta)
+    expected = expected_columns(scene, np.diff(distribution), density[:-1] - density[1:])
     errors = np.abs(computed - expected).max(axis=0) / np.abs(expected).max(axis=0)
     assert errors.max() < 2e-3, errors

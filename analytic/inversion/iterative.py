@@ -16,7 +16,12 @@ stop, the λ near the discrepancy one a loose one (docs/tal.md: a 64 x 64 relay-
 
 The discrepancy rule needs the residual only where it crosses m σ², and the residual grows with λ: its
 sweep stops at the first λ (from the top) whose residual is below m σ², and the λ below it are not
-solved (NaN in the result's residuals and criterion). A progress bar (``progress``) counts the λ solved
+solved (NaN in the result's residuals and criterion). On the default grid (no grid given), the rule does not
+sweep at all but searches the crossing (:meth:`IterativeSolver.discrepancy_search`): log ‖A f − y‖² is
+close to linear in log λ near it, so a secant from the largest λ down (steps of at most
+:data:`SEARCH_STEP_DECADES`), then regula falsi (Illinois) inside the bracket, each solve warm-started by the
+nearest one, reach |‖A f − y‖² − m σ²| ≤ :data:`CROSSING_FRACTION` σ² √(2m), half the noise's own spread,
+in a handful of solves. A progress bar (``progress``) counts the λ solved
 and the iterations; Ctrl-C stops between two products with A (each well under a second at that size).
 """
 
@@ -31,13 +36,20 @@ import scipy.sparse.linalg
 from .laplacian import dct2, idct2, laplacian_eigenvalues
 from .result import Problem
 
-__all__ = ["IterativeSolver", "NOISE_FRACTION"]
+__all__ = ["IterativeSolver", "NOISE_FRACTION", "CROSSING_FRACTION", "SEARCH_STEP_DECADES"]
 
 #: LSQR iterations of the first run of a solve stopped by the noise (then twice as many each run).
 _FIRST_RUN = 10
 #: κ: a solve with σ known stops once its ‖A f − y‖² + λ ‖D f‖² can exceed the converged one by at most
 #: κ σ² √(2m) (the noise's ‖e‖² varies by σ² √(2m)).
 NOISE_FRACTION = 0.1
+#: The discrepancy search's λ is accepted once |‖A f − y‖² − m σ²| ≤ this × σ² √(2m) (the noise's ‖e‖² spread).
+CROSSING_FRACTION = 0.5
+#: Largest step of the discrepancy search down from the largest λ before the crossing is bracketed (decades):
+#: a solve far below the crossing costs many iterations.
+SEARCH_STEP_DECADES = 2.0
+#: Most solves of one discrepancy search (each a warm-started LSQR).
+_MOST_SEARCH_SOLVES = 40
 
 
 class IterativeSolver:
@@ -59,7 +71,8 @@ class IterativeSolver:
 
     def __init__(self, problem: Problem, *, tolerance=1e-10, iteration_limit=None, sigma=None, progress=False):
         matrix, y, pixels = problem.matrix, problem.y, problem.pixels
-        self.matrix = matrix if scipy.sparse.issparse(matrix) else np.asarray(matrix, dtype=np.float64)
+        self.matrix = (matrix if scipy.sparse.issparse(matrix) or isinstance(matrix, scipy.sparse.linalg.LinearOperator)
+                       else np.asarray(matrix, dtype=np.float64))
         self.y = y
         self.live = problem.live
         self.pixels = pixels
@@ -210,6 +223,82 @@ class IterativeSolver:
                 self._bar.close()
                 self._bar = None
         return solutions, traces, failed
+
+    def discrepancy_search(self, low: float, high: float, target: float):
+        """The discrepancy λ in [low, high] by a secant search (module docstring), σ known.
+
+        Returns
+        -------
+        (lambdas, solutions, index, failed)
+            Every λ solved (ascending), their solutions, the index of the chosen one (its residual within
+            :data:`CROSSING_FRACTION` σ² √(2m) of ``target``, or the end of the range nearest the crossing
+            when the residual stays on one side of it over the whole range, or the closest when the solves
+            run out), and how many solves stopped at the iteration limit.
+        """
+        slack = CROSSING_FRACTION * self.sigma**2 * math.sqrt(2.0 * self.measurements)
+        solved = {}                       # log λ -> (solution, log ‖A f − y‖² − log m σ², stop code)
+
+        def solve(t):
+            start = None if not solved else solved[min(solved, key=lambda s: abs(s - t))][0]
+            v, stop = self.solve(math.exp(t), start=start)
+            residual = self.squared_residual_of(v)
+            solved[t] = (v, math.log(max(residual, np.finfo(float).tiny)) - math.log(target), stop)
+            if self._bar is not None:
+                self._bar.update(1)
+                self._bar.set_postfix_str(f"{self.iterations} iterations, λ = {math.exp(t):.3g}, "
+                                          f"‖A f − y‖² / m σ² = {residual / target:.4g}", refresh=True)
+            return abs(residual - target) <= slack
+
+        def result(t):
+            keys = sorted(solved)
+            return (np.exp(keys), np.array([solved[k][0] for k in keys]), keys.index(t),
+                    sum(solved[k][2] == 7 for k in keys))
+
+        bottom, top = math.log(low), math.log(high)
+        step = SEARCH_STEP_DECADES * math.log(10.0)
+        if self.progress:
+            from tqdm import tqdm
+
+            self._bar = tqdm(desc="reconstruct: discrepancy λ search (lsqr)", unit="solve", leave=False)
+        try:
+            if solve(top) or solved[top][1] <= 0 or top == bottom:
+                return result(top)
+            above = top                   # the smallest log λ whose residual is above the target
+            while True:                   # down from the top, by secant steps of at most `step`
+                previous = [t for t in solved if t > above]
+                guess = above - step
+                if previous:
+                    slope = (solved[previous[0]][1] - solved[above][1]) / (previous[0] - above)
+                    if slope > 0:
+                        guess = max(guess, above - solved[above][1] / slope)
+                t = max(bottom, min(guess, above - 0.1 * step))
+                if solve(t):
+                    return result(t)
+                if solved[t][1] < 0:
+                    below = t
+                    break
+                above = t
+                if t == bottom or len(solved) >= _MOST_SEARCH_SOLVES:
+                    return result(t)
+            side = 0                      # regula falsi, Illinois: halve the value of an end kept twice
+            h_below, h_above = solved[below][1], solved[above][1]
+            while len(solved) < _MOST_SEARCH_SOLVES and above - below > 1e-9:
+                t = (below * h_above - above * h_below) / (h_above - h_below)
+                if solve(t):
+                    return result(t)
+                if solved[t][1] < 0:
+                    below, h_below = t, solved[t][1]
+                    h_above = h_above / 2 if side == -1 else h_above
+                    side = -1
+                else:
+                    above, h_above = t, solved[t][1]
+                    h_below = h_below / 2 if side == 1 else h_below
+                    side = 1
+            return result(min(solved, key=lambda s: abs(solved[s][1])))
+        finally:
+            if self._bar is not None:
+                self._bar.close()
+                self._bar = None
 
     def squared_residual_of(self, v, live_only=False):
         """||A f - y||² of the solution v, over every row or over the live rows (NaN for a λ not solved)."""

@@ -61,7 +61,11 @@ class OffsetOperator(scipy.sparse.linalg.LinearOperator):
         A's non-zero entries (as the sparse A of the same plan holds them).
     largest_entry : float
         max |A| (after ``factor``).
+    translation_invariant : bool
+        True: AᵀA is close to a convolution (the reconstruction preconditions by it).
     """
+
+    translation_invariant = True
 
     def __init__(self, plan: OffsetPlan, runs: tuple, *, factor: float = 1.0):
         pixels, bins, virtual = plan.pixels, plan.bins, plan.virtual.grid.pixels
@@ -161,8 +165,11 @@ class OffsetOperator(scipy.sparse.linalg.LinearOperator):
         return _Adjoint(self)
 
     def toarray(self) -> np.ndarray:
-        """A dense (for small captures only: the svd method's copy)."""
-        return np.column_stack([self.matvec(column) for column in np.eye(self.shape[1])])
+        """A dense, from the same runs as the sparse A (for small captures only: the svd method's copy)."""
+        from .offsets import offset_matrix
+
+        plan = OffsetPlan(*self.plan)._replace(scales=self.scales)
+        return offset_matrix(plan, self.runs, 8 * self.shape[0] * self.shape[1] + 2**20).toarray()
 
 
 class _Adjoint(scipy.sparse.linalg.LinearOperator):

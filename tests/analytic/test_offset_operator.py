@@ -47,6 +47,7 @@ def test_the_fft_products_equal_the_sparse_a_of_the_same_capture(case, rng):
         assert np.max(np.abs(operator @ f - y)) <= 1e-13 * np.max(np.abs(y))
         assert np.max(np.abs(operator.T @ r - x)) <= 1e-13 * np.max(np.abs(x))
     assert operator.nnz == matrix.nnz
+    assert np.array_equal(operator.toarray(), matrix.toarray())
     assert operator.largest_entry == pytest.approx(np.max(np.abs(matrix.data)), rel=1e-15)
     rows, columns = operator.row_and_column_seen()
     assert np.array_equal(rows, np.diff(matrix.indptr) > 0)
@@ -76,3 +77,26 @@ def test_reconstructing_through_the_operator_equals_reconstructing_through_a(rng
     reference = reconstruct(matrix, y, scene.pixels, rule="discrepancy", sigma=sigma, method="svd")
     assert svd.lam == pytest.approx(reference.lam, rel=1e-8)
     assert svd.rank == reference.rank and svd.effective_rank == reference.effective_rank
+
+
+def test_solves_through_the_operator_stopped_by_the_noise_stay_within_their_margin(rng):
+    # with σ known the operator's solves run preconditioned (analytic.inversion.iterative): each must still leave
+    # a stacked residual within κ σ² √(2m) of the exact (svd) one, and the discrepancy search must land on m σ²
+    from analytic.inversion.iterative import CROSSING_FRACTION, NOISE_FRACTION
+
+    scene = _scene(**CASES["whole pixels"])
+    matrix = system_matrix(scene)
+    operator = capture_operator(scene)
+    clean = matrix @ scene.reflectance.ravel()
+    sigma = 1e-3 * np.max(clean)
+    y = clean + sigma * rng.standard_normal(clean.size)
+    margin = NOISE_FRACTION * sigma**2 * np.sqrt(2 * y.size)
+    for lam in (1e-2, 1e-4, 1e-6):
+        lam = lam * np.max(matrix.data) ** 2
+        exact = reconstruct(matrix, y, scene.pixels, rule=lam, method="svd")
+        stopped = reconstruct(operator, y, scene.pixels, rule=lam, method="lsqr", sigma=sigma)
+        floor = exact.residual_norm**2 + lam * exact.seminorm**2
+        assert -1e-9 * floor <= stopped.residual_norm**2 + lam * stopped.seminorm**2 - floor <= margin
+    searched = reconstruct(operator, y, scene.pixels, rule="discrepancy", sigma=sigma, method="lsqr")
+    assert not searched.warnings
+    assert abs(searched.residual_norm**2 - y.size * sigma**2) <= CROSSING_FRACTION * sigma**2 * np.sqrt(2 * y.size)

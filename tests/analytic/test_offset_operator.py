@@ -63,13 +63,17 @@ def test_a_capture_the_offsets_cannot_serve_gives_no_operator():
     assert capture_operator(scene) is None
 
 
-def test_reconstructing_through_the_operator_equals_reconstructing_through_a(rng):
-    scene = _scene(**CASES["off centre"])
+def _noisy(case, rng):
+    """(scene, sparse A, operator, y with noise of σ, σ = 1e-3 of the brightest sample)."""
+    scene = _scene(**CASES[case])
     matrix = system_matrix(scene)
-    operator = capture_operator(scene)
-    y = matrix @ scene.reflectance.ravel()
-    sigma = 1e-3 * np.max(y)
-    y = y + sigma * rng.standard_normal(y.size)
+    clean = matrix @ scene.reflectance.ravel()
+    sigma = 1e-3 * np.max(clean)
+    return scene, matrix, capture_operator(scene), clean + sigma * rng.standard_normal(clean.size), sigma
+
+
+def test_reconstructing_through_the_operator_equals_reconstructing_through_a(rng):
+    scene, matrix, operator, y, sigma = _noisy("off centre", rng)
     by_a = reconstruct(matrix, y, scene.pixels, rule=1e-3 * np.max(matrix.data) ** 2, method="lsqr")
     by_operator = reconstruct(operator, y, scene.pixels, rule=by_a.lam, method="lsqr")
     assert np.max(np.abs(by_operator.image - by_a.image)) <= 1e-8 * np.max(np.abs(by_a.image))
@@ -84,12 +88,7 @@ def test_solves_through_the_operator_stopped_by_the_noise_stay_within_their_marg
     # a stacked residual within κ σ² √(2m) of the exact (svd) one, and the discrepancy search must land on m σ²
     from analytic.inversion.iterative import CROSSING_FRACTION, NOISE_FRACTION
 
-    scene = _scene(**CASES["whole pixels"])
-    matrix = system_matrix(scene)
-    operator = capture_operator(scene)
-    clean = matrix @ scene.reflectance.ravel()
-    sigma = 1e-3 * np.max(clean)
-    y = clean + sigma * rng.standard_normal(clean.size)
+    scene, matrix, operator, y, sigma = _noisy("whole pixels", rng)
     margin = NOISE_FRACTION * sigma**2 * np.sqrt(2 * y.size)
     for lam in (1e-2, 1e-4, 1e-6):
         lam = lam * np.max(matrix.data) ** 2

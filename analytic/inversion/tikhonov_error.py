@@ -135,7 +135,7 @@ def tikhonov_error_skipped(scene, matrix, memory_limit: int | None = None) -> st
 
     The exact error holds A dense with its gain H (2 rows M² doubles) and the (M², M²) normal matrix twice;
     the Cramér-Rao bound beside it a dense SVD of A (3 rows M² doubles). Beyond ``memory_limit`` bytes, beyond
-    :data:`MOST_PIXELS`, or for an A applied matrix-free (an operator, not an array), neither is computed.
+    :data:`MOST_PIXELS`, neither is computed (an A applied matrix-free, an operator, is made dense below it).
     ``memory_limit`` defaults to the inversion's ``DEFAULT_MEMORY_LIMIT`` (2 GiB).
     """
     memory_limit = DEFAULT_MEMORY_LIMIT if memory_limit is None else int(memory_limit)
@@ -149,8 +149,6 @@ def tikhonov_error_skipped(scene, matrix, memory_limit: int | None = None) -> st
     if need > memory_limit:
         return (f"not computed: the exact error and the Cramér-Rao bound need A dense ({rows:,} x {unknowns:,}), "
                 f"{need / 2**30:.3g} GiB, over the {memory_limit / 2**30:.3g} GiB limit")
-    if not (scipy.sparse.issparse(matrix) or isinstance(matrix, np.ndarray)):
-        return "not computed: A is applied matrix-free here (an operator), and the exact error needs it dense"
     return None
 
 
@@ -162,13 +160,15 @@ def scene_tikhonov_error(scene, matrix, lam: float):
     (TikhonovError, numpy.ndarray or None, dict) or None
         The error, the bound's ``(M, M)`` image (None without ``[noise]``: the bias alone, no variance), and
         :meth:`TikhonovError.summary` with a ``note``; None when :func:`tikhonov_error_skipped` gives a
-        reason (M² over :data:`MOST_PIXELS`, dense copies of A over the memory limit, or A an operator).
+        reason (M² over :data:`MOST_PIXELS`, or dense copies of A over the memory limit).
     """
     from ..operator.matrix_free import forward
     from .bounds import crb
 
     if tikhonov_error_skipped(scene, matrix) is not None:
         return None
+    if not (scipy.sparse.issparse(matrix) or isinstance(matrix, np.ndarray)):
+        matrix = matrix.toarray()       # an operator (analytic.operator.offset_operator): its dense copy fits
     noise = scene.noise
     variance = 0.0 if noise is None else data_variance(forward(scene, matrix).ravel(), noise)
     error = tikhonov_error(matrix, scene.reflectance, lam, variance=variance)

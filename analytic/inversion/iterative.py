@@ -116,7 +116,9 @@ class IterativeSolver:
                 f"{NOISE_FRACTION:g} σ² √(2m), ‖Bᵀr‖² / λ (a tenth of the noise's own spread; "
                 f"analytic.inversion.iterative), or at LSQR's atol = btol = {self.tolerance:g}"
                 if self.sigma is not None else f"LSQR atol = btol = {self.tolerance:g}")
-        return (f"lsqr: {rule}, at most {self.iteration_limit} iterations; {self.iterations} iterations "
+        how = ("" if self.spectrum is None else
+               " (solved by CGLS preconditioned by AᵀA's DCT diagonal, the gradient tested every iteration)")
+        return (f"lsqr: {rule}, at most {self.iteration_limit} iterations{how}; {self.iterations} iterations "
                 f"over {self.solves} solves")
 
     def to_image(self, v):

@@ -22,7 +22,9 @@ log(‖A f − y‖² − F), F = (m − M²) σ² about the residual's floor as
 it), is close to linear in log λ near the crossing, so a secant from the largest λ down (steps of at most
 :data:`SEARCH_STEP_DECADES`), then regula falsi (Illinois) inside the bracket, each solve warm-started by
 the nearest one, reach |‖A f − y‖² − m σ²| ≤ :data:`CROSSING_FRACTION` σ² √(2m), half the noise's own
-spread, in a handful of solves. A progress bar (``progress``) counts the λ solved and the iterations; Ctrl-C stops between two products with A (each well under a second at that size).
+spread, in a handful of solves. A capture of pixel offsets (its operator says ``translation_invariant``)
+has its solves stopped by the noise made by CGLS, preconditioned by the diagonal of :meth:`_normal_spectrum`,
+the same test made on the exact gradient at every iteration (:meth:`_preconditioned`). A progress bar (``progress``) counts the λ solved and the iterations; Ctrl-C stops between two products with A (each well under a second at that size).
 """
 
 from __future__ import annotations

@@ -48,6 +48,7 @@ def singular_values_of(problem: Problem, memory_limit: int) -> np.ndarray | None
     if 2 * rows * columns * 8 > memory_limit:
         return None
     dense = (matrix[problem.live].toarray() if scipy.sparse.issparse(matrix)
+             else matrix.toarray()[problem.live] if hasattr(matrix, "toarray")     # an operator's
              else np.asarray(matrix, dtype=np.float64)[problem.live])
     return np.linalg.svd(dense, compute_uv=False)   # zero rows add no singular value: left out
 
@@ -98,7 +99,7 @@ def information_warning(*, rank: int | None, effective_rank: int | None, live_ro
 def unseen_pixels_warning(problem: Problem) -> tuple[str, type] | None:
     """The warning (message, category) when some pixels are seen by no measurement (their values are the
     prior's alone), or None."""
-    seen = np.asarray(abs(problem.matrix).sum(axis=0)).ravel() > 0
+    seen = problem.seen
     unseen = int(seen.size - np.count_nonzero(seen))
     if unseen == 0:
         return None

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse
+import scipy.sparse.linalg
 
 from ..errors import DataError
 
@@ -159,6 +160,8 @@ class Problem:
         the squared-Laplacian penalty.
     live : numpy.ndarray of bool
         Rows of A that see some pixel; the others carry no information about f.
+    seen : numpy.ndarray of bool
+        Columns of A (pixels) that some row sees.
     """
 
     matrix: object
@@ -167,6 +170,7 @@ class Problem:
     matrix_scale: float
     data_scale: float
     live: np.ndarray
+    seen: np.ndarray
 
     @property
     def image_scale(self) -> float:
@@ -186,7 +190,12 @@ class Problem:
             1e±150: results and the λ rules' squared criteria could not be
             given back in the caller's units.
         """
-        if not (scipy.sparse.issparse(matrix) or isinstance(matrix, np.ndarray)):
+        operator = isinstance(matrix, scipy.sparse.linalg.LinearOperator)
+        if operator and not all(hasattr(matrix, name) for name in ("largest_entry", "scaled", "row_and_column_seen")):
+            raise ValueError("matrix: a LinearOperator must also give largest_entry, scaled(factor) and "
+                             "row_and_column_seen(), as analytic.operator.offset_operator.OffsetOperator does; "
+                             "or give A as an array")
+        if not (operator or scipy.sparse.issparse(matrix) or isinstance(matrix, np.ndarray)):
             matrix = np.asarray(matrix, dtype=np.float64)
         if isinstance(pixels, bool) or int(pixels) != pixels or pixels < 1:
             raise ValueError(f"pixels: expected a positive whole number, got {pixels!r}")
@@ -199,7 +208,8 @@ class Problem:
             raise ValueError(f"data: {y.size} samples, the matrix has {rows} rows")
         if not np.all(np.isfinite(y)):
             raise ValueError("data: contains NaN or infinity")
-        values = matrix.data if scipy.sparse.issparse(matrix) else matrix
+        values = (np.array([matrix.largest_entry]) if operator else
+                  matrix.data if scipy.sparse.issparse(matrix) else matrix)
         if not np.all(np.isfinite(values)):
             raise ValueError("matrix: contains NaN or infinity")
         largest_entry = float(np.max(np.abs(values))) if values.size else 0.0
@@ -218,8 +228,13 @@ class Problem:
             raise DataError(f"data: the image would be of order {c / a:.1g} (largest |y| {largest_sample:.3g} "
                             f"over A's largest entry {largest_entry:.3g}), outside [1e-150, 1e150] where its "
                             f"squares stay float64 numbers; rescale the data or the source's intensity")
-        scaled = matrix / a if a != 1.0 else matrix
-        live = np.asarray(abs(scaled).sum(axis=1)).ravel() > 0
+        if operator:            # a power of two: the operator's entries stay exact
+            scaled = matrix.scaled(a) if a != 1.0 else matrix
+            live, seen = scaled.row_and_column_seen()
+        else:
+            scaled = matrix / a if a != 1.0 else matrix
+            live = np.asarray(abs(scaled).sum(axis=1)).ravel() > 0
+            seen = np.asarray(abs(scaled).sum(axis=0)).ravel() > 0
         if not live.any():
             raise ValueError("matrix: no row sees the plane (every entry is 0): nothing to reconstruct")
-        return cls(scaled, y / c, pixels, a, c, live)
+        return cls(scaled, y / c, pixels, a, c, live, seen)

@@ -200,8 +200,13 @@ def choose_spectral(solver, rule, fixed, truth, sigma, grid, messages):
     return solver.image(lam), lam, grid, criterion, residuals, seminorms
 
 
-def choose_iterative(solver, rule, fixed, truth, sigma, grid, messages, probes):
-    """λ and the solution on the LSQR route; returns as :func:`choose_spectral`."""
+def choose_iterative(solver, rule, fixed, truth, sigma, grid, messages, probes, search=False):
+    """λ and the solution on the LSQR route; returns as :func:`choose_spectral`.
+
+    With ``search`` (the default grid: no grid was asked for), the discrepancy rule searches its crossing
+    between the grid's ends instead of sweeping the grid (:meth:`.iterative.IterativeSolver.discrepancy_search`);
+    the result's grid is then the λ it solved.
+    """
     if fixed is not None:
         solution, _ = solver.solve(fixed)
         if len(grid) == 1:
@@ -214,6 +219,8 @@ def choose_iterative(solver, rule, fixed, truth, sigma, grid, messages, probes):
         return solver.to_image(solution), fixed, grid, np.full(grid.shape, np.nan), residuals, seminorms
     # the residual grows with λ: the discrepancy rule's sweep ends where it crosses m σ² (NaN below)
     target = solver.measurements * float(sigma) ** 2 if rule == "discrepancy" else None
+    if rule == "discrepancy" and search:
+        return _searched_discrepancy(solver, float(sigma), target, grid, messages)
     solutions, traces, failed = solver.sweep(grid, probes=probes if rule == "gcv" else 0, until=target)
     if failed:
         record_warning(messages, f"lsqr stopped at its iteration limit for {failed} of {len(grid)} λ",
@@ -245,3 +252,24 @@ def choose_iterative(solver, rule, fixed, truth, sigma, grid, messages, probes):
     best = corner(criterion) if rule == "lcurve" else int(np.argmin(criterion))
     edge_warning(best, len(grid), rule, messages)
     return solver.to_image(solutions[best]), float(grid[best]), grid, criterion, residuals, seminorms
+
+
+def _searched_discrepancy(solver, sigma, target, grid, messages):
+    """:func:`choose_iterative`'s discrepancy rule by the search (its λ solved as the grid)."""
+    from .iterative import CROSSING_FRACTION
+
+    lambdas, solutions, index, failed = solver.discrepancy_search(float(grid[0]), float(grid[-1]), target)
+    if failed:
+        record_warning(messages, f"lsqr stopped at its iteration limit for {failed} of {len(lambdas)} λ",
+                       RegularizationWarning)
+    residuals = np.array([solver.squared_residual_of(s) for s in solutions])
+    seminorms = np.array([solver.squared_seminorm_of(s) for s in solutions])
+    criterion = residuals - target
+    slack = CROSSING_FRACTION * sigma**2 * np.sqrt(2.0 * solver.measurements)
+    if abs(criterion[index]) > slack:
+        lower, upper = discrepancy_bracket(criterion, messages)     # warns when it stays on one side
+        if lower != upper:
+            record_warning(messages, f"discrepancy: the search stopped after {len(lambdas)} solves with "
+                                     f"‖A f − y‖² / m σ² = {residuals[index] / target:.6g}, not within "
+                                     f"{CROSSING_FRACTION:g} σ² √(2m) of m σ²", RegularizationWarning)
+    return (solver.to_image(solutions[index]), float(lambdas[index]), lambdas, criterion, residuals, seminorms)

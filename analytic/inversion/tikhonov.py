@@ -65,7 +65,8 @@ class SpectralSolver:
 
     def __init__(self, problem: Problem):
         matrix, y, pixels = problem.matrix, problem.y, problem.pixels
-        dense = matrix.toarray() if scipy.sparse.issparse(matrix) else np.array(matrix, dtype=np.float64)
+        dense = (matrix.toarray() if scipy.sparse.issparse(matrix) or hasattr(matrix, "toarray")    # or an operator's
+                 else np.array(matrix, dtype=np.float64))
         self.pixels = pixels
         self.measurements = dense.shape[0]
         live = problem.live
@@ -343,7 +344,7 @@ def reconstruct_rules(matrix, data, pixels: int, *, rules=RULES, truth=None,
                                      messages)
         else:
             result = choose_iterative(solver, rule, scaled_fixed, truth_image, scaled_sigma, grid,
-                                      messages, gcv_probes)
+                                      messages, gcv_probes, search=lambdas is None)
         for text, category in notices:     # once per call, recorded with every rule's result
             if warned:
                 messages.append(text)

@@ -32,9 +32,11 @@ import numpy as np
 import scipy.linalg
 import scipy.sparse
 
+from .information import DEFAULT_MEMORY_LIMIT
 from .laplacian import neumann_laplacian
 
-__all__ = ["TikhonovError", "tikhonov_error", "data_variance", "scene_tikhonov_error", "MOST_PIXELS"]
+__all__ = ["TikhonovError", "tikhonov_error", "data_variance", "scene_tikhonov_error", "tikhonov_error_skipped",
+           "MOST_PIXELS"]
 
 
 @dataclass(frozen=True)
@@ -128,6 +130,28 @@ def tikhonov_error(matrix, truth, lam: float, *, variance=0.0) -> TikhonovError:
 MOST_PIXELS = 64**2
 
 
+def tikhonov_error_skipped(scene, matrix, memory_limit: int | None = None) -> str | None:
+    """Why :func:`scene_tikhonov_error` computes nothing for ``scene`` and its ``matrix``, in words, or None.
+
+    The exact error holds A dense with its gain H (2 rows M² doubles) and the (M², M²) normal matrix twice;
+    the Cramér-Rao bound beside it a dense SVD of A (3 rows M² doubles). Beyond ``memory_limit`` bytes, beyond
+    :data:`MOST_PIXELS`, neither is computed (an A applied matrix-free, an operator, is made dense below it).
+    ``memory_limit`` defaults to the inversion's ``DEFAULT_MEMORY_LIMIT`` (2 GiB).
+    """
+    memory_limit = DEFAULT_MEMORY_LIMIT if memory_limit is None else int(memory_limit)
+    rows, unknowns = scene.sensor_count * scene.sampling.count, scene.pixels**2
+    if unknowns > MOST_PIXELS:
+        return (f"not computed: M² = {unknowns:,} pixels, over the {MOST_PIXELS:,} whose dense (M², M²) normal "
+                f"matrix the exact error factors")
+    need = 8 * (2 * rows * unknowns + 2 * unknowns**2)
+    if scene.noise is not None:
+        need = max(need, 3 * rows * unknowns * 8)
+    if need > memory_limit:
+        return (f"not computed: the exact error and the Cramér-Rao bound need A dense ({rows:,} x {unknowns:,}), "
+                f"{need / 2**30:.3g} GiB, over the {memory_limit / 2**30:.3g} GiB limit")
+    return None
+
+
 def scene_tikhonov_error(scene, matrix, lam: float):
     """The Tikhonov estimate's error at λ for a scene's image and ``[noise]``, beside its Cramér-Rao bound.
 
@@ -135,13 +159,16 @@ def scene_tikhonov_error(scene, matrix, lam: float):
     -------
     (TikhonovError, numpy.ndarray or None, dict) or None
         The error, the bound's ``(M, M)`` image (None without ``[noise]``: the bias alone, no variance), and
-        :meth:`TikhonovError.summary` with a ``note``; None when M² exceeds :data:`MOST_PIXELS`.
+        :meth:`TikhonovError.summary` with a ``note``; None when :func:`tikhonov_error_skipped` gives a
+        reason (M² over :data:`MOST_PIXELS`, or dense copies of A over the memory limit).
     """
     from ..operator.matrix_free import forward
     from .bounds import crb
 
-    if scene.pixels**2 > MOST_PIXELS:
+    if tikhonov_error_skipped(scene, matrix) is not None:
         return None
+    if not (scipy.sparse.issparse(matrix) or isinstance(matrix, np.ndarray)):
+        matrix = matrix.toarray()       # an operator (analytic.operator.offset_operator): its dense copy fits
     noise = scene.noise
     variance = 0.0 if noise is None else data_variance(forward(scene, matrix).ravel(), noise)
     error = tikhonov_error(matrix, scene.reflectance, lam, variance=variance)

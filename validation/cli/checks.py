@@ -166,6 +166,8 @@ def command_run(args) -> int:
                   f"{Path(args.out) / 'report.md'}")
             if recon.get("error"):
                 print(f"reconstruction error at the model data's λ: {error_text(recon['error'])}")
+            elif recon.get("error_note"):
+                print(f"reconstruction error at the model data's λ: {recon['error_note']}")
     return 0 if check.agreement.agrees else 1
 
 

@@ -67,9 +67,9 @@ def command_reconstruct(args) -> int:
     from analytic.files import (PrecisionWarning, discard, float32_problem, output_folder, reading_folder,
                              save_exr, save_json, save_npy, save_png_image, staged_writes)
     from analytic.inversion import RankDeficiencyWarning, RegularizationWarning, image_metrics, reconstruct
-    from analytic.inversion.tikhonov_error import scene_tikhonov_error
+    from analytic.inversion.tikhonov_error import scene_tikhonov_error, tikhonov_error_skipped
+    from analytic.operator.offset_operator import OffsetOperator
     from validation.plots.bounds import tikhonov_error_figure
-    from analytic.operator.system import system_matrix
     from validation.runs.harness import data_driven_rule, noise_sigma
     from validation.plots import criterion_figure, reconstruction_figure, save_figure
     from validation.runs.report import write_markdown
@@ -94,7 +94,7 @@ def command_reconstruct(args) -> int:
     with output_folder(args.out) as out:
         announce_model(args, cost, "reconstruct")
         assembly_started = time.perf_counter()
-        matrix = system_matrix(scene, progress=show_progress(args))
+        matrix = reconstruction_matrix(scene, args.regularizer, args.method, progress=show_progress(args))
         assembly = time.perf_counter() - assembly_started
         if matrix.nnz == 0:
             raise SceneError("sampling", "the window holds none of the light: no sample sees the plane (or "
@@ -123,9 +123,14 @@ def command_reconstruct(args) -> int:
                             if args.regularizer == "laplacian" else
                             "isotropic total variation (½||Af − y||² + λ TV), Neumann edges, PDHG"),
             "warnings": notes, "lambdas": result.lambdas, "criterion": result.criterion,
+            "operator": ("A applied matrix-free, by FFT over the capture's pixel offsets "
+                         "(analytic.operator.offset_operator)" if isinstance(matrix, OffsetOperator) else
+                         "A assembled sparse (analytic.operator.system)"),
         }
         tikhonov = (scene_tikhonov_error(scene, matrix, result.lam) if args.regularizer == "laplacian" else None)
         report["tikhonov_error"] = None if tikhonov is None else tikhonov[2]
+        if args.regularizer == "laplacian" and tikhonov is None:
+            report["tikhonov_error_note"] = tikhonov_error_skipped(scene, matrix)
         exr_problem = float32_problem(result.image)
         report["exr"] = ("written: float32, every value within float32's rounding of reconstruction.npy"
                          if exr_problem is None else
@@ -172,12 +177,29 @@ def command_reconstruct(args) -> int:
         warnings.warn(f"{out / 'reconstruction.exr'}: not written, {exr_problem}; reconstruction.npy "
                       f"(float64) is the exact record", PrecisionWarning, stacklevel=1)
     if not args.quiet:
+        built = "A's FFT operator made" if isinstance(matrix, OffsetOperator) else "A assembled"
         print(f"reconstruct: M = {scene.pixels}, {how} ({result.method}) in {result.seconds:.2f} s "
-              f"(A assembled in {assembly:.2f} s); {information_text(result)}PSNR {metrics['psnr']:.2f} dB, "
+              f"({built} in {assembly:.2f} s); {information_text(result)}PSNR {metrics['psnr']:.2f} dB, "
               f"SSIM {metrics['ssim']:.3f} (range 1) -> {out}")
         if tikhonov is not None:
             print(f"reconstruct: error at λ: {error_text(tikhonov[2])}")
+        elif "tikhonov_error_note" in report:
+            print(f"reconstruct: error at λ: {report['tikhonov_error_note']}")
     return 0
+
+
+def reconstruction_matrix(scene, regularizer: str, method: str | None, *, progress: bool = False):
+    """A for reconstructing ``scene``: sparse, or where the lsqr method will run (asked for, or chosen because
+    the svd method's dense copies exceed its limit) on a capture of pixel offsets, the matrix-free FFT operator
+    (:func:`analytic.operator.offset_operator.capture_operator`: A's products to rounding, without A)."""
+    from analytic.inversion.information import DEFAULT_MEMORY_LIMIT
+    from analytic.operator.offset_operator import capture_operator
+    from analytic.operator.system import system_matrix
+
+    rows = scene.sensor_count * scene.sampling.count
+    lsqr = method == "lsqr" or (method in (None, "auto") and 3 * rows * scene.pixels**2 * 8 > DEFAULT_MEMORY_LIMIT)
+    operator = capture_operator(scene, progress=progress) if regularizer == "laplacian" and lsqr else None
+    return system_matrix(scene, progress=progress) if operator is None else operator
 
 
 def error_text(summary: dict) -> str:

@@ -199,11 +199,11 @@ def reconstruct_from_noisy_data(matrix, scene: Scene, model: np.ndarray, rendere
         these data}, ``oracle``: {``psnr``, ``lambda``, ``image``},
         ``flat_psnr``, ``error``: the model's estimate's exact bias and standard deviation at its λ beside
         the Cramér-Rao bound (:func:`analytic.inversion.tikhonov_error.scene_tikhonov_error`'s summary; None
-        beyond its size).
+        beyond its size), ``error_note``: why it is None, in words (else None).
     """
     from analytic.inversion import (RankDeficiencyWarning, RegularizationWarning, flat_image_psnr, image_metrics,
                                     reconstruct)
-    from analytic.inversion.tikhonov_error import scene_tikhonov_error
+    from analytic.inversion.tikhonov_error import scene_tikhonov_error, tikhonov_error_skipped
     from analytic.measurement.noise import add_noise
 
     truth = scene.reflectance
@@ -269,6 +269,7 @@ def reconstruct_from_noisy_data(matrix, scene: Scene, model: np.ndarray, rendere
                    "psnr": image_metrics(oracle.image, truth)["psnr"]},
         "flat_psnr": flat_image_psnr(truth),
         "error": None if tikhonov is None else tikhonov[2],
+        "error_note": None if tikhonov is not None else tikhonov_error_skipped(scene, matrix),
     }
 
 

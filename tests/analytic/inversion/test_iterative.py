@@ -46,3 +46,28 @@ def test_the_discrepancy_sweep_ends_where_the_residual_crosses_m_sigma_squared(r
     below = np.nonzero(solved)[0][0]              # the smallest λ solved: its residual is below m σ²
     assert 0 < below and not solved[:below].any() and solved[below:].all()
     assert short.residual_norms[below] ** 2 < len(y) * sigma**2 <= short.residual_norms[below + 1] ** 2
+
+
+@pytest.mark.parametrize("noise", [0.02, 0.005])
+def test_the_discrepancy_search_on_the_default_grid_reaches_the_closed_form_crossing(rng, noise):
+    # the svd method's crossing is exact (brentq on the closed-form residual); the search must land where that
+    # residual is within its stated slack of m σ² (plus the solves' own margin), in far fewer solves than a sweep
+    from analytic.inversion.iterative import CROSSING_FRACTION
+    from analytic.inversion.tikhonov import SpectralSolver
+    from analytic.inversion.result import Problem
+
+    pixels = 8
+    matrix, y, _ = synthetic_problem(rng, pixels=pixels, rows=300, decay=1e-3, noise=noise)
+    exact = reconstruct(matrix, y, pixels, rule="discrepancy", sigma=noise, method="svd")
+    searched = reconstruct(matrix, y, pixels, rule="discrepancy", sigma=noise, method="lsqr")
+    assert not searched.warnings
+    problem = Problem.checked(matrix, y, pixels)
+    scale = problem.matrix_scale**2
+    closed = SpectralSolver(problem)
+    target = len(y) * noise**2
+    spread = noise**2 * np.sqrt(2 * len(y))
+    residual = float(closed.squared_residual(searched.lam / scale)) * problem.data_scale**2
+    assert abs(residual - target) <= (CROSSING_FRACTION + 2 * NOISE_FRACTION) * spread
+    assert abs(searched.residual_norm**2 - target) <= CROSSING_FRACTION * spread
+    assert len(searched.lambdas) < 15 and np.all(np.isfinite(searched.residual_norms))
+    assert np.max(np.abs(searched.image - exact.image)) < 0.1 * np.max(np.abs(exact.image))

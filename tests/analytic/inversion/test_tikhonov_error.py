@@ -60,3 +60,23 @@ def test_without_penalty_weight_the_variance_tends_to_the_cramer_rao_bound(rng):
     np.testing.assert_allclose(error.stddev.ravel(), 0.01 * np.sqrt(np.diag(np.linalg.inv(matrix.T @ matrix))),
                                rtol=1e-6)
     assert np.max(np.abs(error.bias)) < 1e-8
+
+
+def test_the_scene_error_is_skipped_with_its_reason_where_a_dense_a_would_not_fit(monkeypatch):
+    # the exact error holds A dense with its gain (2 rows M² doubles) and the (M², M²) normal matrix twice:
+    # beyond the limit it must say so rather than allocate them (a 64 x 64 scan's A: 2 million x 4096)
+    from analytic import system_matrix
+    from analytic.inversion import tikhonov_error as module
+    from analytic.scenes.common import Sampling, default_scene
+
+    scene = default_scene(pixels=4, reflectance=np.full((4, 4), 0.5), noise=Noise(kind="gaussian", sigma=0.05),
+                          sampling=Sampling(bin_width_opl=0.1, start_opl=2.0, count=8))
+    matrix = system_matrix(scene)
+    rows = matrix.shape[0]
+    need = 8 * max(2 * rows * 16 + 2 * 16**2, 3 * rows * 16)
+    assert module.tikhonov_error_skipped(scene, matrix, need) is None
+    reason = module.tikhonov_error_skipped(scene, matrix, need - 1)
+    assert reason.startswith("not computed") and f"{rows:,} x 16" in reason
+    assert module.scene_tikhonov_error(scene, matrix, 1e-3) is not None
+    monkeypatch.setattr(module, "DEFAULT_MEMORY_LIMIT", need - 1)
+    assert module.scene_tikhonov_error(scene, matrix, 1e-3) is None

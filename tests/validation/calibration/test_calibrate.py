@@ -108,7 +108,7 @@ def test_a_sensor_whose_light_misses_the_window_is_not_determined():
 
 
 @pytest.mark.slow
-# analytic.jacobian's Richardson differences (until its exact route lands) assemble the model at 1e-10, which
+# analytic.jacobian's Richardson differences (illumination.fwhm's column) assemble the model at 1e-10, which
 # some pieces of a moved scene stop short of: its warning, not this test's subject
 @pytest.mark.filterwarnings("ignore::analytic.operator.system.QuadratureWarning")
 @pytest.mark.parametrize("illumination, truth, seeds", [

@@ -43,6 +43,10 @@ def model(waveforms: tuple[str, ...] = ("impulse", "square")) -> None:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             jacobian(scene, ["source.position.z", "sensors.positions.1.x", "sampling.start"])   # the exact route
+    if "square" in waveforms:                    # the exact route of every other waveform (one set of kernels)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            jacobian(scene.replace(illumination=Illumination(waveform="square")), ["source.position.z", "sampling.start"])
 
 
 def relay_wall(waveform: str) -> None:

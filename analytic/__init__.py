@@ -30,6 +30,7 @@ __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "measurement.detector": ["Detector", "expected_counts", "draw_counts", "coates_estimate"],
     "operator.system": ["system_matrix", "count_entries", "QuadratureWarning"],
     "operator.matrix_free": ["forward"],
+    "operator.offset_operator": ["capture_operator"],
     "operator.response": ["impulse_response", "binned_contour_model"],
     "operator.window": ["response_range", "covering_sampling", "window_share", "WindowWarning"],
     "files": ["build_meta", "write_transient", "read_transient"],

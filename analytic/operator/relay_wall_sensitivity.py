@@ -1,0 +1,102 @@
+"""Exact ∂y/∂θ of a relay-wall capture for its geometric keys, impulse illumination (docs/derivatives.md).
+
+In the hidden rectangle's frame (x, y along its edges from its corner, heights along its normal) a pair
+(l, s) is the plane's problem with l in the source's place, s in the sensor's, the rectangle's pixels as
+the cells, and the attenuation multiplied by the wall's cosines at both ends, c_l = n·(x - l) / |x - l|
+and c_s = n·(x - s) / |x - s| (:meth:`analytic.scenes.relay_wall.RelayWallScene.geometry`; n the wall's
+normal, fixed in the frame while l and s move): :func:`analytic.kernels.sensitivity.pair_sums` with
+:class:`~analytic.kernels.sensitivity.PairGeometry`'s ``surfaces`` gives the interior and bin-edge terms
+of ∂y/∂l and ∂y/∂s and the time zero's column, at the pair's bin edges t_e - o_p (o_p the added path of
+the end legs when the scan counts them). The keys follow by the chain rule:
+
+- ``sampling.start``: every edge moving, -I ∫ f a κ_n'(d + o_p) dx (the impulse response at the edges);
+- ``laser.position.*`` with the end legs counted: the laser leg's factor (:mod:`.relay_wall_legs`) plus
+  the time shift, -∂y/∂t_0 ∂o_p/∂o_l with ∂o_p/∂o_l = (o_l - l) / |o_l - l|; ``sensor.position.*`` the
+  time shift alone, ∂o_p/∂o_s = (o_s - s) / |o_s - s|;
+- ``hidden.center.*``: a translation of the rectangle is l and s moving the other way in its frame,
+  -(∂y/∂l + ∂y/∂s) (the wall's normal unchanged, the legs untouched);
+- ``scan.laser_point.{x,y}`` (single scan): ∂y/∂l plus the laser leg's factor (its l-derivative, the
+  negative of its o_l-derivative) and the time shift with ∂o_p/∂l = (l - o_l) / |o_l - l|.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..kernels.sensitivity import AMPLITUDES, pair_sums
+from ..scenes.relay_wall import WALL_NORMAL
+from .relay_wall_legs import leg_column
+from .sensitivity import edge_columns, pair_geometry, pixel_cells, run_sensors
+
+__all__ = ["supports_relay", "relay_parts", "relay_column"]
+
+_STEMS = ("sampling.start", "laser.position", "sensor.position", "hidden.center", "scan.laser_point")
+
+
+def supports_relay(scene, stem: str) -> bool:
+    """Whether :func:`relay_column` gives ``stem``'s column: a relay wall under the impulse illumination."""
+    return scene.kind == "relay_wall" and scene.illumination.waveform == "impulse" and stem in _STEMS
+
+
+def _offsets(scene, lit, read) -> np.ndarray:
+    """Each pair's added path o_p (the end legs when the scan counts them, else 0), metres."""
+    if not scene.scan.account_first_and_last_bounces:
+        return np.zeros(len(lit))
+    return np.linalg.norm(scene.laser_position - lit, axis=1) + np.linalg.norm(read - scene.sensor_position, axis=1)
+
+
+def relay_parts(scene, *, progress: bool = False):
+    """y, ∂y/∂l, ∂y/∂s (world axes, the wall's normal fixed) and ∂y/∂sampling.start of every pair.
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        y ``(P, N)``, y's units; ∂y/∂l and ∂y/∂s ``(P, N, 3)``, per metre (l and s each pair's own
+        points, the laser leg's factor held); ∂y/∂t_0 ``(P, N)``, per metre of path length.
+    """
+    rectangle = scene.rectangle()
+    axes = rectangle.axes
+    lit, read = scene.pair_points
+    local_lit, local_read = rectangle.local(lit), rectangle.local(read)
+    normal = tuple(map(float, axes @ WALL_NORMAL))
+    cells = pixel_cells(rectangle.width, rectangle.height, scene.reflectance,
+                        np.unique(np.vstack([local_lit, local_read]), axis=0))
+    edges = np.asarray(scene.sampling.edges, dtype=np.float64)
+    shifted = edges[None, :] - _offsets(scene, lit, read)[:, None]
+    count = len(lit)
+    sums = np.zeros((count, 2, edges.size, AMPLITUDES))
+    rtol = float(scene.tolerance)
+
+    def arguments(p):
+        geometry = pair_geometry(local_lit[p], local_read[p], "lambertian")._replace(
+            surfaces=True, snx=normal[0], sny=normal[1], snz=normal[2], knx=normal[0], kny=normal[1], knz=normal[2])
+        return geometry, cells, shifted[p], rtol, sums[p, 0], sums[p, 1]
+
+    run_sensors(pair_sums, arguments, count, rtol, progress)
+    sums *= scene.laser_leg(lit)[:, None, None, None]
+    y, source, sensor, start, _ = edge_columns(sums, 1.0)
+    # the frame's coordinates are axes (p - corner): a world gradient is axesᵀ times the frame's
+    return y, source @ axes, sensor @ axes, start
+
+
+def relay_column(scene, stem: str, axis: int, parts) -> np.ndarray:
+    """∂y/∂(``stem``'s ``axis`` component), ``(P, N)``, from :func:`relay_parts`' ``parts``."""
+    y, lit_gradient, read_gradient, start = parts
+    if stem == "sampling.start":
+        return start
+    if stem == "hidden.center":
+        return -(lit_gradient[..., axis] + read_gradient[..., axis])
+    lit, read = scene.pair_points
+    counted = bool(scene.scan.account_first_and_last_bounces)
+    if stem == "sensor.position":
+        toward = scene.sensor_position - read
+        shift = toward[:, axis] / np.linalg.norm(toward, axis=1)
+        return -start * shift[:, None] if counted else np.zeros_like(y)
+    toward = scene.laser_position - lit
+    shift = toward[:, axis] / np.linalg.norm(toward, axis=1)           # ∂o_p/∂o_l
+    leg = leg_column(scene, "laser.position", axis, y)                   # y ∂ln c_l/∂o_l
+    column = leg - (start * shift[:, None] if counted else 0.0)
+    if stem == "laser.position":
+        return column
+    # scan.laser_point: l moves (o_l - l turns the other way: the leg's and the shift's signs flip)
+    return lit_gradient[..., axis] - column

@@ -15,6 +15,7 @@ the end legs when the scan counts them). The keys follow by the chain rule:
   time shift alone, ∂o_p/∂o_s = (o_s - s) / |o_s - s|;
 - ``hidden.center.*``: a translation of the rectangle is l and s moving the other way in its frame,
   -(∂y/∂l + ∂y/∂s) (the wall's normal unchanged, the legs untouched);
+- ``hidden.rotation.*``: l, s and n turning the other way in the frame (:func:`_rotation`);
 - ``scan.laser_point.{x,y}`` (single scan): ∂y/∂l plus the laser leg's factor (its l-derivative, the
   negative of its o_l-derivative) and the time shift with ∂o_p/∂l = (l - o_l) / |o_l - l|.
 """
@@ -25,12 +26,14 @@ import numpy as np
 
 from ..kernels.sensitivity import AMPLITUDES, pair_sums
 from ..scenes.relay_wall import WALL_NORMAL
+from .parameters import rotation
 from .relay_wall_legs import leg_column
 from .sensitivity import edge_columns, pair_geometry, pixel_cells, run_sensors
 
 __all__ = ["supports_relay", "relay_parts", "relay_column"]
 
-_STEMS = ("sampling.start", "laser.position", "sensor.position", "hidden.center", "scan.laser_point")
+_STEMS = ("sampling.start", "laser.position", "sensor.position", "hidden.center", "hidden.rotation",
+          "scan.laser_point")
 
 
 def supports_relay(scene, stem: str) -> bool:
@@ -45,6 +48,36 @@ def _offsets(scene, lit, read) -> np.ndarray:
     return np.linalg.norm(scene.laser_position - lit, axis=1) + np.linalg.norm(read - scene.sensor_position, axis=1)
 
 
+def _frame(scene):
+    """The rectangle, each pair's (l, s) in its frame, and the wall's normal in it."""
+    rectangle = scene.rectangle()
+    lit, read = scene.pair_points
+    return rectangle, rectangle.local(lit), rectangle.local(read), rectangle.axes @ WALL_NORMAL
+
+
+def _sums(scene, source_normal, sensor_normal, progress: bool = False) -> np.ndarray:
+    """:func:`pair_sums` of every pair ``(P, 2, E, 13)`` (F, H at the pair's bin edges t_e - o_p), times the
+    laser leg's factor, with the ends' cosines taken about ``source_normal`` and ``sensor_normal`` (frame)."""
+    rectangle, local_lit, local_read, _ = _frame(scene)
+    lit, read = scene.pair_points
+    cells = pixel_cells(rectangle.width, rectangle.height, scene.reflectance,
+                        np.unique(np.vstack([local_lit, local_read]), axis=0))
+    edges = np.asarray(scene.sampling.edges, dtype=np.float64)
+    shifted = edges[None, :] - _offsets(scene, lit, read)[:, None]
+    count = len(lit)
+    sums = np.zeros((count, 2, edges.size, AMPLITUDES))
+    rtol = float(scene.tolerance)
+    (snx, sny, snz), (knx, kny, knz) = map(float, source_normal), map(float, sensor_normal)
+
+    def arguments(p):
+        geometry = pair_geometry(local_lit[p], local_read[p], "lambertian")._replace(
+            surfaces=True, snx=snx, sny=sny, snz=snz, knx=knx, kny=kny, knz=knz)
+        return geometry, cells, shifted[p], rtol, sums[p, 0], sums[p, 1]
+
+    run_sensors(pair_sums, arguments, count, rtol, progress)
+    return sums * scene.laser_leg(lit)[:, None, None, None]
+
+
 def relay_parts(scene, *, progress: bool = False):
     """y, ∂y/∂l, ∂y/∂s (world axes, the wall's normal fixed) and ∂y/∂sampling.start of every pair.
 
@@ -54,29 +87,38 @@ def relay_parts(scene, *, progress: bool = False):
         y ``(P, N)``, y's units; ∂y/∂l and ∂y/∂s ``(P, N, 3)``, per metre (l and s each pair's own
         points, the laser leg's factor held); ∂y/∂t_0 ``(P, N)``, per metre of path length.
     """
-    rectangle = scene.rectangle()
-    axes = rectangle.axes
-    lit, read = scene.pair_points
-    local_lit, local_read = rectangle.local(lit), rectangle.local(read)
-    normal = tuple(map(float, axes @ WALL_NORMAL))
-    cells = pixel_cells(rectangle.width, rectangle.height, scene.reflectance,
-                        np.unique(np.vstack([local_lit, local_read]), axis=0))
-    edges = np.asarray(scene.sampling.edges, dtype=np.float64)
-    shifted = edges[None, :] - _offsets(scene, lit, read)[:, None]
-    count = len(lit)
-    sums = np.zeros((count, 2, edges.size, AMPLITUDES))
-    rtol = float(scene.tolerance)
-
-    def arguments(p):
-        geometry = pair_geometry(local_lit[p], local_read[p], "lambertian")._replace(
-            surfaces=True, snx=normal[0], sny=normal[1], snz=normal[2], knx=normal[0], kny=normal[1], knz=normal[2])
-        return geometry, cells, shifted[p], rtol, sums[p, 0], sums[p, 1]
-
-    run_sensors(pair_sums, arguments, count, rtol, progress)
-    sums *= scene.laser_leg(lit)[:, None, None, None]
-    y, source, sensor, start, _ = edge_columns(sums, 1.0)
+    rectangle, _, _, normal = _frame(scene)
+    y, source, sensor, start, _ = edge_columns(_sums(scene, normal, normal, progress), 1.0)
     # the frame's coordinates are axes (p - corner): a world gradient is axesᵀ times the frame's
-    return y, source @ axes, sensor @ axes, start
+    return y, source @ rectangle.axes, sensor @ rectangle.axes, start
+
+
+def _rotation(scene, axis: int, parts) -> np.ndarray:
+    """∂y/∂hidden.rotation.{axis}: the rectangle turning by θ about the world axis through its centre is, in
+    its frame, l, s and the wall's normal n turning by -θ: dp/dθ = -e × (p - c), dn/dθ = -e × n.
+
+    The points' share is the chain rule on ∂y/∂l and ∂y/∂s; n enters through the cosines alone,
+    ∂(c_l c_s)/∂n·v = c_s v·(x - l)/|x - l| + c_l v·(x - s)/|x - s| (no path length moves: no edge
+    term), each term the cell integrals with that end's normal replaced by v = dn/dθ (frame).
+    """
+    _, lit_gradient, read_gradient, _ = parts
+    rectangle, _, _, normal = _frame(scene)
+    generator = rotation(axis, 1.0) - rotation(axis, -1.0)          # 2 sin(1) [e]x
+    turn = -generator / (2.0 * np.sin(1.0))                          # v ↦ -e × v
+    lit, read = scene.pair_points
+    column = (np.einsum("pnj,pj->pn", lit_gradient, (lit - scene.center) @ turn.T)
+              + np.einsum("pnj,pj->pn", read_gradient, (read - scene.center) @ turn.T))
+    return column + _normal_turn(scene, rectangle.axes @ (turn @ WALL_NORMAL), normal)
+
+
+def _normal_turn(scene, velocity, normal) -> np.ndarray:
+    """∂y/∂θ of the wall's normal (frame ``normal``) turning at ``velocity`` (frame), the points held:
+    the interior integral of a (c_s v·(x - l)/|x - l| + c_l v·(x - s)/|x - s|), ``(P, N)``."""
+    column = np.zeros((scene.sensor_count, scene.sampling.count))
+    if np.any(velocity != 0.0):
+        for ends in ((velocity, normal), (normal, velocity)):
+            column += np.diff(_sums(scene, *ends)[:, 0, :, 0], axis=1)
+    return column
 
 
 def relay_column(scene, stem: str, axis: int, parts) -> np.ndarray:
@@ -86,6 +128,8 @@ def relay_column(scene, stem: str, axis: int, parts) -> np.ndarray:
         return start
     if stem == "hidden.center":
         return -(lit_gradient[..., axis] + read_gradient[..., axis])
+    if stem == "hidden.rotation":
+        return _rotation(scene, axis, parts)
     lit, read = scene.pair_points
     counted = bool(scene.scan.account_first_and_last_bounces)
     if stem == "sensor.position":

@@ -2,7 +2,7 @@
 
 In the hidden rectangle's frame a pair (l, s) is the plane's problem with the wall's cosines at both
 ends (analytic/operator/relay_wall_sensitivity.py): ``sampling.start``, ``hidden.center.*``,
-``scan.laser_point.*`` and, with the end legs counted, the laser's and sensor's positions. The
+``hidden.rotation.*`` (the wall's normal turning in the frame too), ``scan.laser_point.*`` and, with the end legs counted, the laser's and sensor's positions. The
 reference is Richardson differences of the model assembled at tolerance 1e-10 with a fine step (a
 route that shares no code with the cell integrals' edge terms), held to its own error bound
 (``errors=True``: the Richardson pair's disagreement and the second differences' change, which a
@@ -50,15 +50,16 @@ _COUNTED = "\naccount_first_and_last_bounces = true"
 _CASES = {
     "confocal, counted legs": (dict(scan='type = "confocal"\ngrid = [2, 2]' + _COUNTED, start=3.0),
                                ["sampling.start", "laser.position.x", "laser.position.z", "sensor.position.y",
-                                "hidden.center.x", "hidden.center.z"]),
+                                "hidden.center.x", "hidden.center.z", "hidden.rotation.y"]),
     "exhaustive, tilted rectangle": (dict(scan='type = "exhaustive"\ngrid = [2, 1]',
                                           hidden="center = [0.1, -0.05, 0.8]\nu = [0.6, 0.0, 0.25]\n"
                                                  "v = [0.0, -0.6, 0.0]"),
-                                     ["sampling.start", "hidden.center.x", "hidden.center.y", "hidden.center.z"]),
+                                     ["sampling.start", "hidden.center.x", "hidden.center.y", "hidden.center.z",
+                                      "hidden.rotation.x", "hidden.rotation.y", "hidden.rotation.z"]),
     "single, counted legs": (dict(scan='type = "single"\nlaser_point = [0.2, 0.1, 0.0]\ngrid = [2, 2]' + _COUNTED,
                                   start=3.0),
                              ["scan.laser_point.x", "scan.laser_point.y", "laser.position.y", "sensor.position.x",
-                              "hidden.center.y"]),
+                              "hidden.center.y", "hidden.rotation.x"]),
     "rectangle near the wall": (dict(scan='type = "confocal"\ngrid = [2, 2]', start=0.0,
                                      hidden="center = [0.1, -0.05, 0.1]\nu = [0.6, 0.0, 0.0]\nv = [0.0, -0.6, 0.0]",
                                      points="[laser]\nposition = [-0.4, 0.2, 0.05]\n[sensor]\n"
@@ -98,4 +99,14 @@ def test_dropping_the_edge_term_fails(tmp_path, monkeypatch):
         return columns(sums, scale)
 
     monkeypatch.setattr(relay, "edge_columns", interior_only)
+    assert _gap(jacobian(scene, keys), reference, bound).min() > 1.0
+
+
+def test_dropping_the_wall_normals_turn_fails(tmp_path, monkeypatch):
+    # a rotation of the rectangle turns the wall's normal in its frame: the cosines' share is needed
+    changes, _ = _CASES["exhaustive, tilted rectangle"]
+    scene = _capture(tmp_path, **changes)
+    keys = ["hidden.rotation.x", "hidden.rotation.y"]
+    reference, bound = jacobian(scene, keys, route="differences", step=_STEP, errors=True)
+    monkeypatch.setattr(relay, "_normal_turn", lambda scene, velocity, normal: 0.0)
     assert _gap(jacobian(scene, keys), reference, bound).min() > 1.0

@@ -14,10 +14,11 @@
   scale (∂y/∂s = y) and the source's intensity (∂y/∂I = y / I). A relay
   wall's ``laser.position.*`` and ``sensor.position.*`` are exact through
   the laser leg's factor (:mod:`.relay_wall_legs`) unless the end legs are
-  counted; with the impulse illumination ``sampling.start``, ``hidden.center.*``,
+  counted; ``sampling.start``, ``hidden.center.*``,
   ``hidden.rotation.*``, ``scan.laser_point.*`` and the laser's and sensor's
   positions with the end legs counted are exact through the rectangle's
-  frame (:mod:`.relay_wall_sensitivity`). Every other key
+  frame (:mod:`.relay_wall_sensitivity`, the waveforms the plane's routes
+  take). Every other key
   (``illumination.*``, the relay wall's other geometric keys) still takes the differences below.
 - ``"differences"``: Richardson-extrapolated central differences of the
   model assembled at tolerance :data:`TOLERANCE`, for every key (the tests'

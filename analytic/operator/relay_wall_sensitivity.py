@@ -1,13 +1,14 @@
-"""Exact ∂y/∂θ of a relay-wall capture for its geometric keys, impulse illumination (docs/derivatives.md).
+"""Exact ∂y/∂θ of a relay-wall capture for its geometric keys (docs/derivatives.md).
 
 In the hidden rectangle's frame (x, y along its edges from its corner, heights along its normal) a pair
 (l, s) is the plane's problem with l in the source's place, s in the sensor's, the rectangle's pixels as
 the cells, and the attenuation multiplied by the wall's cosines at both ends, c_l = n·(x - l) / |x - l|
 and c_s = n·(x - s) / |x - s| (:meth:`analytic.scenes.relay_wall.RelayWallScene.geometry`; n the wall's
-normal, fixed in the frame while l and s move): :func:`analytic.kernels.sensitivity.pair_sums` with
-:class:`~analytic.kernels.sensitivity.PairGeometry`'s ``surfaces`` gives the interior and bin-edge terms
-of ∂y/∂l and ∂y/∂s and the time zero's column, at the pair's bin edges t_e - o_p (o_p the added path of
-the end legs when the scan counts them). The keys follow by the chain rule:
+normal, fixed in the frame while l and s move): :func:`analytic.kernels.sensitivity.pair_sums` (the
+impulse) or :func:`analytic.kernels.sensitivity_waveform.waveform_pair_sums` (the other waveforms the
+plane's exact route takes) with :class:`~analytic.kernels.sensitivity.PairGeometry`'s ``surfaces`` gives
+the interior and bin-edge terms of ∂y/∂l and ∂y/∂s and the time zero's column, on the pair's time axis
+shifted by -o_p (o_p the added path of the end legs when the scan counts them). The keys follow by the chain rule:
 
 - ``sampling.start``: every edge moving, -I ∫ f a κ_n'(d + o_p) dx (the impulse response at the edges);
 - ``laser.position.*`` with the end legs counted: the laser leg's factor (:mod:`.relay_wall_legs`) plus
@@ -24,11 +25,15 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..kernels.bins import TimeAxis
 from ..kernels.sensitivity import AMPLITUDES, pair_sums
+from ..kernels.sensitivity_waveform import OUTPUTS, waveform_pair_sums
 from ..scenes.relay_wall import WALL_NORMAL
 from .parameters import rotation
 from .relay_wall_legs import leg_column
+from ..waveforms import make_waveform
 from .sensitivity import edge_columns, pair_geometry, pixel_cells, run_sensors
+from .waveform_sensitivity import kernel_scales
 
 __all__ = ["supports_relay", "relay_parts", "relay_column"]
 
@@ -37,8 +42,12 @@ _STEMS = ("sampling.start", "laser.position", "sensor.position", "hidden.center"
 
 
 def supports_relay(scene, stem: str) -> bool:
-    """Whether :func:`relay_column` gives ``stem``'s column: a relay wall under the impulse illumination."""
-    return scene.kind == "relay_wall" and scene.illumination.waveform == "impulse" and stem in _STEMS
+    """Whether :func:`relay_column` gives ``stem``'s column: a relay wall whose waveform one of the plane's
+    exact routes takes (every one but a step S other than the impulse)."""
+    if scene.kind != "relay_wall" or stem not in _STEMS:
+        return False
+    light = scene.illumination
+    return light.waveform == "impulse" or make_waveform(light, scene.sampling.bin_width_opl).terms.degree != 0
 
 
 def _offsets(scene, lit, read) -> np.ndarray:
@@ -55,27 +64,44 @@ def _frame(scene):
     return rectangle, rectangle.local(lit), rectangle.local(read), rectangle.axes @ WALL_NORMAL
 
 
-def _sums(scene, source_normal, sensor_normal, progress: bool = False) -> np.ndarray:
-    """:func:`pair_sums` of every pair ``(P, 2, E, 13)`` (F, H at the pair's bin edges t_e - o_p), times the
-    laser leg's factor, with the ends' cosines taken about ``source_normal`` and ``sensor_normal`` (frame)."""
+def _pass(scene, source_normal, sensor_normal, progress: bool = False):
+    """y, ∂y/∂l, ∂y/∂s (frame axes) and ∂y/∂t_0 of every pair, with the ends' cosines taken about
+    ``source_normal`` and ``sensor_normal`` (frame), times the laser leg's factor.
+
+    The impulse: :func:`pair_sums` (F, H at the pair's bin edges t_e - o_p); any other waveform:
+    :func:`waveform_pair_sums` on the pair's time axis shifted by -o_p.
+    """
     rectangle, local_lit, local_read, _ = _frame(scene)
     lit, read = scene.pair_points
     cells = pixel_cells(rectangle.width, rectangle.height, scene.reflectance,
                         np.unique(np.vstack([local_lit, local_read]), axis=0))
-    edges = np.asarray(scene.sampling.edges, dtype=np.float64)
-    shifted = edges[None, :] - _offsets(scene, lit, read)[:, None]
-    count = len(lit)
-    sums = np.zeros((count, 2, edges.size, AMPLITUDES))
-    rtol = float(scene.tolerance)
+    offsets = _offsets(scene, lit, read)
+    count, rtol, sampling = len(lit), float(scene.tolerance), scene.sampling
     (snx, sny, snz), (knx, kny, knz) = map(float, source_normal), map(float, sensor_normal)
 
-    def arguments(p):
-        geometry = pair_geometry(local_lit[p], local_read[p], "lambertian")._replace(
+    def geometry(p):
+        return pair_geometry(local_lit[p], local_read[p], "lambertian")._replace(
             surfaces=True, snx=snx, sny=sny, snz=snz, knx=knx, kny=kny, knz=knz)
-        return geometry, cells, shifted[p], rtol, sums[p, 0], sums[p, 1]
 
-    run_sensors(pair_sums, arguments, count, rtol, progress)
-    return sums * scene.laser_leg(lit)[:, None, None, None]
+    leg = scene.laser_leg(lit)
+    if scene.illumination.waveform == "impulse":
+        edges = np.asarray(sampling.edges, dtype=np.float64)
+        shifted = edges[None, :] - offsets[:, None]
+        sums = np.zeros((count, 2, edges.size, AMPLITUDES))
+        run_sensors(pair_sums, lambda p: (geometry(p), cells, shifted[p], rtol, sums[p, 0], sums[p, 1]), count, rtol,
+                    progress)
+        return edge_columns(sums * leg[:, None, None, None], 1.0)[:4]
+    terms = make_waveform(scene.illumination, sampling.bin_width_opl).terms
+    scales = kernel_scales(terms, float(sampling.bin_width_opl))
+    sums = np.zeros((count, sampling.count, OUTPUTS))
+
+    def arguments(p):
+        axis = TimeAxis(float(sampling.start_opl) - offsets[p], float(sampling.bin_width_opl), int(sampling.count))
+        return geometry(p), cells, terms, axis, scales, rtol, sums[p]
+
+    run_sensors(waveform_pair_sums, arguments, count, rtol, progress)
+    sums *= leg[:, None, None]
+    return sums[..., 0], sums[..., 1:4], sums[..., 4:7], sums[..., 7]
 
 
 def relay_parts(scene, *, progress: bool = False):
@@ -88,7 +114,7 @@ def relay_parts(scene, *, progress: bool = False):
         points, the laser leg's factor held); ∂y/∂t_0 ``(P, N)``, per metre of path length.
     """
     rectangle, _, _, normal = _frame(scene)
-    y, source, sensor, start, _ = edge_columns(_sums(scene, normal, normal, progress), 1.0)
+    y, source, sensor, start = _pass(scene, normal, normal, progress)
     # the frame's coordinates are axes (p - corner): a world gradient is axesᵀ times the frame's
     return y, source @ rectangle.axes, sensor @ rectangle.axes, start
 
@@ -117,7 +143,7 @@ def _normal_turn(scene, velocity, normal) -> np.ndarray:
     column = np.zeros((scene.sensor_count, scene.sampling.count))
     if np.any(velocity != 0.0):
         for ends in ((velocity, normal), (normal, velocity)):
-            column += np.diff(_sums(scene, *ends)[:, 0, :, 0], axis=1)
+            column += _pass(scene, *ends)[0]
     return column
 
 

@@ -23,7 +23,8 @@ _TOLERANCE = 1e-6
 
 
 def _capture(tmp_path, scan, hidden="center = [0.1, -0.05, 0.8]\nu = [0.6, 0.0, 0.0]\nv = [0.0, -0.6, 0.0]",
-             points="[laser]\nposition = [-0.4, 0.2, 0.3]\n[sensor]\nposition = [0.3, -0.1, 0.2]", start=1.4):
+             points="[laser]\nposition = [-0.4, 0.2, 0.3]\n[sensor]\nposition = [0.3, -0.1, 0.2]", start=1.4,
+             light='waveform = "impulse"'):
     text = f"""
 [relay_wall]
 size = [2.0, 2.0]
@@ -38,6 +39,8 @@ reflectance = 0.7
 period = 0.05
 start = {start}
 count = 40
+[illumination]
+{light}
 [model]
 tolerance = {_TOLERANCE}
 """
@@ -65,6 +68,17 @@ _CASES = {
                                      points="[laser]\nposition = [-0.4, 0.2, 0.05]\n[sensor]\n"
                                             "position = [0.3, -0.1, 0.05]"),
                                 ["sampling.start", "hidden.center.x", "hidden.center.z"]),
+    "confocal, counted legs, Gaussian pulse": (dict(scan='type = "confocal"\ngrid = [2, 2]' + _COUNTED, start=3.0,
+                                                    light='waveform = "gaussian"\nfwhm = 0.05'),
+                                               ["sampling.start", "laser.position.x", "sensor.position.z",
+                                                "hidden.center.z", "hidden.rotation.y"]),
+    "single, tilted rectangle, square pulse": (dict(scan='type = "single"\nlaser_point = [0.2, 0.1, 0.0]\n'
+                                                         'grid = [2, 2]',
+                                                    hidden="center = [0.1, -0.05, 0.8]\nu = [0.6, 0.0, 0.25]\n"
+                                                           "v = [0.0, -0.6, 0.0]",
+                                                    light='waveform = "square"\nwidth = 0.08'),
+                                               ["sampling.start", "scan.laser_point.x", "hidden.center.x",
+                                                "hidden.rotation.z"]),
 }
 
 
@@ -75,7 +89,8 @@ def _gap(exact, reference, bound):
     return np.abs(exact - reference).max(axis=1) / (bound + _TOLERANCE * scale)
 
 
-@pytest.mark.parametrize("case", list(_CASES))
+@pytest.mark.parametrize("case", [pytest.param(case, marks=pytest.mark.slow) if "Gaussian" in case else case
+                                  for case in _CASES])
 def test_the_geometric_keys_against_differences_of_the_model(tmp_path, case):
     changes, keys = _CASES[case]
     scene = _capture(tmp_path, **changes)

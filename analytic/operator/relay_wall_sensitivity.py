@@ -28,6 +28,7 @@ import numpy as np
 from ..kernels.bins import TimeAxis
 from ..kernels.sensitivity import AMPLITUDES, pair_sums
 from ..kernels.sensitivity_waveform import OUTPUTS, waveform_pair_sums
+from ..resources import require_memory
 from ..scenes.relay_wall import WALL_NORMAL
 from .parameters import rotation
 from .relay_wall_legs import leg_column
@@ -36,6 +37,9 @@ from .sensitivity import edge_columns, pair_geometry, pixel_cells, run_sensors
 from .waveform_sensitivity import kernel_scales
 
 __all__ = ["supports_relay", "relay_parts", "relay_column"]
+
+#: The kernels' sums of one block of pairs, in doubles (256 MB).
+_BLOCK_DOUBLES = 2 ** 25
 
 _STEMS = ("sampling.start", "laser.position", "sensor.position", "hidden.center", "hidden.rotation",
           "scan.laser_point")
@@ -84,24 +88,40 @@ def _pass(scene, source_normal, sensor_normal, progress: bool = False):
             surfaces=True, snx=snx, sny=sny, snz=snz, knx=knx, kny=kny, knz=knz)
 
     leg = scene.laser_leg(lit)
-    if scene.illumination.waveform == "impulse":
+    bins = int(sampling.count)
+    # y, ∂y/∂l, ∂y/∂s and ∂y/∂t_0 (8 doubles per entry), then the kernels' sums a block of pairs at a time
+    require_memory(8 * 8 * count * bins, f"the exact derivatives of {count:,} pairs x {bins} bins",
+                   "take fewer keys on the exact route, or a smaller scan")
+    out = np.zeros((count, bins, 8))
+    impulse = scene.illumination.waveform == "impulse"
+    if impulse:
         edges = np.asarray(sampling.edges, dtype=np.float64)
         shifted = edges[None, :] - offsets[:, None]
-        sums = np.zeros((count, 2, edges.size, AMPLITUDES))
-        run_sensors(pair_sums, lambda p: (geometry(p), cells, shifted[p], rtol, sums[p, 0], sums[p, 1]), count, rtol,
-                    progress)
-        return edge_columns(sums * leg[:, None, None, None], 1.0)[:4]
-    terms = make_waveform(scene.illumination, sampling.bin_width_opl).terms
-    scales = kernel_scales(terms, float(sampling.bin_width_opl))
-    sums = np.zeros((count, sampling.count, OUTPUTS))
+        width = 2 * edges.size * AMPLITUDES
+    else:
+        terms = make_waveform(scene.illumination, sampling.bin_width_opl).terms
+        scales = kernel_scales(terms, float(sampling.bin_width_opl))
+        width = bins * OUTPUTS
+    block = max(1, _BLOCK_DOUBLES // width)
+    for first in range(0, count, block):
+        pairs = range(first, min(count, first + block))
+        if impulse:
+            sums = np.zeros((len(pairs), 2, edges.size, AMPLITUDES))
+            run_sensors(pair_sums, lambda i: (geometry(pairs[i]), cells, shifted[pairs[i]], rtol, sums[i, 0],
+                                              sums[i, 1]), len(pairs), rtol, progress)
+            y, source, sensor, start, _ = edge_columns(sums, 1.0)
+            parts = (y[..., None], source, sensor, start[..., None])
+        else:
+            sums = np.zeros((len(pairs), bins, OUTPUTS))
 
-    def arguments(p):
-        axis = TimeAxis(float(sampling.start_opl) - offsets[p], float(sampling.bin_width_opl), int(sampling.count))
-        return geometry(p), cells, terms, axis, scales, rtol, sums[p]
+            def arguments(i):
+                axis = TimeAxis(float(sampling.start_opl) - offsets[pairs[i]], float(sampling.bin_width_opl), bins)
+                return geometry(pairs[i]), cells, terms, axis, scales, rtol, sums[i]
 
-    run_sensors(waveform_pair_sums, arguments, count, rtol, progress)
-    sums *= leg[:, None, None]
-    return sums[..., 0], sums[..., 1:4], sums[..., 4:7], sums[..., 7]
+            run_sensors(waveform_pair_sums, arguments, len(pairs), rtol, progress)
+            parts = (sums[..., :8],)
+        out[first:first + len(pairs)] = np.concatenate(parts, axis=-1) * leg[pairs.start:pairs.stop, None, None]
+    return out[..., 0], out[..., 1:4], out[..., 4:7], out[..., 7]
 
 
 def relay_parts(scene, *, progress: bool = False):

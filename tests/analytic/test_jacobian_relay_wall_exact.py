@@ -125,3 +125,13 @@ def test_dropping_the_wall_normals_turn_fails(tmp_path, monkeypatch):
     reference, bound = jacobian(scene, keys, route="differences", step=_STEP, errors=True)
     monkeypatch.setattr(relay, "_normal_turn", lambda scene, velocity, normal: 0.0)
     assert _gap(jacobian(scene, keys), reference, bound).min() > 1.0
+
+
+@pytest.mark.parametrize("light", ['waveform = "impulse"', 'waveform = "square"\nwidth = 0.08'])
+def test_pairs_in_blocks_give_the_same_columns(tmp_path, monkeypatch, light):
+    # big scans are integrated a block of pairs at a time: one pair per block must change nothing
+    scene = _capture(tmp_path, scan='type = "exhaustive"\ngrid = [2, 1]' + _COUNTED, start=3.0, light=light)
+    keys = ["sampling.start", "laser.position.x", "hidden.center.z"]
+    whole = jacobian(scene, keys)
+    monkeypatch.setattr(relay, "_BLOCK_DOUBLES", 1)
+    assert np.array_equal(jacobian(scene, keys), whole)

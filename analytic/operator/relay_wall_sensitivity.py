@@ -10,7 +10,7 @@ plane's exact route takes) with :class:`~analytic.kernels.sensitivity.PairGeomet
 the interior and bin-edge terms of ∂y/∂l and ∂y/∂s and the time zero's column, on the pair's time axis
 shifted by -o_p (o_p the added path of the end legs when the scan counts them). The keys follow by the chain rule:
 
-- ``sampling.start``: every edge moving, -I ∫ f a κ_n'(d + o_p) dx (the impulse response at the edges);
+- ``sampling.start``: every edge moving, -I ∫ f a κ_n'(d + o_p) dx (for the impulse, the impulse response at the edges);
 - ``laser.position.*`` with the end legs counted: the laser leg's factor (:mod:`.relay_wall_legs`) plus
   the time shift, -∂y/∂t_0 ∂o_p/∂o_l with ∂o_p/∂o_l = (o_l - l) / |o_l - l|; ``sensor.position.*`` the
   time shift alone, ∂o_p/∂o_s = (o_s - s) / |o_s - s|;
@@ -30,9 +30,9 @@ from ..kernels.sensitivity import AMPLITUDES, pair_sums
 from ..kernels.sensitivity_waveform import OUTPUTS, waveform_pair_sums
 from ..resources import require_memory
 from ..scenes.relay_wall import WALL_NORMAL
+from ..waveforms import make_waveform
 from .parameters import rotation
 from .relay_wall_legs import leg_column
-from ..waveforms import make_waveform
 from .sensitivity import edge_columns, pair_geometry, pixel_cells, run_sensors
 from .waveform_sensitivity import kernel_scales
 

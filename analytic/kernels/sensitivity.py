@@ -80,6 +80,15 @@ class PairGeometry(NamedTuple):
     distance: float     # D, between the feet
     first: float        # t_min = sqrt(D² + (h_s + h_k)²), the first arrival
     second: float       # sqrt(D² + (h_s - h_k)²)
+    # the ends' own surfaces (a relay wall's points): a is multiplied by n·(x - p) / |x - p| at each end,
+    # unit normals in this frame, fixed when the points move; none for the plane
+    surfaces: bool = False
+    snx: float = 0.0
+    sny: float = 0.0
+    snz: float = 0.0
+    knx: float = 0.0
+    kny: float = 0.0
+    knz: float = 0.0
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -110,6 +119,25 @@ def amplitudes(g, x, y, out):
     out[10] = a * rkx / dk
     out[11] = a * rky / dk
     out[12] = a * g.kh / dk
+    if g.surfaces:
+        _surfaces(g, rsx, rsy, rkx, rky, ds, dk, out)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _surfaces(g, rsx, rsy, rkx, rky, ds, dk, out):
+    """Multiply the amplitudes by the ends' cosines c = n·(x - p) / |x - p| (and ∂a/∂p by the product rule)."""
+    # x - p_s = (-rsx, -rsy, -h_s);  ∂c/∂p_j = (-n_j + c (x - p)_j / |x - p|) / |x - p|
+    cs = -(g.snx * rsx + g.sny * rsy + g.snz * g.sh) / ds
+    ck = -(g.knx * rkx + g.kny * rky + g.knz * g.kh) / dk
+    a, both = out[0], cs * ck
+    slopes = ((-g.snx - cs * rsx / ds) / ds, (-g.sny - cs * rsy / ds) / ds, (-g.snz - cs * g.sh / ds) / ds,
+              (-g.knx - ck * rkx / dk) / dk, (-g.kny - ck * rky / dk) / dk, (-g.knz - ck * g.kh / dk) / dk)
+    for j in range(3):
+        out[1 + j] = out[1 + j] * both + a * ck * slopes[j]
+        out[4 + j] = out[4 + j] * both + a * cs * slopes[3 + j]
+    out[0] = a * both
+    for j in range(7, AMPLITUDES):
+        out[j] *= both
 
 
 @njit(cache=True, error_model="numpy", inline="always")

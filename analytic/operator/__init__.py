@@ -9,6 +9,7 @@
 - :mod:`.derivatives`: derivatives of y with respect to the scene's parameters (exact or by differences);
 - :mod:`.sensitivity`, :mod:`.waveform_sensitivity`: the exact route's interior and bin-edge terms for a
   plane scene (the impulse; every other waveform); :mod:`.relay_wall_legs`: a relay wall's end legs;
+  :mod:`.relay_wall_sensitivity`: a relay wall's other geometric keys, in the rectangle's frame;
 - :mod:`.offsets`, :mod:`.offset_operator`: captures whose pairs are translates by whole pixels, each
   distinct offset computed once; A applied by FFT over them without A (for reconstructions at size);
 - :mod:`.parameters`: the scene's numbers named by scene-file keys (docs/design.md section 9).

@@ -14,8 +14,12 @@
   scale (∂y/∂s = y) and the source's intensity (∂y/∂I = y / I). A relay
   wall's ``laser.position.*`` and ``sensor.position.*`` are exact through
   the laser leg's factor (:mod:`.relay_wall_legs`) unless the end legs are
-  counted. Every other key (``illumination.*``, the relay wall's other
-  geometric keys) still takes the differences below.
+  counted; ``sampling.start``, ``hidden.center.*``,
+  ``hidden.rotation.*``, ``scan.laser_point.*`` and the laser's and sensor's
+  positions with the end legs counted are exact through the rectangle's
+  frame (:mod:`.relay_wall_sensitivity`, the waveforms the plane's routes
+  take). Every other key
+  (``illumination.*``, the relay wall's other geometric keys) still takes the differences below.
 - ``"differences"``: Richardson-extrapolated central differences of the
   model assembled at tolerance :data:`TOLERANCE`, for every key (the tests'
   independent reference).
@@ -35,6 +39,7 @@ from .parameters import Parameter, parameter, parameters, rotation, value_of, wi
 from .general_routes import progress_bar
 from .matrix_free import forward
 from .relay_wall_legs import leg_column, supports_leg
+from .relay_wall_sensitivity import relay_column, relay_parts, supports_relay
 from .sensitivity import position_derivatives
 from .waveform_sensitivity import waveform_derivatives
 
@@ -134,7 +139,7 @@ def exact_keys(scene, items) -> list[bool]:
         heights = np.vstack([np.asarray(scene.source)[None, :], np.asarray(scene.sensors)])[:, 2]
         high = heights.min() >= _SIZE_HEIGHT * _scale(scene, parameter(scene, "source.position.x"))
     return [item.stem.endswith(".reflectance") or item.unit == "W/sr" or supports_leg(scene, item.stem)
-            or (plane and item.stem in _EXACT_STEMS and (item.stem != "plane.size" or high)) for item in items]
+            or supports_relay(scene, item.stem) or (plane and item.stem in _EXACT_STEMS and (item.stem != "plane.size" or high)) for item in items]
 
 
 def _exact_column(scene, item: Parameter, parts) -> np.ndarray:
@@ -214,7 +219,7 @@ def jacobian(scene, keys, *, step: float | None = None, route: str = "exact", pr
     if route not in ROUTES:
         raise OptionError(f"route: expected one of {', '.join(ROUTES)}, got {route!r}")
     exact = exact_keys(scene, items) if route == "exact" else [False] * len(items)
-    y = parts = centre = None
+    y = parts = relay = centre = None
     columns, bounds = [], []
     bar = progress_bar(progress and not all(exact), len(items), "jacobian", "key")
     for item, closed in zip(items, exact):
@@ -226,6 +231,9 @@ def jacobian(scene, keys, *, step: float | None = None, route: str = "exact", pr
         elif closed and supports_leg(scene, item.stem):
             y = forward(scene) if y is None else y
             columns.append(leg_column(scene, item.stem, item.index[0], y))
+        elif closed and supports_relay(scene, item.stem):
+            relay = relay_parts(scene, progress=progress) if relay is None else relay
+            columns.append(relay_column(scene, item.stem, item.index[0] if item.index else 0, relay))
         elif closed:
             parts = _position_parts(scene, progress) if parts is None else parts
             columns.append(_exact_column(scene, item, parts))

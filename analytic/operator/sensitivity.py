@@ -47,7 +47,7 @@ from .blocks import run_blocks
 from .general_routes import progress_bar
 from .system import QuadratureWarning
 
-__all__ = ["position_derivatives", "supports", "pair_geometry", "run_sensors"]
+__all__ = ["position_derivatives", "supports", "pair_geometry", "run_sensors", "pixel_cells", "edge_columns"]
 
 #: Cells are at most this fraction of their distance to a foot's peak wide.
 _CELL_OF_HEIGHT = 0.25
@@ -71,21 +71,29 @@ def _near(boxes, feet) -> np.ndarray:
 
 
 def _cells(scene):
+    """The plane's pixels of non-zero reflectance as boxes (x0, x1, y0, y1, f), split near the feet (:func:`pixel_cells`)."""
+    size = float(scene.size)
+    feet = np.vstack([np.asarray(scene.source, dtype=np.float64)[None, :], np.asarray(scene.sensors, dtype=np.float64)])
+    return pixel_cells(size, size, scene.reflectance, feet)
+
+
+def pixel_cells(width: float, height: float, reflectance, feet) -> np.ndarray:
     """The pixels of non-zero reflectance as boxes (x0, x1, y0, y1, f), split in quadrants near the feet.
 
-    A's amplitude has a peak as wide as the height under each source and
-    sensor (complex singularities a height away): a cell is split until it
-    is narrower than a quarter of its distance to them, so the cells shrink
-    geometrically towards a foot (a few dozen per level) however low it is.
-    Whole arrays at a time, one level of splitting after the other.
+    The image's M x M pixels tile [0, width] x [0, height] (image row r from
+    the top). A's amplitude has a peak as wide as the height under each
+    point of ``feet`` (rows x, y, height: complex singularities a height
+    away): a cell is split until it is narrower than a quarter of its
+    distance to them, so the cells shrink geometrically towards a foot (a
+    few dozen per level) however low it is. Whole arrays at a time, one
+    level of splitting after the other.
     """
-    size, pixels = float(scene.size), int(scene.pixels)
-    delta = size / pixels
-    image = np.asarray(scene.reflectance, dtype=np.float64)
+    image = np.asarray(reflectance, dtype=np.float64)
+    pixels = image.shape[0]
+    du, dv = width / pixels, height / pixels
     rows, columns = np.nonzero(image)
-    x0, y0 = columns * delta, size - (rows + 1) * delta
-    boxes = np.stack([x0, x0 + delta, y0, y0 + delta, image[rows, columns]], axis=1)
-    feet = np.vstack([np.asarray(scene.source, dtype=np.float64)[None, :], np.asarray(scene.sensors, dtype=np.float64)])
+    x0, y0 = columns * du, height - (rows + 1) * dv
+    boxes = np.stack([x0, x0 + du, y0, y0 + dv, image[rows, columns]], axis=1)
     kept, pending = [], boxes
     while len(pending):
         near = _near(pending, feet)
@@ -156,9 +164,14 @@ def position_derivatives(scene, *, progress: bool = False):
                 sums[k, 0], sums[k, 1])
 
     run_sensors(pair_sums, arguments, count, rtol, progress)
+    return edge_columns(sums, float(scene.intensity))
+
+
+def edge_columns(sums, scale: float):
+    """(y, ∂y/∂p_s, ∂y/∂p_k, ∂y/∂t_0, response) of :func:`position_derivatives` from :func:`pair_sums`' ``sums``
+    ``(K, 2, E, 13)`` (F, H at the bin edges) and the rows' common factor ``scale``."""
     F, H = sums[:, 0], sums[:, 1]
     interior = np.diff(F, axis=1)                  # F(t_{n+1}) - F(t_n)
     moving = H[:, :-1] - H[:, 1:]                  # H(t_n) - H(t_{n+1})
-    scale = float(scene.intensity)
     return (scale * interior[..., 0], scale * (interior[..., 1:4] + moving[..., 7:10]),
             scale * (interior[..., 4:7] + moving[..., 10:13]), -scale * moving[..., 0], scale * H[..., 0])

@@ -59,7 +59,3 @@ def test_the_laser_and_sensor_positions_against_differences_of_the_model(tmp_pat
     gap = np.abs(exact - reference).max(axis=1)[:, :3] / scale[:, :3]
     assert gap.max() < 1e-6, gap.max()
 
-
-def test_counted_end_legs_keep_the_differences(tmp_path):
-    scene = _capture(tmp_path, 'type = "confocal"\ngrid = [2, 2]\naccount_first_and_last_bounces = true')
-    assert not any(exact_keys(scene, parameters(scene, _KEYS)))

@@ -1,0 +1,192 @@
+"""Exact ∂y/∂θ of a relay-wall capture for its geometric keys (docs/derivatives.md).
+
+In the hidden rectangle's frame (x, y along its edges from its corner, heights along its normal) a pair
+(l, s) is the plane's problem with l in the source's place, s in the sensor's, the rectangle's pixels as
+the cells, and the attenuation multiplied by the wall's cosines at both ends, c_l = n·(x - l) / |x - l|
+and c_s = n·(x - s) / |x - s| (:meth:`analytic.scenes.relay_wall.RelayWallScene.geometry`; n the wall's
+normal, fixed in the frame while l and s move): :func:`analytic.kernels.sensitivity.pair_sums` (the
+impulse) or :func:`analytic.kernels.sensitivity_waveform.waveform_pair_sums` (the other waveforms the
+plane's exact route takes) with :class:`~analytic.kernels.sensitivity.PairGeometry`'s ``surfaces`` gives
+the interior and bin-edge terms of ∂y/∂l and ∂y/∂s and the time zero's column, on the pair's time axis
+shifted by -o_p (o_p the added path of the end legs when the scan counts them). The keys follow by the chain rule:
+
+- ``sampling.start``: every edge moving, -I ∫ f a κ_n'(d + o_p) dx (for the impulse, the impulse response at the edges);
+- ``laser.position.*`` with the end legs counted: the laser leg's factor (:mod:`.relay_wall_legs`) plus
+  the time shift, -∂y/∂t_0 ∂o_p/∂o_l with ∂o_p/∂o_l = (o_l - l) / |o_l - l|; ``sensor.position.*`` the
+  time shift alone, ∂o_p/∂o_s = (o_s - s) / |o_s - s|;
+- ``hidden.center.*``: a translation of the rectangle is l and s moving the other way in its frame,
+  -(∂y/∂l + ∂y/∂s) (the wall's normal unchanged, the legs untouched);
+- ``hidden.rotation.*``: l, s and n turning the other way in the frame (:func:`_rotation`);
+- ``scan.laser_point.{x,y}`` (single scan): ∂y/∂l plus the laser leg's factor (its l-derivative, the
+  negative of its o_l-derivative) and the time shift with ∂o_p/∂l = (l - o_l) / |o_l - l|.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..kernels.bins import TimeAxis
+from ..kernels.sensitivity import AMPLITUDES, pair_sums
+from ..kernels.sensitivity_waveform import OUTPUTS, waveform_pair_sums
+from ..resources import require_memory
+from ..scenes.relay_wall import WALL_NORMAL
+from ..waveforms import make_waveform
+from .parameters import rotation
+from .relay_wall_legs import leg_column
+from .sensitivity import edge_columns, pair_geometry, pixel_cells, run_sensors
+from .waveform_sensitivity import kernel_scales
+
+__all__ = ["supports_relay", "relay_parts", "relay_column"]
+
+#: The kernels' sums of one block of pairs, in doubles (256 MB).
+_BLOCK_DOUBLES = 2 ** 25
+
+_STEMS = ("sampling.start", "laser.position", "sensor.position", "hidden.center", "hidden.rotation",
+          "scan.laser_point")
+
+
+def supports_relay(scene, stem: str) -> bool:
+    """Whether :func:`relay_column` gives ``stem``'s column: a relay wall whose waveform one of the plane's
+    exact routes takes (every one but a step S other than the impulse)."""
+    if scene.kind != "relay_wall" or stem not in _STEMS:
+        return False
+    light = scene.illumination
+    return light.waveform == "impulse" or make_waveform(light, scene.sampling.bin_width_opl).terms.degree != 0
+
+
+def _offsets(scene, lit, read) -> np.ndarray:
+    """Each pair's added path o_p (the end legs when the scan counts them, else 0), metres."""
+    if not scene.scan.account_first_and_last_bounces:
+        return np.zeros(len(lit))
+    return np.linalg.norm(scene.laser_position - lit, axis=1) + np.linalg.norm(read - scene.sensor_position, axis=1)
+
+
+def _frame(scene):
+    """The rectangle, each pair's (l, s) in its frame, and the wall's normal in it."""
+    rectangle = scene.rectangle()
+    lit, read = scene.pair_points
+    return rectangle, rectangle.local(lit), rectangle.local(read), rectangle.axes @ WALL_NORMAL
+
+
+def _pass(scene, source_normal, sensor_normal, progress: bool = False):
+    """y, ∂y/∂l, ∂y/∂s (frame axes) and ∂y/∂t_0 of every pair, with the ends' cosines taken about
+    ``source_normal`` and ``sensor_normal`` (frame), times the laser leg's factor.
+
+    The impulse: :func:`pair_sums` (F, H at the pair's bin edges t_e - o_p); any other waveform:
+    :func:`waveform_pair_sums` on the pair's time axis shifted by -o_p.
+    """
+    rectangle, local_lit, local_read, _ = _frame(scene)
+    lit, read = scene.pair_points
+    cells = pixel_cells(rectangle.width, rectangle.height, scene.reflectance,
+                        np.unique(np.vstack([local_lit, local_read]), axis=0))
+    offsets = _offsets(scene, lit, read)
+    count, rtol, sampling = len(lit), float(scene.tolerance), scene.sampling
+    (snx, sny, snz), (knx, kny, knz) = map(float, source_normal), map(float, sensor_normal)
+
+    def geometry(p):
+        return pair_geometry(local_lit[p], local_read[p], "lambertian")._replace(
+            surfaces=True, snx=snx, sny=sny, snz=snz, knx=knx, kny=kny, knz=knz)
+
+    leg = scene.laser_leg(lit)
+    bins = int(sampling.count)
+    # y, ∂y/∂l, ∂y/∂s and ∂y/∂t_0 (8 doubles per entry), then the kernels' sums a block of pairs at a time
+    require_memory(8 * 8 * count * bins, f"the exact derivatives of {count:,} pairs x {bins} bins",
+                   "take fewer keys on the exact route, or a smaller scan")
+    out = np.zeros((count, bins, 8))
+    impulse = scene.illumination.waveform == "impulse"
+    if impulse:
+        edges = np.asarray(sampling.edges, dtype=np.float64)
+        shifted = edges[None, :] - offsets[:, None]
+        width = 2 * edges.size * AMPLITUDES
+    else:
+        terms = make_waveform(scene.illumination, sampling.bin_width_opl).terms
+        scales = kernel_scales(terms, float(sampling.bin_width_opl))
+        width = bins * OUTPUTS
+    block = max(1, _BLOCK_DOUBLES // width)
+    for first in range(0, count, block):
+        pairs = range(first, min(count, first + block))
+        if impulse:
+            sums = np.zeros((len(pairs), 2, edges.size, AMPLITUDES))
+            run_sensors(pair_sums, lambda i: (geometry(pairs[i]), cells, shifted[pairs[i]], rtol, sums[i, 0],
+                                              sums[i, 1]), len(pairs), rtol, progress)
+            y, source, sensor, start, _ = edge_columns(sums, 1.0)
+            parts = (y[..., None], source, sensor, start[..., None])
+        else:
+            sums = np.zeros((len(pairs), bins, OUTPUTS))
+
+            def arguments(i):
+                axis = TimeAxis(float(sampling.start_opl) - offsets[pairs[i]], float(sampling.bin_width_opl), bins)
+                return geometry(pairs[i]), cells, terms, axis, scales, rtol, sums[i]
+
+            run_sensors(waveform_pair_sums, arguments, len(pairs), rtol, progress)
+            parts = (sums[..., :8],)
+        out[first:first + len(pairs)] = np.concatenate(parts, axis=-1) * leg[pairs.start:pairs.stop, None, None]
+    return out[..., 0], out[..., 1:4], out[..., 4:7], out[..., 7]
+
+
+def relay_parts(scene, *, progress: bool = False):
+    """y, ∂y/∂l, ∂y/∂s (world axes, the wall's normal fixed) and ∂y/∂sampling.start of every pair.
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        y ``(P, N)``, y's units; ∂y/∂l and ∂y/∂s ``(P, N, 3)``, per metre (l and s each pair's own
+        points, the laser leg's factor held); ∂y/∂t_0 ``(P, N)``, per metre of path length.
+    """
+    rectangle, _, _, normal = _frame(scene)
+    y, source, sensor, start = _pass(scene, normal, normal, progress)
+    # the frame's coordinates are axes (p - corner): a world gradient is axesᵀ times the frame's
+    return y, source @ rectangle.axes, sensor @ rectangle.axes, start
+
+
+def _rotation(scene, axis: int, parts) -> np.ndarray:
+    """∂y/∂hidden.rotation.{axis}: the rectangle turning by θ about the world axis through its centre is, in
+    its frame, l, s and the wall's normal n turning by -θ: dp/dθ = -e × (p - c), dn/dθ = -e × n.
+
+    The points' share is the chain rule on ∂y/∂l and ∂y/∂s; n enters through the cosines alone,
+    ∂(c_l c_s)/∂n·v = c_s v·(x - l)/|x - l| + c_l v·(x - s)/|x - s| (no path length moves: no edge
+    term), each term the cell integrals with that end's normal replaced by v = dn/dθ (frame).
+    """
+    _, lit_gradient, read_gradient, _ = parts
+    rectangle, _, _, normal = _frame(scene)
+    generator = rotation(axis, 1.0) - rotation(axis, -1.0)          # 2 sin(1) [e]x
+    turn = -generator / (2.0 * np.sin(1.0))                          # v ↦ -e × v
+    lit, read = scene.pair_points
+    column = (np.einsum("pnj,pj->pn", lit_gradient, (lit - scene.center) @ turn.T)
+              + np.einsum("pnj,pj->pn", read_gradient, (read - scene.center) @ turn.T))
+    return column + _normal_turn(scene, rectangle.axes @ (turn @ WALL_NORMAL), normal)
+
+
+def _normal_turn(scene, velocity, normal) -> np.ndarray:
+    """∂y/∂θ of the wall's normal (frame ``normal``) turning at ``velocity`` (frame), the points held:
+    the interior integral of a (c_s v·(x - l)/|x - l| + c_l v·(x - s)/|x - s|), ``(P, N)``."""
+    column = np.zeros((scene.sensor_count, scene.sampling.count))
+    if np.any(velocity != 0.0):
+        for ends in ((velocity, normal), (normal, velocity)):
+            column += _pass(scene, *ends)[0]
+    return column
+
+
+def relay_column(scene, stem: str, axis: int, parts) -> np.ndarray:
+    """∂y/∂(``stem``'s ``axis`` component), ``(P, N)``, from :func:`relay_parts`' ``parts``."""
+    y, lit_gradient, read_gradient, start = parts
+    if stem == "sampling.start":
+        return start
+    if stem == "hidden.center":
+        return -(lit_gradient[..., axis] + read_gradient[..., axis])
+    if stem == "hidden.rotation":
+        return _rotation(scene, axis, parts)
+    lit, read = scene.pair_points
+    counted = bool(scene.scan.account_first_and_last_bounces)
+    if stem == "sensor.position":
+        toward = scene.sensor_position - read
+        shift = toward[:, axis] / np.linalg.norm(toward, axis=1)
+        return -start * shift[:, None] if counted else np.zeros_like(y)
+    toward = scene.laser_position - lit
+    shift = toward[:, axis] / np.linalg.norm(toward, axis=1)           # ∂o_p/∂o_l
+    leg = leg_column(scene, "laser.position", axis, y)                   # y ∂ln c_l/∂o_l
+    column = leg - (start * shift[:, None] if counted else 0.0)
+    if stem == "laser.position":
+        return column
+    # scan.laser_point: l moves (o_l - l turns the other way: the leg's and the shift's signs flip)
+    return lit_gradient[..., axis] - column

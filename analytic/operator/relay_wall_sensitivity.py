@@ -36,7 +36,7 @@ from ..scenes.relay_wall import WALL_NORMAL
 from ..waveforms import make_waveform
 from .parameters import rotation
 from .relay_wall_legs import leg_column
-from .sensitivity import edge_columns, pair_geometry, pixel_cells, run_sensors
+from .sensitivity import edge_columns, pair_geometry, pixel_cells, run_sensors, warn_edges_on_arrivals
 from .waveform_sensitivity import kernel_scales
 
 __all__ = ["supports_relay", "relay_parts", "relay_column"]
@@ -71,6 +71,13 @@ def _frame(scene):
     return rectangle, rectangle.local(lit), rectangle.local(read), rectangle.axes @ WALL_NORMAL
 
 
+def _cells(scene) -> np.ndarray:
+    """The rectangle's pixels of non-zero reflectance as frame boxes, split near the pairs' feet."""
+    rectangle, local_lit, local_read, _ = _frame(scene)
+    return pixel_cells(rectangle.width, rectangle.height, scene.reflectance,
+                       np.unique(np.vstack([local_lit, local_read]), axis=0))
+
+
 def _pass(scene, source_normal, sensor_normal, progress: bool = False, weight=None):
     """y, ∂y/∂l, ∂y/∂s (frame axes) and ∂y/∂t_0 of every pair, with the ends' cosines taken about
     ``source_normal`` and ``sensor_normal`` (frame), times the laser leg's factor (and, given
@@ -79,10 +86,9 @@ def _pass(scene, source_normal, sensor_normal, progress: bool = False, weight=No
     The impulse: :func:`pair_sums` (F, H at the pair's bin edges t_e - o_p); any other waveform:
     :func:`waveform_pair_sums` on the pair's time axis shifted by -o_p.
     """
-    rectangle, local_lit, local_read, _ = _frame(scene)
+    _, local_lit, local_read, _ = _frame(scene)
     lit, read = scene.pair_points
-    cells = pixel_cells(rectangle.width, rectangle.height, scene.reflectance,
-                        np.unique(np.vstack([local_lit, local_read]), axis=0))
+    cells = _cells(scene)
     offsets = _offsets(scene, lit, read)
     count, rtol, sampling = len(lit), float(scene.tolerance), scene.sampling
     (snx, sny, snz), (knx, kny, knz) = map(float, source_normal), map(float, sensor_normal)
@@ -139,7 +145,12 @@ def relay_parts(scene, *, progress: bool = False):
         y ``(P, N)``, y's units; ∂y/∂l and ∂y/∂s ``(P, N, 3)``, per metre (l and s each pair's own
         points, the laser leg's factor held); ∂y/∂t_0 ``(P, N)``, per metre of path length.
     """
-    rectangle, _, _, normal = _frame(scene)
+    rectangle, local_lit, local_read, normal = _frame(scene)
+    if scene.illumination.waveform == "impulse":
+        offsets = _offsets(scene, *scene.pair_points)
+        geometries = [pair_geometry(l, s, "lambertian") for l, s in zip(local_lit, local_read)]
+        edges = np.asarray(scene.sampling.edges, dtype=np.float64)
+        warn_edges_on_arrivals(geometries, _cells(scene), edges[None, :] - offsets[:, None], "pair")
     y, source, sensor, start = _pass(scene, normal, normal, progress)
     # the frame's coordinates are axes (p - corner): a world gradient is axesᵀ times the frame's
     return y, source @ rectangle.axes, sensor @ rectangle.axes, start

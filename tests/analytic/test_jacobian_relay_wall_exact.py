@@ -20,37 +20,10 @@ import analytic.operator.relay_wall_sensitivity as relay
 from analytic.operator.derivatives import exact_keys, jacobian
 from analytic.errors import SceneError
 from analytic.operator.parameters import parameters
-from analytic.scenes.scene_file import scene_of
+from relay_capture import capture as _capture
 
 _STEP = 2e-5
 _TOLERANCE = 1e-6
-
-
-def _capture(tmp_path, scan, hidden="center = [0.1, -0.05, 0.8]\nu = [0.6, 0.0, 0.0]\nv = [0.0, -0.6, 0.0]",
-             points="[laser]\nposition = [-0.4, 0.2, 0.3]\n[sensor]\nposition = [0.3, -0.1, 0.2]", start=1.4,
-             light='waveform = "impulse"'):
-    text = f"""
-[relay_wall]
-size = [2.0, 2.0]
-[hidden]
-{hidden}
-pixels = 3
-reflectance = 0.7
-{points}
-[scan]
-{scan}
-[sampling]
-period = 0.05
-start = {start}
-count = 40
-[illumination]
-{light}
-[model]
-tolerance = {_TOLERANCE}
-"""
-    path = tmp_path / "capture.toml"
-    path.write_text(text)
-    return scene_of(path)
 
 
 _COUNTED = "\naccount_first_and_last_bounces = true"

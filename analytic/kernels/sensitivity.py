@@ -89,6 +89,12 @@ class PairGeometry(NamedTuple):
     knx: float = 0.0
     kny: float = 0.0
     knz: float = 0.0
+    # every amplitude times w0 + wx x + wy y (a frame coordinate: a hidden rectangle's edge vector
+    # stretching it, analytic/operator/relay_wall_sensitivity.py); none for the plane
+    weighted: bool = False
+    wx: float = 0.0
+    wy: float = 0.0
+    w0: float = 0.0
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -121,6 +127,10 @@ def amplitudes(g, x, y, out):
     out[12] = a * g.kh / dk
     if g.surfaces:
         _surfaces(g, rsx, rsy, rkx, rky, ds, dk, out)
+    if g.weighted:
+        weight = g.w0 + g.wx * x + g.wy * y
+        for j in range(AMPLITUDES):
+            out[j] *= weight
 
 
 @njit(cache=True, error_model="numpy", inline="always")

@@ -18,13 +18,16 @@ shifted by -o_p (o_p the added path of the end legs when the scan counts them). 
   -(∂y/∂l + ∂y/∂s) (the wall's normal unchanged, the legs untouched);
 - ``hidden.rotation.*``: l, s and n turning the other way in the frame (:func:`_rotation`);
 - ``scan.laser_point.{x,y}`` (single scan): ∂y/∂l plus the laser leg's factor (its l-derivative, the
-  negative of its o_l-derivative) and the time shift with ∂o_p/∂l = (l - o_l) / |o_l - l|.
+  negative of its o_l-derivative) and the time shift with ∂o_p/∂l = (l - o_l) / |o_l - l|;
+- ``hidden.u.*``, ``hidden.v.*``: a stretch about the centre (a pass weighted by the frame coordinate)
+  plus a turn (:func:`_edge_vector`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from ..errors import SceneError
 from ..kernels.bins import TimeAxis
 from ..kernels.sensitivity import AMPLITUDES, pair_sums
 from ..kernels.sensitivity_waveform import OUTPUTS, waveform_pair_sums
@@ -33,7 +36,7 @@ from ..scenes.relay_wall import WALL_NORMAL
 from ..waveforms import make_waveform
 from .parameters import rotation
 from .relay_wall_legs import leg_column
-from .sensitivity import edge_columns, pair_geometry, pixel_cells, run_sensors
+from .sensitivity import edge_columns, pair_geometry, pixel_cells, run_sensors, warn_edges_on_arrivals
 from .waveform_sensitivity import kernel_scales
 
 __all__ = ["supports_relay", "relay_parts", "relay_column"]
@@ -42,7 +45,7 @@ __all__ = ["supports_relay", "relay_parts", "relay_column"]
 _BLOCK_DOUBLES = 2 ** 25
 
 _STEMS = ("sampling.start", "laser.position", "sensor.position", "hidden.center", "hidden.rotation",
-          "scan.laser_point")
+          "scan.laser_point", "hidden.u", "hidden.v")
 
 
 def supports_relay(scene, stem: str) -> bool:
@@ -68,24 +71,33 @@ def _frame(scene):
     return rectangle, rectangle.local(lit), rectangle.local(read), rectangle.axes @ WALL_NORMAL
 
 
-def _pass(scene, source_normal, sensor_normal, progress: bool = False):
+def _cells(scene) -> np.ndarray:
+    """The rectangle's pixels of non-zero reflectance as frame boxes, split near the pairs' feet."""
+    rectangle, local_lit, local_read, _ = _frame(scene)
+    return pixel_cells(rectangle.width, rectangle.height, scene.reflectance,
+                       np.unique(np.vstack([local_lit, local_read]), axis=0))
+
+
+def _pass(scene, source_normal, sensor_normal, progress: bool = False, weight=None):
     """y, ∂y/∂l, ∂y/∂s (frame axes) and ∂y/∂t_0 of every pair, with the ends' cosines taken about
-    ``source_normal`` and ``sensor_normal`` (frame), times the laser leg's factor.
+    ``source_normal`` and ``sensor_normal`` (frame), times the laser leg's factor (and, given
+    ``weight`` = (w_x, w_y, w_0), every integrand times w_0 + w_x x + w_y y, frame metres).
 
     The impulse: :func:`pair_sums` (F, H at the pair's bin edges t_e - o_p); any other waveform:
     :func:`waveform_pair_sums` on the pair's time axis shifted by -o_p.
     """
-    rectangle, local_lit, local_read, _ = _frame(scene)
+    _, local_lit, local_read, _ = _frame(scene)
     lit, read = scene.pair_points
-    cells = pixel_cells(rectangle.width, rectangle.height, scene.reflectance,
-                        np.unique(np.vstack([local_lit, local_read]), axis=0))
+    cells = _cells(scene)
     offsets = _offsets(scene, lit, read)
     count, rtol, sampling = len(lit), float(scene.tolerance), scene.sampling
     (snx, sny, snz), (knx, kny, knz) = map(float, source_normal), map(float, sensor_normal)
+    wx, wy, w0 = (0.0, 0.0, 0.0) if weight is None else map(float, weight)
 
     def geometry(p):
         return pair_geometry(local_lit[p], local_read[p], "lambertian")._replace(
-            surfaces=True, snx=snx, sny=sny, snz=snz, knx=knx, kny=kny, knz=knz)
+            surfaces=True, snx=snx, sny=sny, snz=snz, knx=knx, kny=kny, knz=knz,
+            weighted=weight is not None, wx=wx, wy=wy, w0=w0)
 
     leg = scene.laser_leg(lit)
     bins = int(sampling.count)
@@ -133,7 +145,12 @@ def relay_parts(scene, *, progress: bool = False):
         y ``(P, N)``, y's units; ∂y/∂l and ∂y/∂s ``(P, N, 3)``, per metre (l and s each pair's own
         points, the laser leg's factor held); ∂y/∂t_0 ``(P, N)``, per metre of path length.
     """
-    rectangle, _, _, normal = _frame(scene)
+    rectangle, local_lit, local_read, normal = _frame(scene)
+    if scene.illumination.waveform == "impulse":
+        offsets = _offsets(scene, *scene.pair_points)
+        geometries = [pair_geometry(l, s, "lambertian") for l, s in zip(local_lit, local_read)]
+        edges = np.asarray(scene.sampling.edges, dtype=np.float64)
+        warn_edges_on_arrivals(geometries, _cells(scene), edges[None, :] - offsets[:, None], "pair")
     y, source, sensor, start = _pass(scene, normal, normal, progress)
     # the frame's coordinates are axes (p - corner): a world gradient is axesᵀ times the frame's
     return y, source @ rectangle.axes, sensor @ rectangle.axes, start
@@ -147,10 +164,14 @@ def _rotation(scene, axis: int, parts) -> np.ndarray:
     ∂(c_l c_s)/∂n·v = c_s v·(x - l)/|x - l| + c_l v·(x - s)/|x - s| (no path length moves: no edge
     term), each term the cell integrals with that end's normal replaced by v = dn/dθ (frame).
     """
+    generator = rotation(axis, 1.0) - rotation(axis, -1.0)          # 2 sin(1) [e]x
+    return _turn(scene, -generator / (2.0 * np.sin(1.0)), parts)     # v ↦ -e × v
+
+
+def _turn(scene, turn, parts) -> np.ndarray:
+    """∂y/∂θ of the rectangle turning about its centre, ``turn`` the world matrix v ↦ -e × v."""
     _, lit_gradient, read_gradient, _ = parts
     rectangle, _, _, normal = _frame(scene)
-    generator = rotation(axis, 1.0) - rotation(axis, -1.0)          # 2 sin(1) [e]x
-    turn = -generator / (2.0 * np.sin(1.0))                          # v ↦ -e × v
     lit, read = scene.pair_points
     column = (np.einsum("pnj,pj->pn", lit_gradient, (lit - scene.center) @ turn.T)
               + np.einsum("pnj,pj->pn", read_gradient, (read - scene.center) @ turn.T))
@@ -167,9 +188,44 @@ def _normal_turn(scene, velocity, normal) -> np.ndarray:
     return column
 
 
+def _edge_vector(scene, stem: str, axis: int, parts) -> np.ndarray:
+    """∂y/∂hidden.u.{axis} (or v), the centre and the other edge held, the pixel count fixed.
+
+    A component of u along ê = u/|u| stretches the rectangle about its centre: with the pixels fixed
+    in (ξ/|u|, η/|v|), u → (1 + ε) u gives dy/dε = y + ∫ ξ' f ∂_ê(a κ) dx (ξ' = ξ - |u|/2, the area
+    element's change and the points' stretch), and ∂_x(a κ) = -(∂_l + ∂_s)(a κ) in the frame (a κ
+    depends on x through x - l and x - s, the normals fixed): the pass weighted by ξ' gives it. A
+    component along the lit face's normal n turns the rectangle about e = ê × n by δ/|u|
+    (:func:`_turn`). One along the other edge breaks u ⊥ v: the scene refuses it.
+    """
+    y = parts[0]
+    rectangle, _, _, normal = _frame(scene)
+    side = 0 if stem == "hidden.u" else 1
+    other, key = (scene.v, "hidden.v") if side == 0 else (scene.u, "hidden.u")
+    if abs(other[axis]) > 1e-9 * np.linalg.norm(other):
+        raise SceneError(f"{stem}.{'xyz'[axis]}", f"has no derivative on its own: {key}.{'xyz'[axis]} = "
+                                                  f"{float(other[axis])!r} is not 0, so changing it breaks u ⟂ v, "
+                                                  f"which the scene requires; take the components along which "
+                                                  f"{key} is 0, or hidden.rotation.*")
+    length = (rectangle.width, rectangle.height)[side]
+    along, face = rectangle.axes[side], rectangle.axes[2]
+    column = np.zeros_like(y)
+    if along[axis] != 0.0:
+        weight = (1.0, 0.0, -0.5 * length) if side == 0 else (0.0, 1.0, -0.5 * length)
+        _, lit_w, read_w, _ = _pass(scene, normal, normal, weight=weight)
+        column += along[axis] / length * (y - lit_w[..., side] - read_w[..., side])
+    if face[axis] != 0.0:
+        e = np.cross(along, face)
+        turn = -np.array([[0.0, -e[2], e[1]], [e[2], 0.0, -e[0]], [-e[1], e[0], 0.0]])
+        column += face[axis] / length * _turn(scene, turn, parts)
+    return column
+
+
 def relay_column(scene, stem: str, axis: int, parts) -> np.ndarray:
     """∂y/∂(``stem``'s ``axis`` component), ``(P, N)``, from :func:`relay_parts`' ``parts``."""
     y, lit_gradient, read_gradient, start = parts
+    if stem in ("hidden.u", "hidden.v"):
+        return _edge_vector(scene, stem, axis, parts)
     if stem == "sampling.start":
         return start
     if stem == "hidden.center":

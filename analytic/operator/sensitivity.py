@@ -47,12 +47,52 @@ from .blocks import run_blocks
 from .general_routes import progress_bar
 from .system import QuadratureWarning
 
-__all__ = ["position_derivatives", "supports", "pair_geometry", "run_sensors", "pixel_cells", "edge_columns"]
+__all__ = ["position_derivatives", "supports", "pair_geometry", "run_sensors", "pixel_cells", "edge_columns",
+           "EdgeOnArrivalWarning", "warn_edges_on_arrivals"]
 
 #: Cells are at most this fraction of their distance to a foot's peak wide.
 _CELL_OF_HEIGHT = 0.25
 #: The cell integrals' accuracy, as a fraction of the scene's tolerance.
 _SAFETY = 1.0
+#: A bin edge this close (relative) to a pair's first arrival is on it.
+_ON_ARRIVAL = 1e-9
+
+
+class EdgeOnArrivalWarning(UserWarning):
+    """A bin edge lies on a pair's first arrival, where the impulse response jumps: y has no derivative there."""
+
+
+def warn_edges_on_arrivals(geometries, cells, edges, what: str) -> None:
+    """Warn once (:class:`EdgeOnArrivalWarning`) if a bin edge is on a pair's first arrival with light there.
+
+    The impulse response of a pair jumps at its first arrival t_min when the point of first arrival (on
+    the segment between the feet, h_s / (h_s + h_k) of the way from the source's) lies on a cell of
+    non-zero reflectance: y is then not differentiable in anything that moves that edge or t_min, and the
+    cell integrals (whose isochrone there is a point) return the one-sided value of the edge just before
+    the arrival. ``geometries``: :class:`PairGeometry` per pair; ``cells``: rows (x0, x1, y0, y1, f);
+    ``edges``: ``(P, E)`` each pair's bin edges on its own time axis, metres; ``what``: the pairs' name.
+    """
+    edges = np.asarray(edges, dtype=np.float64)
+    hits = []
+    for p, g in enumerate(geometries):
+        near = np.flatnonzero(np.abs(edges[p] - g.first) <= _ON_ARRIVAL * g.first)
+        if not near.size:
+            continue
+        share = g.sh / (g.sh + g.kh) if g.sh + g.kh > 0.0 else 0.5
+        x, y = g.sx + share * (g.kx - g.sx), g.sy + share * (g.ky - g.sy)
+        slack = _ON_ARRIVAL * g.first
+        if np.any((cells[:, 0] - slack <= x) & (x <= cells[:, 1] + slack) & (cells[:, 2] - slack <= y)
+                  & (y <= cells[:, 3] + slack)):
+            hits.append((p, int(near[0])))
+    if hits:
+        (p, n), width = hits[0], float(edges[0, 1] - edges[0, 0]) if edges.shape[1] > 1 else 0.0
+        edge, first = float(edges[p, n]), float(geometries[p].first)
+        warnings.warn(f"bin edge {n} of {what} {p} (t = {edge!r} m on its time axis) lies on its first arrival "
+                      f"({first!r} m), where the impulse response jumps ({len(hits)} pair(s) in all): y has no "
+                      f"derivative there in sampling.start or any key that moves the arrival, and the exact "
+                      f"route returns the one-sided value of the edge just before the arrival; move "
+                      f"sampling.start by a fraction of a bin (e.g. {0.25 * width:g} m)",
+                      EdgeOnArrivalWarning, stacklevel=4)
 
 
 def supports(scene) -> bool:
@@ -159,9 +199,11 @@ def position_derivatives(scene, *, progress: bool = False):
     sums = np.zeros((count, 2, bins + 1, AMPLITUDES))
     rtol = _SAFETY * float(scene.tolerance)
 
+    geometries = [pair_geometry(scene.source, sensor, scene.attenuation) for sensor in scene.sensors]
+    warn_edges_on_arrivals(geometries, cells, np.broadcast_to(edges, (count, edges.size)), "sensor")
+
     def arguments(k):
-        return (pair_geometry(scene.source, scene.sensors[k], scene.attenuation), cells, edges, rtol,
-                sums[k, 0], sums[k, 1])
+        return geometries[k], cells, edges, rtol, sums[k, 0], sums[k, 1]
 
     run_sensors(pair_sums, arguments, count, rtol, progress)
     return edge_columns(sums, float(scene.intensity))

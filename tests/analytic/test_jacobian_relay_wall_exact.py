@@ -8,6 +8,9 @@ route that shares no code with the cell integrals' edge terms), held to its own 
 (``errors=True``: the Richardson pair's disagreement and the second differences' change, which a
 kink of y in the stencil raises) plus the exact route's tolerance. Dropping the bin-edge term (what
 Monte Carlo differentiation does) must fail it.
+
+``hidden.u.*`` and ``hidden.v.*`` (the edge vectors: the pixel grid stretched and turned) are held to
+the same reference on every component the scene accepts; the others (which break u ⟂ v) are refused.
 """
 
 import numpy as np
@@ -15,38 +18,12 @@ import pytest
 
 import analytic.operator.relay_wall_sensitivity as relay
 from analytic.operator.derivatives import exact_keys, jacobian
+from analytic.errors import SceneError
 from analytic.operator.parameters import parameters
-from analytic.scenes.scene_file import scene_of
+from relay_capture import capture as _capture
 
 _STEP = 2e-5
 _TOLERANCE = 1e-6
-
-
-def _capture(tmp_path, scan, hidden="center = [0.1, -0.05, 0.8]\nu = [0.6, 0.0, 0.0]\nv = [0.0, -0.6, 0.0]",
-             points="[laser]\nposition = [-0.4, 0.2, 0.3]\n[sensor]\nposition = [0.3, -0.1, 0.2]", start=1.4,
-             light='waveform = "impulse"'):
-    text = f"""
-[relay_wall]
-size = [2.0, 2.0]
-[hidden]
-{hidden}
-pixels = 3
-reflectance = 0.7
-{points}
-[scan]
-{scan}
-[sampling]
-period = 0.05
-start = {start}
-count = 40
-[illumination]
-{light}
-[model]
-tolerance = {_TOLERANCE}
-"""
-    path = tmp_path / "capture.toml"
-    path.write_text(text)
-    return scene_of(path)
 
 
 _COUNTED = "\naccount_first_and_last_bounces = true"
@@ -93,7 +70,10 @@ def _gap(exact, reference, bound):
                                   for case in _CASES])
 def test_the_geometric_keys_against_differences_of_the_model(tmp_path, case):
     changes, keys = _CASES[case]
-    scene = _capture(tmp_path, **changes)
+    _hold_to_differences(_capture(tmp_path, **changes), keys)
+
+
+def _hold_to_differences(scene, keys):
     assert all(exact_keys(scene, parameters(scene, keys)))
     exact = jacobian(scene, keys)
     reference, bound = jacobian(scene, keys, route="differences", step=_STEP, errors=True)
@@ -135,3 +115,34 @@ def test_pairs_in_blocks_give_the_same_columns(tmp_path, monkeypatch, light):
     whole = jacobian(scene, keys)
     monkeypatch.setattr(relay, "_BLOCK_DOUBLES", 1)
     assert np.array_equal(jacobian(scene, keys), whole)
+
+
+_EDGE_CASES = {
+    "confocal, counted legs": ["hidden.u.x", "hidden.u.z", "hidden.v.y", "hidden.v.z"],
+    "exhaustive, tilted rectangle": ["hidden.u.x", "hidden.u.z", "hidden.v.y"],
+}
+
+
+@pytest.mark.parametrize("case", list(_EDGE_CASES))
+def test_the_edge_vectors_against_differences_of_the_model(tmp_path, case):
+    _hold_to_differences(_capture(tmp_path, **_CASES[case][0]), _EDGE_CASES[case])
+
+
+def test_dropping_the_stretch_fails(tmp_path, monkeypatch):
+    # the stretch's integrand is the points' derivatives weighted by the frame coordinate: dropping the
+    # weight (an unweighted pass, the area element's change alone) must fail
+    scene = _capture(tmp_path, **_CASES["exhaustive, tilted rectangle"][0])
+    keys = ["hidden.u.x", "hidden.v.y"]
+    reference, bound = jacobian(scene, keys, route="differences", step=_STEP, errors=True)
+    passes = relay._pass
+    monkeypatch.setattr(relay, "_pass", lambda scene, *ends, progress=False, weight=None: passes(scene, *ends))
+    assert _gap(jacobian(scene, keys), reference, bound).min() > 1.0
+
+
+@pytest.mark.parametrize("key, other", [("hidden.u.y", "hidden.v.y"), ("hidden.v.z", "hidden.u.z")])
+def test_an_edge_component_that_breaks_orthogonality_is_refused(tmp_path, key, other):
+    scene = _capture(tmp_path, **_CASES["exhaustive, tilted rectangle"][0])
+    with pytest.raises(SceneError) as refusal:
+        jacobian(scene, [key])
+    message = str(refusal.value)
+    assert "\n" not in message and message.startswith(key) and other in message

@@ -39,6 +39,7 @@ __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
                   "RegularizationWarning"],
     "operator.conditioning": ["singular_values", "conditioning_summary"],
     "operator.derivatives": ["jacobian"],
+    "operator.sensitivity": ["EdgeOnArrivalWarning"],
     "inversion.bounds": ["crb", "Bounds"],
     "operator.parameters": ["with_values"],
 })

@@ -28,5 +28,6 @@ __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "window": ["response_range", "covering_sampling", "window_share", "WindowWarning"],
     "conditioning": ["singular_values", "conditioning_summary"],
     "derivatives": ["jacobian", "derivative"],
+    "sensitivity": ["EdgeOnArrivalWarning"],
     "parameters": ["Parameter", "parameter", "parameters", "value_of", "with_values", "parameter_keys"],
 })

@@ -38,10 +38,12 @@ import numpy as np
 
 from .cache import njit
 
-__all__ = ["PairGeometry", "AMPLITUDES", "amplitudes", "isochrone_ellipse", "pair_sums"]
+__all__ = ["PairGeometry", "AMPLITUDES", "RELAY_AMPLITUDES", "amplitudes", "isochrone_ellipse", "pair_sums"]
 
 #: a, ∂a/∂p_s (x, y, z), ∂a/∂p_k (x, y, z), a ∂d/∂p_s (x, y, z), a ∂d/∂p_k (x, y, z).
 AMPLITUDES = 13
+#: A relay wall's pairs (``PairGeometry.surfaces``) add seven (:func:`amplitudes`): buffers hold this many.
+RELAY_AMPLITUDES = 20
 #: F (the area integrals) takes the first seven (a and ∂a/∂θ), H (the coarea ones) a and the last six.
 _AREA = 7
 #: The Gauss orders climbed, one after the other, until two consecutive ones agree.

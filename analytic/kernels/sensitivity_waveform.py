@@ -34,7 +34,7 @@ import numpy as np
 from .bins import bin_edge, pixel_bins
 from .cache import njit
 from .pieces import piece_derivatives, piece_of, piece_value
-from .sensitivity import _LADDER, _NODES, _WEIGHTS, _line_roots, _path, amplitudes, isochrone_ellipse
+from .sensitivity import RELAY_AMPLITUDES, _LADDER, _NODES, _WEIGHTS, _line_roots, _path, amplitudes, isochrone_ellipse
 
 __all__ = ["OUTPUTS", "waveform_pair_sums"]
 
@@ -238,7 +238,7 @@ def _limits(g, box, scales, rtol, deepest, limits):
     zero's ∫ a max |κ'|, the moment's that times the cell's largest d.
     """
     x0, x1, y0, y1 = box
-    rung, amp, magnitude = 3, np.empty(13), np.zeros(13)
+    rung, amp, magnitude = 3, np.empty(RELAY_AMPLITUDES), np.zeros(13)
     for i in range(_LADDER[rung]):
         for m in range(_LADDER[rung]):
             amplitudes(g, x0 + (x1 - x0) * _NODES[rung, i], y0 + (y1 - y0) * _NODES[rung, m], amp)
@@ -277,7 +277,7 @@ def waveform_pair_sums(g, cells, terms, axis, scales, rtol, out):
         Outputs: m⁻¹ (y) and m⁻² (the derivatives) times the kernels' units.
     """
     kinked = terms.starts[terms.kinks]
-    work = np.zeros((5, max(13, axis.count + 1)))
+    work = np.zeros((5, max(RELAY_AMPLITUDES, axis.count + 1)))
     rungs = np.zeros((2, axis.count, OUTPUTS))
     total = np.zeros((axis.count, OUTPUTS))
     limits = np.empty(OUTPUTS)

@@ -3,8 +3,9 @@
 For one source-sensor pair over the plane z = 0 (world frame), with
 d(x) = |x - p_s| + |x - p_k| and a cell [x0, x1] x [y0, y1] of constant
 reflectance, two integrals of the :data:`AMPLITUDES` amplitudes w_j
-(:func:`amplitudes`: a, ∂a/∂p_s, ∂a/∂p_k, a ∂d/∂p_s, a ∂d/∂p_k) at each
-bin edge t:
+(:func:`amplitudes`: a, ∂a/∂p_s, ∂a/∂p_k, a ∂d/∂p_s, a ∂d/∂p_k; a relay
+wall's pair adds ∂a/∂n and the stretch's moments, :data:`RELAY_AMPLITUDES`)
+at each bin edge t:
 
     F_j(t) = ∫_{cell, d < t} w_j dx        H_j(t) = ∫_{cell} w_j δ(d - t) dx = dF_j/dt
 
@@ -42,10 +43,14 @@ __all__ = ["PairGeometry", "AMPLITUDES", "RELAY_AMPLITUDES", "amplitudes", "isoc
 
 #: a, ∂a/∂p_s (x, y, z), ∂a/∂p_k (x, y, z), a ∂d/∂p_s (x, y, z), a ∂d/∂p_k (x, y, z).
 AMPLITUDES = 13
-#: A relay wall's pairs (``PairGeometry.surfaces``) add seven (:func:`amplitudes`): buffers hold this many.
+#: A relay wall's pairs (``PairGeometry.surfaces``) add seven (:func:`amplitudes`): ∂a/∂n (x, y, z), the
+#: ends' normals turning together, and the stretch's moments (x - m_x)(∂a/∂p_s + ∂a/∂p_k)_x, the same along
+#: y, (x - m_x) a (∂d/∂p_s + ∂d/∂p_k)_x and along y. Buffers hold this many.
 RELAY_AMPLITUDES = 20
-#: F (the area integrals) takes the first seven (a and ∂a/∂θ), H (the coarea ones) a and the last six.
+#: F (the area integrals) takes a and ∂a/∂θ (the plane's first seven), H (the coarea ones) a and a ∂d/∂θ.
 _AREA = 7
+_AREA_INDEX = np.array([0, 1, 2, 3, 4, 5, 6, 13, 14, 15, 16, 17])
+_EDGE_INDEX = np.array([0, 7, 8, 9, 10, 11, 12, 18, 19])
 #: The Gauss orders climbed, one after the other, until two consecutive ones agree.
 _LADDER = np.array([2, 3, 4, 6, 8, 11])
 #: Where a cut piece's climb starts (G_2 judged by G_3, as a whole cell's).
@@ -97,6 +102,29 @@ class PairGeometry(NamedTuple):
     wx: float = 0.0
     wy: float = 0.0
     w0: float = 0.0
+    # a relay wall's stretch moments are taken about (mx, my) (frame metres); mscale (metres) the weight's
+    # scale in their accuracy (a coordinate's reach from there over the rectangle)
+    mx: float = 0.0
+    my: float = 0.0
+    mscale: float = 1.0
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _counts(g):
+    """How many amplitudes the pair has, and how many of them F and H take (:data:`_AREA_INDEX`, :data:`_EDGE_INDEX`)."""
+    if g.surfaces:
+        return RELAY_AMPLITUDES, 12, 9
+    return AMPLITUDES, _AREA, _AREA
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _floor(g, j):
+    """Area amplitude j's accuracy floor in units of ∫ a over the cell: a column's own scale."""
+    if j == 0 or 13 <= j <= 15:
+        return 1.0
+    if j >= 16:
+        return g.mscale / g.first
+    return 1.0 / g.first
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -129,9 +157,14 @@ def amplitudes(g, x, y, out):
     out[12] = a * g.kh / dk
     if g.surfaces:
         _surfaces(g, rsx, rsy, rkx, rky, ds, dk, out)
+        mx, my = x - g.mx, y - g.my
+        out[16] = mx * (out[1] + out[4])
+        out[17] = my * (out[2] + out[5])
+        out[18] = mx * (out[7] + out[10])
+        out[19] = my * (out[8] + out[11])
     if g.weighted:
         weight = g.w0 + g.wx * x + g.wy * y
-        for j in range(AMPLITUDES):
+        for j in range(_counts(g)[0]):
             out[j] *= weight
 
 
@@ -147,6 +180,10 @@ def _surfaces(g, rsx, rsy, rkx, rky, ds, dk, out):
     for j in range(3):
         out[1 + j] = out[1 + j] * both + a * ck * slopes[j]
         out[4 + j] = out[4 + j] * both + a * cs * slopes[3 + j]
+    # ∂a/∂n, both ends' normals moving together: a (c_k ∂c_s/∂n + c_s ∂c_k/∂n), ∂c/∂n = (x - p) / |x - p|
+    out[13] = -a * (ck * rsx / ds + cs * rkx / dk)
+    out[14] = -a * (ck * rsy / ds + cs * rky / dk)
+    out[15] = -a * (ck * g.sh / ds + cs * g.kh / dk)
     out[0] = a * both
     for j in range(7, AMPLITUDES):
         out[j] *= both
@@ -212,21 +249,21 @@ def _slice(g, x, roots, rows, weight, rung, area, edge, amp):
     low, high = roots
     y0, y1 = rows
     bottom, top = max(y0, low), min(y1, high)
+    _, areas, edges = _counts(g)
     if top > bottom:
         height = top - bottom
         for i in range(_LADDER[rung]):
             amplitudes(g, x, bottom + height * _NODES[rung, i], amp)
             scale = weight * height * _WEIGHTS[rung, i]
-            for j in range(_AREA):          # F needs a and ∂a/∂θ
-                area[j] += scale * amp[j]
+            for k in range(areas):          # F needs a and ∂a/∂θ
+                area[_AREA_INDEX[k]] += scale * amp[_AREA_INDEX[k]]
     for root in (low, high):
         if y0 <= root <= y1:
             slope = abs(_path_dy(g, x, root))
             if slope > 0.0:
                 amplitudes(g, x, root, amp)
-                edge[0] += weight * amp[0] / slope
-                for j in range(_AREA, AMPLITUDES):     # H needs a and a ∂d/∂θ
-                    edge[j] += weight * amp[j] / slope
+                for k in range(edges):      # H needs a and a ∂d/∂θ
+                    edge[_EDGE_INDEX[k]] += weight * amp[_EDGE_INDEX[k]] / slope
 
 
 @njit(cache=True, error_model="numpy")
@@ -239,7 +276,7 @@ def _piece_rule(g, chords, rows, part, rung, area, edge, amp):
     discriminant that cancels near an extreme, are exact to rounding however near one a node is."""
     cx, reach, cy, tilt, half = chords
     v0, v1 = part
-    for j in range(AMPLITUDES):
+    for j in range(RELAY_AMPLITUDES):
         area[j] = 0.0
         edge[j] = 0.0
     for i in range(_LADDER[rung]):
@@ -254,7 +291,7 @@ def _piece_rule(g, chords, rows, part, rung, area, edge, amp):
 @njit(cache=True, error_model="numpy", inline="always")
 def _within(low, high, limits, scale):
     """Whether |low_j - high_j| <= scale x limits_j for every amplitude j with a limit (limits_j >= 0)."""
-    for j in range(AMPLITUDES):
+    for j in range(RELAY_AMPLITUDES):
         if limits[j] >= 0.0 and abs(low[j] - high[j]) > scale * limits[j]:
             return False
     return True
@@ -265,19 +302,24 @@ def _cut_cell(g, ellipse, box, rtol, magnitude, area, edge, work):
     """Add F and H of one cell the ellipse crosses to ``area`` and ``edge``.
 
     ``magnitude``: ∫_cell |w_j| of each amplitude (from the tensor rule), the scale of F_j's accuracy, and
-    of H's (|a ∂d/∂θ| <= a) over the cell's diagonal; ``work``: float64[7, 13]. Returns how many
-    pieces were kept unconverged (the depth or :data:`_MAX_RULES` reached).
+    of H's (|a ∂d/∂θ| <= a) over the cell's diagonal (times the moments' scale for theirs); ``work``:
+    float64[7, 20]. Returns how many pieces were kept unconverged (the depth or :data:`_MAX_RULES` reached).
     """
     x0, x1, y0, y1 = box[0], box[1], box[2], box[3]
     failures = 0
     limit_area, limit_edge = work[5], work[6]
     diagonal = math.hypot(x1 - x0, y1 - y0)
-    for j in range(AMPLITUDES):
+    _, areas, edges = _counts(g)
+    limit_area[:] = -1.0
+    limit_edge[:] = -1.0
+    for k in range(areas):
         # a derivative's scale at least a's over the first arrival (a column's own scale), so that a
         # derivative vanishing over the cell does not ask for more than its column needs
-        limit_area[j] = rtol * max(magnitude[j], magnitude[0] / g.first) if 0 < j < _AREA else -1.0
-        limit_edge[j] = rtol * magnitude[0] / diagonal if (j == 0 or j >= _AREA) else -1.0
-    limit_area[0] = rtol * magnitude[0]
+        j = _AREA_INDEX[k]
+        limit_area[j] = rtol * max(magnitude[j], magnitude[0] * _floor(g, j))
+    for k in range(edges):
+        j = _EDGE_INDEX[k]
+        limit_edge[j] = rtol * magnitude[0] / diagonal * (g.mscale if j >= 18 else 1.0)
     cx, cy, a, b = ellipse
     reach = math.sqrt((a * g.ex) ** 2 + (b * g.ey) ** 2)
     xa, xb = max(x0, cx - reach), min(x1, cx + reach)
@@ -326,7 +368,7 @@ def _cut_cell(g, ellipse, box, rtol, magnitude, area, edge, work):
             if done or depth >= _MAX_DEPTH or top + 2 > _STACK or rules >= _MAX_RULES:
                 if not done:
                     failures += 1
-                for j in range(AMPLITUDES):
+                for j in range(RELAY_AMPLITUDES):
                     area[j] += high_area[j]
                     edge[j] += high_edge[j]
                 continue
@@ -339,16 +381,17 @@ def _cut_cell(g, ellipse, box, rtol, magnitude, area, edge, work):
 
 @njit(cache=True, error_model="numpy")
 def _box_rule(g, x0, x1, y0, y1, rung, out, absolute, amp):
-    for j in range(AMPLITUDES):
+    for j in range(RELAY_AMPLITUDES):
         out[j] = 0.0
         absolute[j] = 0.0
-    order = _LADDER[rung]
+    order, areas = _LADDER[rung], _counts(g)[1]
     for i in range(order):
         x = x0 + (x1 - x0) * _NODES[rung, i]
         for m in range(order):
             amplitudes(g, x, y0 + (y1 - y0) * _NODES[rung, m], amp)
             scale = (x1 - x0) * (y1 - y0) * _WEIGHTS[rung, i] * _WEIGHTS[rung, m]
-            for j in range(_AREA):
+            for k in range(areas):
+                j = _AREA_INDEX[k]
                 out[j] += scale * amp[j]
                 absolute[j] += scale * abs(amp[j])
 
@@ -359,8 +402,8 @@ def _full_cell(g, box, rtol, out, magnitude, work):
     two agree in every amplitude (to ``rtol`` of its ∫ |w_j|), else split in four. Returns how many
     parts were kept unconverged."""
     amp, low, high, absolute, limits = work[0], work[1], work[3], work[5], work[6]
-    for j in range(_AREA, AMPLITUDES):
-        limits[j] = -1.0
+    limits[:] = -1.0
+    areas = _counts(g)[1]
     boxes = np.empty((_STACK, 4))
     depths = np.empty(_STACK, dtype=np.int64)
     boxes[0, :] = box[:4]
@@ -377,16 +420,16 @@ def _full_cell(g, box, rtol, out, magnitude, work):
         for rung in range(1, _LADDER.size):
             low[:] = high
             _box_rule(g, x0, x1, y0, y1, rung, high, absolute, amp)
-            for j in range(1, _AREA):
-                limits[j] = max(absolute[j], absolute[0] / g.first)
-            limits[0] = absolute[0]
+            for k in range(areas):
+                j = _AREA_INDEX[k]
+                limits[j] = max(absolute[j], absolute[0] * _floor(g, j))
             if _within(low, high, limits, rtol):
                 done = True
                 break
         if done or depth >= _MAX_DEPTH or top + 4 > _STACK or rules >= _MAX_RULES:
             if not done:
                 failures += 1
-            for j in range(AMPLITUDES):
+            for j in range(RELAY_AMPLITUDES):
                 out[j] += high[j]
                 magnitude[j] += absolute[j]
             continue
@@ -401,7 +444,8 @@ def _full_cell(g, box, rtol, out, magnitude, work):
 
 @njit(cache=True, error_model="numpy", nogil=True)
 def pair_sums(g, cells, edges, rtol, F, H):
-    """Σ_cells f F_j(t_e) into ``F[e]`` and Σ_cells f H_j(t_e) into ``H[e]`` (both (E, 13), zeroed by the caller).
+    """Σ_cells f F_j(t_e) into ``F[e]`` and Σ_cells f H_j(t_e) into ``H[e]`` (both (E, J), zeroed by the caller;
+    J = :data:`AMPLITUDES`, or :data:`RELAY_AMPLITUDES` for a pair with ``surfaces``).
 
     Returns how many cell integrals were kept before meeting ``rtol`` (0 normally).
 
@@ -414,16 +458,16 @@ def pair_sums(g, cells, edges, rtol, F, H):
         Bin edges t_e, metres of path length.
     rtol : float
         Relative accuracy of each cell's (piece's) integrals.
-    F, H : float64[E, 13]
+    F, H : float64[E, J]
         Outputs: m⁻² and m⁻³ (times the amplitudes' units).
     """
     failures = 0
-    count = cells.shape[0]
-    work = np.zeros((7, AMPLITUDES))
-    full = np.zeros((count, AMPLITUDES))
+    count, width = cells.shape[0], _counts(g)[0]
+    work = np.zeros((7, RELAY_AMPLITUDES))
+    full = np.zeros((count, RELAY_AMPLITUDES))
     deepest = np.empty(count)
-    magnitude = np.zeros((count, AMPLITUDES))
-    area, edge = np.zeros(AMPLITUDES), np.zeros(AMPLITUDES)
+    magnitude = np.zeros((count, RELAY_AMPLITUDES))
+    area, edge = np.zeros(RELAY_AMPLITUDES), np.zeros(RELAY_AMPLITUDES)
     nearest = np.empty(count)
     done = np.zeros(count, dtype=np.bool_)
     for c in range(count):
@@ -447,14 +491,14 @@ def pair_sums(g, cells, edges, rtol, F, H):
                 failures += _full_cell(g, cells[c], rtol, full[c], magnitude[c], work)
                 done[c] = True
             if deepest[c] < t:
-                for j in range(AMPLITUDES):
+                for j in range(width):
                     F[e, j] += f * full[c, j]
             elif cells[c, 1] > cx - rx and cells[c, 0] < cx + rx and cells[c, 3] > cy - ry and cells[c, 2] < cy + ry:
-                for j in range(AMPLITUDES):
+                for j in range(RELAY_AMPLITUDES):
                     area[j] = 0.0
                     edge[j] = 0.0
                 failures += _cut_cell(g, ellipse, cells[c], rtol, magnitude[c], area, edge, work)
-                for j in range(AMPLITUDES):
+                for j in range(width):
                     F[e, j] += f * area[j]
                     H[e, j] += f * edge[j]
     return failures

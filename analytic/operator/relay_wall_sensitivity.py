@@ -16,11 +16,15 @@ shifted by -o_p (o_p the added path of the end legs when the scan counts them). 
   time shift alone, ∂o_p/∂o_s = (o_s - s) / |o_s - s|;
 - ``hidden.center.*``: a translation of the rectangle is l and s moving the other way in its frame,
   -(∂y/∂l + ∂y/∂s) (the wall's normal unchanged, the legs untouched);
-- ``hidden.rotation.*``: l, s and n turning the other way in the frame (:func:`_rotation`);
+- ``hidden.rotation.*``: l, s and n turning the other way in the frame (:func:`_rotation`; n's share
+  from the kernels' ∂a/∂n for the impulse, from two passes with one end's normal replaced otherwise);
 - ``scan.laser_point.{x,y}`` (single scan): ∂y/∂l plus the laser leg's factor (its l-derivative, the
   negative of its o_l-derivative) and the time shift with ∂o_p/∂l = (l - o_l) / |o_l - l|;
-- ``hidden.u.*``, ``hidden.v.*``: a stretch about the centre (a pass weighted by the frame coordinate)
-  plus a turn (:func:`_edge_vector`).
+- ``hidden.u.*``, ``hidden.v.*``: a stretch about the centre (the kernels' moments about it for the
+  impulse, a pass weighted by the frame coordinate otherwise) plus a turn (:func:`_edge_vector`).
+
+So for the impulse every key comes from one pass, and where the pairs are translates of a few by whole
+pixels (:mod:`.offsets`) from one pass over each distinct offset (:mod:`.relay_wall_offsets`).
 """
 
 from __future__ import annotations
@@ -29,13 +33,14 @@ import numpy as np
 
 from ..errors import SceneError
 from ..kernels.bins import TimeAxis
-from ..kernels.sensitivity import AMPLITUDES, pair_sums
+from ..kernels.sensitivity import RELAY_AMPLITUDES, pair_sums
 from ..kernels.sensitivity_waveform import OUTPUTS, waveform_pair_sums
 from ..resources import require_memory
 from ..scenes.relay_wall import WALL_NORMAL
 from ..waveforms import make_waveform
 from .parameters import rotation
 from .relay_wall_legs import leg_column
+from .relay_wall_offsets import offset_parts
 from .sensitivity import edge_columns, pair_geometry, pixel_cells, run_sensors, warn_edges_on_arrivals
 from .waveform_sensitivity import kernel_scales
 
@@ -81,12 +86,14 @@ def _cells(scene) -> np.ndarray:
 def _pass(scene, source_normal, sensor_normal, progress: bool = False, weight=None):
     """y, ∂y/∂l, ∂y/∂s (frame axes) and ∂y/∂t_0 of every pair, with the ends' cosines taken about
     ``source_normal`` and ``sensor_normal`` (frame), times the laser leg's factor (and, given
-    ``weight`` = (w_x, w_y, w_0), every integrand times w_0 + w_x x + w_y y, frame metres).
+    ``weight`` = (w_x, w_y, w_0), every integrand times w_0 + w_x x + w_y y, frame metres); for the
+    impulse also ∂y/∂n (``(P, N, 3)``, frame) and the stretch's moments about the centre (``(P, N, 2)``,
+    :func:`_edge_vector`), else None for both.
 
     The impulse: :func:`pair_sums` (F, H at the pair's bin edges t_e - o_p); any other waveform:
     :func:`waveform_pair_sums` on the pair's time axis shifted by -o_p.
     """
-    _, local_lit, local_read, _ = _frame(scene)
+    rectangle, local_lit, local_read, _ = _frame(scene)
     lit, read = scene.pair_points
     cells = _cells(scene)
     offsets = _offsets(scene, lit, read)
@@ -94,22 +101,25 @@ def _pass(scene, source_normal, sensor_normal, progress: bool = False, weight=No
     (snx, sny, snz), (knx, kny, knz) = map(float, source_normal), map(float, sensor_normal)
     wx, wy, w0 = (0.0, 0.0, 0.0) if weight is None else map(float, weight)
 
+    middle = (0.5 * rectangle.width, 0.5 * rectangle.height)
+
     def geometry(p):
         return pair_geometry(local_lit[p], local_read[p], "lambertian")._replace(
             surfaces=True, snx=snx, sny=sny, snz=snz, knx=knx, kny=kny, knz=knz,
-            weighted=weight is not None, wx=wx, wy=wy, w0=w0)
+            weighted=weight is not None, wx=wx, wy=wy, w0=w0, mx=middle[0], my=middle[1], mscale=np.hypot(*middle))
 
     leg = scene.laser_leg(lit)
     bins = int(sampling.count)
-    # y, ∂y/∂l, ∂y/∂s and ∂y/∂t_0 (8 doubles per entry), then the kernels' sums a block of pairs at a time
-    require_memory(8 * 8 * count * bins, f"the exact derivatives of {count:,} pairs x {bins} bins",
+    # y, ∂y/∂l, ∂y/∂s, ∂y/∂t_0, ∂y/∂n and the moments (13 doubles per entry), then the kernels' sums a
+    # block of pairs at a time
+    require_memory(8 * 13 * count * bins, f"the exact derivatives of {count:,} pairs x {bins} bins",
                    "take fewer keys on the exact route, or a smaller scan")
-    out = np.zeros((count, bins, 8))
     impulse = scene.illumination.waveform == "impulse"
+    out = np.zeros((count, bins, 13 if impulse else 8))
     if impulse:
         edges = np.asarray(sampling.edges, dtype=np.float64)
         shifted = edges[None, :] - offsets[:, None]
-        width = 2 * edges.size * AMPLITUDES
+        width = 2 * edges.size * RELAY_AMPLITUDES
     else:
         terms = make_waveform(scene.illumination, sampling.bin_width_opl).terms
         scales = kernel_scales(terms, float(sampling.bin_width_opl))
@@ -118,11 +128,10 @@ def _pass(scene, source_normal, sensor_normal, progress: bool = False, weight=No
     for first in range(0, count, block):
         pairs = range(first, min(count, first + block))
         if impulse:
-            sums = np.zeros((len(pairs), 2, edges.size, AMPLITUDES))
+            sums = np.zeros((len(pairs), 2, edges.size, RELAY_AMPLITUDES))
             run_sensors(pair_sums, lambda i: (geometry(pairs[i]), cells, shifted[pairs[i]], rtol, sums[i, 0],
                                               sums[i, 1]), len(pairs), rtol, progress)
-            y, source, sensor, start, _ = edge_columns(sums, 1.0)
-            parts = (y[..., None], source, sensor, start[..., None])
+            parts = relay_edge_columns(sums)
         else:
             sums = np.zeros((len(pairs), bins, OUTPUTS))
 
@@ -133,7 +142,19 @@ def _pass(scene, source_normal, sensor_normal, progress: bool = False, weight=No
             run_sensors(waveform_pair_sums, arguments, len(pairs), rtol, progress)
             parts = (sums[..., :8],)
         out[first:first + len(pairs)] = np.concatenate(parts, axis=-1) * leg[pairs.start:pairs.stop, None, None]
-    return out[..., 0], out[..., 1:4], out[..., 4:7], out[..., 7]
+    extra = (out[..., 8:11], out[..., 11:13]) if impulse else (None, None)
+    return out[..., 0], out[..., 1:4], out[..., 4:7], out[..., 7], *extra
+
+
+def relay_edge_columns(sums) -> tuple:
+    """(y, ∂y/∂l, ∂y/∂s, ∂y/∂t_0, ∂y/∂n, the stretch's moments) per bin, as ``(..., N, c)`` arrays (c = 1, 3,
+    3, 1, 3, 2), from :func:`pair_sums`' ``sums`` ``(..., 2, E, 20)`` (F and H at the bin edges)."""
+    y, source, sensor, start, _ = edge_columns(sums, 1.0)
+    F, H = sums[..., 0, :, :], sums[..., 1, :, :]
+    interior = np.diff(F, axis=-2)                   # F(t_{n+1}) - F(t_n)
+    moving = H[..., :-1, :] - H[..., 1:, :]          # H(t_n) - H(t_{n+1})
+    return (y[..., None], source, sensor, start[..., None], interior[..., 13:16],
+            interior[..., 16:18] + moving[..., 18:20])
 
 
 def relay_parts(scene, *, progress: bool = False):
@@ -143,17 +164,24 @@ def relay_parts(scene, *, progress: bool = False):
     -------
     tuple of numpy.ndarray
         y ``(P, N)``, y's units; ∂y/∂l and ∂y/∂s ``(P, N, 3)``, per metre (l and s each pair's own
-        points, the laser leg's factor held); ∂y/∂t_0 ``(P, N)``, per metre of path length.
+        points, the laser leg's factor held); ∂y/∂t_0 ``(P, N)``, per metre of path length; for the
+        impulse, ∂y/∂n ``(P, N, 3)`` (the wall's normal in the rectangle's frame, both ends' cosines) and
+        the stretch's moments ``(P, N, 2)`` (:func:`_edge_vector`), else None for each.
+
+    The impulse takes the offset route where the pairs are translates of a few
+    (:func:`.relay_wall_offsets.offset_parts`): each distinct (pair, pixel) offset integrated once.
     """
     rectangle, local_lit, local_read, normal = _frame(scene)
+    parts = None
     if scene.illumination.waveform == "impulse":
         offsets = _offsets(scene, *scene.pair_points)
         geometries = [pair_geometry(l, s, "lambertian") for l, s in zip(local_lit, local_read)]
         edges = np.asarray(scene.sampling.edges, dtype=np.float64)
         warn_edges_on_arrivals(geometries, _cells(scene), edges[None, :] - offsets[:, None], "pair")
-    y, source, sensor, start = _pass(scene, normal, normal, progress)
+        parts = offset_parts(scene, normal, progress=progress)
+    y, source, sensor, start, normals, moments = _pass(scene, normal, normal, progress) if parts is None else parts
     # the frame's coordinates are axes (p - corner): a world gradient is axesᵀ times the frame's
-    return y, source @ rectangle.axes, sensor @ rectangle.axes, start
+    return y, source @ rectangle.axes, sensor @ rectangle.axes, start, normals, moments
 
 
 def _rotation(scene, axis: int, parts) -> np.ndarray:
@@ -170,19 +198,22 @@ def _rotation(scene, axis: int, parts) -> np.ndarray:
 
 def _turn(scene, turn, parts) -> np.ndarray:
     """∂y/∂θ of the rectangle turning about its centre, ``turn`` the world matrix v ↦ -e × v."""
-    _, lit_gradient, read_gradient, _ = parts
+    lit_gradient, read_gradient = parts[1], parts[2]
     rectangle, _, _, normal = _frame(scene)
     lit, read = scene.pair_points
     column = (np.einsum("pnj,pj->pn", lit_gradient, (lit - scene.center) @ turn.T)
               + np.einsum("pnj,pj->pn", read_gradient, (read - scene.center) @ turn.T))
-    return column + _normal_turn(scene, rectangle.axes @ (turn @ WALL_NORMAL), normal)
+    return column + _normal_turn(scene, rectangle.axes @ (turn @ WALL_NORMAL), normal, parts[4])
 
 
-def _normal_turn(scene, velocity, normal) -> np.ndarray:
+def _normal_turn(scene, velocity, normal, gradient) -> np.ndarray:
     """∂y/∂θ of the wall's normal (frame ``normal``) turning at ``velocity`` (frame), the points held:
-    the interior integral of a (c_s v·(x - l)/|x - l| + c_l v·(x - s)/|x - s|), ``(P, N)``."""
+    the interior integral of a (c_s v·(x - l)/|x - l| + c_l v·(x - s)/|x - s|), ``(P, N)``: ∂y/∂n·v
+    from ``gradient`` (the impulse's parts), else two passes with one end's normal replaced by v."""
     column = np.zeros((scene.sensor_count, scene.sampling.count))
     if np.any(velocity != 0.0):
+        if gradient is not None:
+            return gradient @ velocity
         for ends in ((velocity, normal), (normal, velocity)):
             column += _pass(scene, *ends)[0]
     return column
@@ -194,7 +225,7 @@ def _edge_vector(scene, stem: str, axis: int, parts) -> np.ndarray:
     A component of u along ê = u/|u| stretches the rectangle about its centre: with the pixels fixed
     in (ξ/|u|, η/|v|), u → (1 + ε) u gives dy/dε = y + ∫ ξ' f ∂_ê(a κ) dx (ξ' = ξ - |u|/2, the area
     element's change and the points' stretch), and ∂_x(a κ) = -(∂_l + ∂_s)(a κ) in the frame (a κ
-    depends on x through x - l and x - s, the normals fixed): the pass weighted by ξ' gives it. A
+    depends on x through x - l and x - s, the normals fixed): the moments, or the pass weighted by ξ'. A
     component along the lit face's normal n turns the rectangle about e = ê × n by δ/|u|
     (:func:`_turn`). One along the other edge breaks u ⊥ v: the scene refuses it.
     """
@@ -211,9 +242,12 @@ def _edge_vector(scene, stem: str, axis: int, parts) -> np.ndarray:
     along, face = rectangle.axes[side], rectangle.axes[2]
     column = np.zeros_like(y)
     if along[axis] != 0.0:
-        weight = (1.0, 0.0, -0.5 * length) if side == 0 else (0.0, 1.0, -0.5 * length)
-        _, lit_w, read_w, _ = _pass(scene, normal, normal, weight=weight)
-        column += along[axis] / length * (y - lit_w[..., side] - read_w[..., side])
+        moments = parts[5]
+        if moments is None:           # a pass weighted by ξ'
+            weight = (1.0, 0.0, -0.5 * length) if side == 0 else (0.0, 1.0, -0.5 * length)
+            weighted = _pass(scene, normal, normal, weight=weight)
+            moments = (weighted[1] + weighted[2])[..., :2]
+        column += along[axis] / length * (y - moments[..., side])
     if face[axis] != 0.0:
         e = np.cross(along, face)
         turn = -np.array([[0.0, -e[2], e[1]], [e[2], 0.0, -e[0]], [-e[1], e[0], 0.0]])
@@ -223,7 +257,7 @@ def _edge_vector(scene, stem: str, axis: int, parts) -> np.ndarray:
 
 def relay_column(scene, stem: str, axis: int, parts) -> np.ndarray:
     """∂y/∂(``stem``'s ``axis`` component), ``(P, N)``, from :func:`relay_parts`' ``parts``."""
-    y, lit_gradient, read_gradient, start = parts
+    y, lit_gradient, read_gradient, start = parts[:4]
     if stem in ("hidden.u", "hidden.v"):
         return _edge_vector(scene, stem, axis, parts)
     if stem == "sampling.start":

@@ -220,6 +220,10 @@ def jacobian(scene, keys, *, step: float | None = None, route: str = "exact", pr
         raise OptionError(f"route: expected one of {', '.join(ROUTES)}, got {route!r}")
     exact = exact_keys(scene, items) if route == "exact" else [False] * len(items)
     y = parts = relay = centre = None
+    if any(closed and supports_relay(scene, item.stem) and not supports_leg(scene, item.stem)
+           for item, closed in zip(items, exact)):
+        relay = relay_parts(scene, progress=progress)      # its y serves the linear keys and the legs'
+        y = relay[0]
     columns, bounds = [], []
     bar = progress_bar(progress and not all(exact), len(items), "jacobian", "key")
     for item, closed in zip(items, exact):

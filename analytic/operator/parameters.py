@@ -31,7 +31,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..errors import OptionError
+from ..errors import OptionError, SceneError
 
 __all__ = ["Parameter", "parameter", "parameters", "value_of", "with_values", "parameter_keys", "rotation"]
 
@@ -153,6 +153,8 @@ def parameter(scene, key: str) -> Parameter:
             index.append(_AXES.index(parts[-1]))
         if stem == "scan.laser_point" and scene.scan.type != "single":
             raise OptionError(f"parameter: {key!r} applies to a single scan, not {scene.scan.type!r}")
+        if stem in ("hidden.u", "hidden.v"):
+            _check_edge_component(scene, stem, index[-1])
         canonical = ".".join([stem, *map(str, index[:lists]), *(_AXES[i] for i in index[lists:])])
         return Parameter(canonical, stem, tuple(index), unit)
     raise OptionError(f"parameter: {key!r} is no parameter of this {scene.kind} scene; "
@@ -170,6 +172,17 @@ def parameters(scene, keys) -> list[Parameter]:
             raise OptionError(f"parameters: {key!r} names the same number as {seen[item.key]!r}; give it once")
         seen[item.key] = key
     return found
+
+
+def _check_edge_component(scene, stem: str, axis: int) -> None:
+    """SceneError for a component of an edge vector that cannot move alone: one along which the other
+    edge is not 0 (changing it breaks u ⟂ v, which the scene requires)."""
+    other, key = (scene.v, "hidden.v") if stem == "hidden.u" else (scene.u, "hidden.u")
+    if abs(other[axis]) > 1e-9 * np.linalg.norm(other):
+        raise SceneError(f"{stem}.{_AXES[axis]}", f"has no derivative on its own: {key}.{_AXES[axis]} = "
+                                                  f"{float(other[axis])!r} is not 0, so changing it breaks u ⟂ v, "
+                                                  f"which the scene requires; take the components along which "
+                                                  f"{key} is 0, or hidden.rotation.*")
 
 
 def value_of(scene, item: Parameter | str) -> float:

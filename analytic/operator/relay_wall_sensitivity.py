@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import SceneError
 from ..kernels.bins import TimeAxis
 from ..kernels.sensitivity import RELAY_AMPLITUDES, pair_sums
 from ..kernels.sensitivity_waveform import OUTPUTS, waveform_pair_sums
@@ -227,17 +226,11 @@ def _edge_vector(scene, stem: str, axis: int, parts) -> np.ndarray:
     element's change and the points' stretch), and ∂_x(a κ) = -(∂_l + ∂_s)(a κ) in the frame (a κ
     depends on x through x - l and x - s, the normals fixed): the moments, or the pass weighted by ξ'. A
     component along the lit face's normal n turns the rectangle about e = ê × n by δ/|u|
-    (:func:`_turn`). One along the other edge breaks u ⊥ v: the scene refuses it.
+    (:func:`_turn`). One along the other edge breaks u ⊥ v: :func:`.parameters.parameter` refuses it.
     """
     y = parts[0]
     rectangle, _, _, normal = _frame(scene)
     side = 0 if stem == "hidden.u" else 1
-    other, key = (scene.v, "hidden.v") if side == 0 else (scene.u, "hidden.u")
-    if abs(other[axis]) > 1e-9 * np.linalg.norm(other):
-        raise SceneError(f"{stem}.{'xyz'[axis]}", f"has no derivative on its own: {key}.{'xyz'[axis]} = "
-                                                  f"{float(other[axis])!r} is not 0, so changing it breaks u ⟂ v, "
-                                                  f"which the scene requires; take the components along which "
-                                                  f"{key} is 0, or hidden.rotation.*")
     length = (rectangle.width, rectangle.height)[side]
     along, face = rectangle.axes[side], rectangle.axes[2]
     column = np.zeros_like(y)

@@ -51,7 +51,8 @@ def _against_differences(scene, sensor=0, bound=1e-5):
 
 
 def test_an_isochrone_born_inside_a_bin():
-    # both sensors' first arrivals (2.26 m, 2.07 m) fall inside bins, away from their edges
+    # sensor 0's first arrival (1.814 m) falls inside bin 0, 0.09 of a bin below its upper edge: its row's
+    # source and time-zero columns see the isochrone born there (sensor 1's, 1.581 m, is before the window)
     scene = default_scene(pixels=8, reflectance=_image(8), sensors=[[0.3, 0.6, 0.8], [0.9, 0.2, 0.5]],
                           sampling=Sampling(bin_width_opl=0.07, start_opl=1.75, count=14), noise=None)
     _against_differences(scene, sensor=1)

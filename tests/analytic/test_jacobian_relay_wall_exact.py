@@ -141,8 +141,13 @@ def test_dropping_the_stretch_fails(tmp_path, monkeypatch):
 
 @pytest.mark.parametrize("key, other", [("hidden.u.y", "hidden.v.y"), ("hidden.v.z", "hidden.u.z")])
 def test_an_edge_component_that_breaks_orthogonality_is_refused(tmp_path, key, other):
+    # refused as a parameter of the scene, before any integral, on both routes, with the same line
     scene = _capture(tmp_path, **_CASES["exhaustive, tilted rectangle"][0])
-    with pytest.raises(SceneError) as refusal:
-        jacobian(scene, [key])
-    message = str(refusal.value)
-    assert "\n" not in message and message.startswith(key) and other in message
+    messages = []
+    for refuse in (lambda: parameters(scene, [key]), lambda: jacobian(scene, [key]),
+                   lambda: jacobian(scene, [key], route="differences")):
+        with pytest.raises(SceneError) as refusal:
+            refuse()
+        messages.append(str(refusal.value))
+    assert len(set(messages)) == 1
+    assert "\n" not in messages[0] and messages[0].startswith(key) and other in messages[0]

@@ -50,14 +50,19 @@ def model(waveforms: tuple[str, ...] = ("impulse", "square")) -> None:
 
 
 def relay_wall(waveform: str) -> None:
-    """A confocal capture of a hidden square parallel to the wall: the offset route's kernels (y without A)."""
+    """A confocal capture of a hidden square parallel to the wall: the offset route's kernels (y without A;
+    for the impulse, the exact derivatives by pixel offsets too)."""
+    from analytic.operator.derivatives import jacobian
     from analytic.operator.matrix_free import forward
     from analytic.scenes.common import Illumination, Sampling
     from analytic.scenes.relay_wall import Scan, default_relay_wall_scene
 
-    forward(default_relay_wall_scene(pixels=8, scan=Scan(type="confocal", grid=(8, 8)),
+    scene = default_relay_wall_scene(pixels=8, scan=Scan(type="confocal", grid=(8, 8)),
                                      sampling=Sampling(bin_width_opl=0.05, start_opl=1.9, count=60),
-                                     illumination=Illumination(waveform=waveform)))
+                                     illumination=Illumination(waveform=waveform))
+    forward(scene)
+    if waveform == "impulse":
+        jacobian(scene, ["hidden.center.z", "hidden.u.x"])
 
 
 def renderer() -> None:

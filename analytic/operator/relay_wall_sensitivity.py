@@ -37,6 +37,7 @@ from ..kernels.sensitivity_waveform import OUTPUTS, waveform_pair_sums
 from ..resources import require_memory
 from ..scenes.relay_wall import WALL_NORMAL
 from ..waveforms import make_waveform
+from ..waveforms.pieces import without_tail_kinks
 from .parameters import rotation
 from .relay_wall_legs import leg_column
 from .relay_wall_offsets import offset_parts
@@ -120,7 +121,8 @@ def _pass(scene, source_normal, sensor_normal, progress: bool = False, weight=No
         shifted = edges[None, :] - offsets[:, None]
         width = 2 * edges.size * RELAY_AMPLITUDES
     else:
-        terms = make_waveform(scene.illumination, sampling.bin_width_opl).terms
+        # a smooth pulse's truncated tails are no breakpoints: cutting at them is most of the work
+        terms = without_tail_kinks(make_waveform(scene.illumination, sampling.bin_width_opl).terms)
         scales = kernel_scales(terms, float(sampling.bin_width_opl))
         width = bins * OUTPUTS
     block = max(1, _BLOCK_DOUBLES // width)

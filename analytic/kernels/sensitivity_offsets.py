@@ -6,18 +6,22 @@ pair is integrated over every pixel of a virtual rectangle once, and each pixel'
 bins, read like A's (:func:`analytic.kernels.offsets.offset_product`). A pixel's integrals at the bin
 edges are :func:`.sensitivity.pair_sums` over its own cells and the edges of its window (the last edge at
 or below its nearest path, where F is 0, to the first beyond its deepest, where F is the whole pixel's),
-turned into the :data:`OUTPUTS` per bin there.
+turned into the :data:`OUTPUTS` per bin there; for any other waveform,
+:func:`.sensitivity_waveform.waveform_pair_sums` over its cells on the axis of its window's bins
+(:func:`waveform_window_sums`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from .bins import TimeAxis
 from .cache import njit
 from .offsets import _run
 from .sensitivity import RELAY_AMPLITUDES, pair_sums
+from .sensitivity_waveform import waveform_pair_sums
 
-__all__ = ["OUTPUTS", "window_sums", "window_products"]
+__all__ = ["OUTPUTS", "window_sums", "waveform_window_sums", "window_products"]
 
 #: y, ∂y/∂l (x, y, z), ∂y/∂s (x, y, z), ∂y/∂t_0, ∂y/∂n (x, y, z), the stretch's moments (x, y): per bin,
 #: each the interior term plus the bin-edge term (:func:`analytic.operator.relay_wall_sensitivity.relay_edge_columns`).
@@ -73,6 +77,28 @@ def window_sums(g, cells, bounds, windows, edges, rtol, starts, first, last, val
         failures += pair_sums(g, cells[bounds[j]:bounds[j + 1]], edges[low:high + 1], rtol, F, H)
         for i in range(high - low):
             _bin(F, H, i, values[starts[j] + i])
+    return failures
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def waveform_window_sums(g, pixels, terms, axis, scales, rtol, span, values):
+    """:func:`window_sums` for a waveform other than the impulse: each pixel's run is
+    :func:`.sensitivity_waveform.waveform_pair_sums` over its cells on the axis of bins
+    ``windows[j, 0]`` ... ``windows[j, 1] - 1`` of ``axis``.
+
+    ``pixels`` = (cells, bounds, windows, starts) as :func:`window_sums` takes them; ``span`` = (first,
+    last) the pixels; ``values``: float64[R, C], the waveform route's outputs per bin. Returns the cell
+    integrals kept before meeting ``rtol``.
+    """
+    cells, bounds, windows, starts = pixels
+    failures = 0
+    for j in range(span[0], span[1]):
+        low, high = windows[j, 0], windows[j, 1]
+        if high <= low:
+            continue
+        window = TimeAxis(axis.start_opl + axis.bin_width_opl * low, axis.bin_width_opl, high - low)
+        failures += waveform_pair_sums(g, cells[bounds[j]:bounds[j + 1]], terms, window, scales, rtol,
+                                       values[starts[j]:starts[j + 1]])
     return failures
 
 

@@ -169,17 +169,16 @@ def relay_parts(scene, *, progress: bool = False):
         impulse, ∂y/∂n ``(P, N, 3)`` (the wall's normal in the rectangle's frame, both ends' cosines) and
         the stretch's moments ``(P, N, 2)`` (:func:`_edge_vector`), else None for each.
 
-    The impulse takes the offset route where the pairs are translates of a few
-    (:func:`.relay_wall_offsets.offset_parts`): each distinct (pair, pixel) offset integrated once.
+    Where the pairs are translates of a few, the offset route (:func:`.relay_wall_offsets.offset_parts`):
+    each distinct (pair, pixel) offset integrated once.
     """
     rectangle, local_lit, local_read, normal = _frame(scene)
-    parts = None
     if scene.illumination.waveform == "impulse":
         offsets = _offsets(scene, *scene.pair_points)
         geometries = [pair_geometry(l, s, "lambertian") for l, s in zip(local_lit, local_read)]
         edges = np.asarray(scene.sampling.edges, dtype=np.float64)
         warn_edges_on_arrivals(geometries, _cells(scene), edges[None, :] - offsets[:, None], "pair")
-        parts = offset_parts(scene, normal, progress=progress)
+    parts = offset_parts(scene, normal, progress=progress)
     y, source, sensor, start, normals, moments = _pass(scene, normal, normal, progress) if parts is None else parts
     # the frame's coordinates are axes (p - corner): a world gradient is axesᵀ times the frame's
     return y, source @ rectangle.axes, sensor @ rectangle.axes, start, normals, moments

@@ -10,6 +10,8 @@ the :data:`OUTPUTS` integrals of each bin n reached (:func:`_point`):
     4..6   ∫ ∂a/∂p_k κ_n(d) + a ∂d/∂p_k κ_n'(d)            (∂y/∂p_k)
     7      -∫ a κ_n'(d)                                    (∂y/∂t_0: every edge moving)
     8      -∫ a d κ_n'(d)                                  (the moment the scaling law of plane.size needs)
+    9      ∫ a [S(u) - u s(u)]_{u = t_n - d}^{t_{n+1} - d}    (a unit-peak pulse's widths: its scaling law)
+    10     ∫ a [s'(u)]_{u = t_n - d}^{t_{n+1} - d}             (the EMG's Gaussian width: the heat equation)
 
 The integrand is analytic on the cell except on the isochrones d = t_e - b_i
 (a bin edge shifted back by a kink b_i of the waveform, where κ_n has a kink
@@ -38,8 +40,8 @@ from .sensitivity import RELAY_AMPLITUDES, _LADDER, _NODES, _WEIGHTS, _line_root
 
 __all__ = ["OUTPUTS", "waveform_pair_sums"]
 
-#: y, ∂y/∂p_s (x, y, z), ∂y/∂p_k (x, y, z), ∂y/∂t_0, and -∫ a d κ_n'(d) (see the module docstring).
-OUTPUTS = 9
+#: y, ∂y/∂p_s (x, y, z), ∂y/∂p_k (x, y, z), ∂y/∂t_0, -∫ a d κ_n'(d), the pulse's two (module docstring).
+OUTPUTS = 11
 _MAX_DEPTH = 24
 #: Rule applications per cell before the rest is kept as it is, and counted.
 _MAX_RULES = 4000
@@ -48,13 +50,13 @@ _STACK = 96
 
 @njit(cache=True, error_model="numpy", inline="always")
 def _edge_values(terms, u, scratch):
-    """(K_i, F_i(u), s(u)) of the piece i holding u (zeros before the waveform starts)."""
+    """(K_i, F_i(u), s(u), s'(u)) of the piece i holding u (zeros before the waveform starts)."""
     piece = piece_of(terms, u)
     if piece < 0:
-        return 0.0, 0.0, 0.0
+        return 0.0, 0.0, 0.0, 0.0
     value = piece_value(terms, piece, u)[0]
-    piece_derivatives(terms, piece, u, 2, scratch)
-    return terms.constants[piece], value, scratch[1]
+    piece_derivatives(terms, piece, u, 3, scratch)
+    return terms.constants[piece], value, scratch[1], scratch[2]
 
 
 @njit(cache=True, error_model="numpy")
@@ -62,15 +64,17 @@ def _point(g, terms, axis, run, xy, weight, out, work):
     """Add weight x the :data:`OUTPUTS` integrands at plane point ``xy`` for the bins of ``run`` to ``out``.
 
     κ_n = (K_j - K_i) + (F_j - F_i) at the bin's two edges (the constants cancel exactly within a piece,
-    as :func:`.bins.kernel_values` takes them); ``work``: (amplitudes, scratch, three rows of edge values).
+    as :func:`.bins.kernel_values` takes them); ``work``: (amplitudes, scratch, five rows of edge values).
     """
-    amp, scratch, values = work[0], work[1], work[2:5]
+    amp, scratch, values = work[0], work[1], work[2:7]
     x, y = xy
     amplitudes(g, x, y, amp)
     d = _path(g, x, y)
     for e in range(run.bins + 1):
-        constant, form, density = _edge_values(terms, bin_edge(axis, run.first + e) - d, scratch)
+        u = bin_edge(axis, run.first + e) - d
+        constant, form, density, curve = _edge_values(terms, u, scratch)
         values[0, e], values[1, e], values[2, e] = constant, form, density
+        values[3, e], values[4, e] = u * density, curve
     a = amp[0]
     for i in range(run.bins):
         wk = weight * ((values[0, i + 1] - values[0, i]) + (values[1, i + 1] - values[1, i]))
@@ -81,6 +85,8 @@ def _point(g, terms, axis, run, xy, weight, out, work):
             out[i, 4 + j] += wk * amp[4 + j] + ws * amp[10 + j]
         out[i, 7] -= ws * a
         out[i, 8] -= ws * a * d
+        out[i, 9] += (wk - weight * (values[3, i + 1] - values[3, i])) * a
+        out[i, 10] += weight * (values[4, i + 1] - values[4, i]) * a
 
 
 @njit(cache=True, error_model="numpy")
@@ -232,10 +238,11 @@ def _halves(stack, top, v0, v1, depth):
 def _limits(g, box, scales, rtol, deepest, limits):
     """Each output's accuracy in this cell: rtol x ∫_cell |w_j| (a fixed G_6 x G_6) x the waveform's scale.
 
-    ``scales`` = (max_n κ_n, max_n |κ_n'|) over τ: y's scale is ∫ a max κ; a position's
-    ∫ |∂a/∂θ| max κ + ∫ |a ∂d/∂θ| max |κ'|, at least ∫ a (max κ / t_min + max |κ'|) (a column's own
-    scale, so that a derivative vanishing over the cell asks no more than its column needs); the time
-    zero's ∫ a max |κ'|, the moment's that times the cell's largest d.
+    ``scales`` = (max_n κ_n, max_n |κ_n'|, max_n |[S - u s]|, max_n |[s']|) over τ: y's scale is
+    ∫ a max κ; a position's ∫ |∂a/∂θ| max κ + ∫ |a ∂d/∂θ| max |κ'|, at least ∫ a (max κ / t_min +
+    max |κ'|) (a column's own scale, so that a derivative vanishing over the cell asks no more than its
+    column needs); the time zero's ∫ a max |κ'|, the moment's that times the cell's largest d; the
+    pulse's two ∫ a times their own (inf where they are not wanted: they then never split a cell).
     """
     x0, x1, y0, y1 = box
     rung, amp, magnitude = 3, np.empty(RELAY_AMPLITUDES), np.zeros(13)
@@ -245,18 +252,20 @@ def _limits(g, box, scales, rtol, deepest, limits):
             weight = (x1 - x0) * (y1 - y0) * _WEIGHTS[rung, i] * _WEIGHTS[rung, m]
             for j in range(13):
                 magnitude[j] += weight * abs(amp[j])
-    kernel, slope = scales
+    kernel, slope, scaled, curvature = scales
     area = magnitude[0]
     limits[0] = rtol * area * kernel
     for c in range(1, 7):
         limits[c] = rtol * max(magnitude[c] * kernel + magnitude[c + 6] * slope, area * (kernel / g.first + slope))
     limits[7] = rtol * area * slope
     limits[8] = rtol * area * slope * deepest
+    limits[9] = rtol * area * scaled
+    limits[10] = rtol * area * curvature
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
 def waveform_pair_sums(g, cells, terms, axis, scales, rtol, out):
-    """Σ_cells f x the :data:`OUTPUTS` integrals of each bin into ``out`` ((N, 9), zeroed by the caller).
+    """Σ_cells f x the :data:`OUTPUTS` integrals of each bin into ``out`` ((N, 11), zeroed by the caller).
 
     Returns how many cell integrals were kept before meeting ``rtol`` (0 normally).
 
@@ -270,14 +279,15 @@ def waveform_pair_sums(g, cells, terms, axis, scales, rtol, out):
     axis : TimeAxis
         The bins.
     scales : tuple of float
-        max_n κ_n (metres) and max_n |κ_n'| (dimensionless) over τ.
+        max_n κ_n (metres), max_n |κ_n'| (dimensionless), max_n |[S(u) - u s(u)]| (metres) and
+        max_n |[s'(u)]| (1/m) over τ, the last two inf where outputs 9 and 10 are not wanted.
     rtol : float
         Relative accuracy of each cell's integrals (:func:`_limits`).
-    out : float64[N, 9]
-        Outputs: m⁻¹ (y) and m⁻² (the derivatives) times the kernels' units.
+    out : float64[N, 11]
+        Outputs: m⁻¹ (y) and m⁻² (the derivatives) times the kernels' units; output 9 as y, 10 as y per m².
     """
     kinked = terms.starts[terms.kinks]
-    work = np.zeros((5, max(RELAY_AMPLITUDES, axis.count + 1)))
+    work = np.zeros((7, max(RELAY_AMPLITUDES, axis.count + 1)))
     rungs = np.zeros((2, axis.count, OUTPUTS))
     total = np.zeros((axis.count, OUTPUTS))
     limits = np.empty(OUTPUTS)

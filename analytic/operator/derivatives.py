@@ -18,8 +18,11 @@
   ``hidden.rotation.*``, ``scan.laser_point.*`` and the laser's and sensor's
   positions with the end legs counted are exact through the rectangle's
   frame (:mod:`.relay_wall_sensitivity`, the waveforms the plane's routes
-  take). Every other key
-  (``illumination.*``, the relay wall's other geometric keys) still takes the differences below.
+  take). The pulse's widths of a plane scene (``illumination.fwhm``, ``.tail``, ``.width``, and
+  ``.cutoff`` with the default duration) are exact by the unit-peak pulse's scaling law and, for the
+  EMG's ``fwhm``, the heat equation (:func:`.waveform_sensitivity.width_column`). Every other key
+  (a Butterworth's stated ``duration`` and the ``cutoff`` beside it, a relay wall's ``illumination.*``
+  and other geometric keys) still takes the differences below.
 - ``"differences"``: Richardson-extrapolated central differences of the
   model assembled at tolerance :data:`TOLERANCE`, for every key (the tests'
   independent reference).
@@ -41,7 +44,7 @@ from .matrix_free import forward
 from .relay_wall_legs import leg_column, supports_leg
 from .relay_wall_sensitivity import relay_column, relay_parts, supports_relay
 from .sensitivity import position_derivatives
-from .waveform_sensitivity import waveform_derivatives
+from .waveform_sensitivity import supports_width, waveform_derivatives, width_column
 
 __all__ = ["jacobian", "derivative", "exact_keys", "ROUTES", "TOLERANCE", "STEP"]
 
@@ -122,14 +125,15 @@ def _exact_plane(scene) -> bool:
     return make_waveform(scene.illumination, scene.sampling.bin_width_opl).terms.degree != 0
 
 
-def _position_parts(scene, progress: bool):
-    """(y, ∂y/∂p_s, ∂y/∂p_k, ∂y/∂t_0, moment) of :func:`.waveform_sensitivity.waveform_derivatives`, any waveform."""
+def _position_parts(scene, progress: bool, pulse: bool = False):
+    """(y, ∂y/∂p_s, ∂y/∂p_k, ∂y/∂t_0, moment, widths) of :func:`.waveform_sensitivity.waveform_derivatives`,
+    any waveform (``widths`` None for the impulse; judged to the tolerance with ``pulse``)."""
     if scene.illumination.waveform != "impulse":
-        return waveform_derivatives(scene, progress=progress)
+        return waveform_derivatives(scene, progress=progress, pulse=pulse)
     y, source, sensor, start, response = position_derivatives(scene, progress=progress)
     edges = np.asarray(scene.sampling.edges, dtype=np.float64)
     # -I ∫ f a d κ_n'(d) dx with κ_n' = δ(d - t_n) - δ(d - t_{n+1}): t_{n+1} G(t_{n+1}) - t_n G(t_n)
-    return y, source, sensor, start, edges[1:] * response[:, 1:] - edges[:-1] * response[:, :-1]
+    return y, source, sensor, start, edges[1:] * response[:, 1:] - edges[:-1] * response[:, :-1], None
 
 
 def exact_keys(scene, items) -> list[bool]:
@@ -139,13 +143,16 @@ def exact_keys(scene, items) -> list[bool]:
         heights = np.vstack([np.asarray(scene.source)[None, :], np.asarray(scene.sensors)])[:, 2]
         high = heights.min() >= _SIZE_HEIGHT * _scale(scene, parameter(scene, "source.position.x"))
     return [item.stem.endswith(".reflectance") or item.unit == "W/sr" or supports_leg(scene, item.stem)
-            or supports_relay(scene, item.stem) or (plane and item.stem in _EXACT_STEMS and (item.stem != "plane.size" or high)) for item in items]
+            or supports_relay(scene, item.stem) or (plane and supports_width(scene, item.stem))
+            or (plane and item.stem in _EXACT_STEMS and (item.stem != "plane.size" or high)) for item in items]
 
 
 def _exact_column(scene, item: Parameter, parts) -> np.ndarray:
     """One column from :func:`analytic.operator.sensitivity.position_derivatives`' ``parts``."""
-    y, source, sensor, start, moment = parts
+    y, source, sensor, start, moment, widths = parts
     stem, index = item.stem, item.index
+    if stem.startswith("illumination."):
+        return width_column(scene, stem, y, widths)
     if stem == "source.position":
         return source[..., index[0]]
     if stem == "sensors.positions":
@@ -239,7 +246,8 @@ def jacobian(scene, keys, *, step: float | None = None, route: str = "exact", pr
             relay = relay_parts(scene, progress=progress) if relay is None else relay
             columns.append(relay_column(scene, item.stem, item.index[0] if item.index else 0, relay))
         elif closed:
-            parts = _position_parts(scene, progress) if parts is None else parts
+            pulse = any(c and i.stem.startswith("illumination.") for i, c in zip(items, exact))
+            parts = _position_parts(scene, progress, pulse) if parts is None else parts
             columns.append(_exact_column(scene, item, parts))
         else:
             if errors and centre is None:

@@ -8,8 +8,9 @@
 2. A point-like plane's closed form (side s): d ≈ L + g·u over the plane, whose density of g·u is a
    trapezoid p, so ∂y_n/∂θ ≈ I s² [∂a/∂θ ∫ p(v) κ_n(L + v) dv + a ∂L/∂θ ∫ p(v) κ_n'(L + v) dv], the
    v-integrals by Gauss rules on the trapezoid's three linear pieces (relative error O(s / distance)).
-3. The waveform's width: y is analytic in ``illumination.fwhm`` (and ``tail``), so the differences are
-   adequate there; held to the scaling law of a unit-peak pulse (S_λ(u) = λ S(u/λ) when every width is
+3. The waveform's width by the differences (the exact route's: tests/analytic/test_jacobian_widths.py):
+   y is analytic in ``illumination.fwhm`` (and ``tail``), so they are adequate there; held to the scaling
+   law of a unit-peak pulse (S_λ(u) = λ S(u/λ) when every width is
    scaled by λ): Σ_w w ∂y/∂w = y - I ∫ f a [u s(u)]_{u = t_n - d}^{t_{n+1} - d} dx, the last from the
    exact route's time-zero column and moment.
 """
@@ -169,9 +170,9 @@ def test_the_widths_differences_against_the_scaling_law_of_a_unit_peak_pulse(pul
                           illumination=Illumination(waveform=pulse, **widths), noise=None,
                           sampling=Sampling(bin_width_opl=0.07, start_opl=1.2, count=24))
     keys = [f"illumination.{name}" for name in widths]
-    columns = _reference(jacobian, scene, keys)
+    columns = _reference(jacobian, scene, keys, route="differences")
     scaled = sum(value * columns[..., i] for i, value in enumerate(widths.values()))
-    y, _, _, start, moment = waveform_derivatives(scene.replace(tolerance=1e-9))
+    y, _, _, start, moment, _ = waveform_derivatives(scene.replace(tolerance=1e-9))
     assert np.all(y[:, 0] == 0.0)
     # R(t_e) = I ∫ f a s(t_e - d) from ∂y_n/∂t_0 = R(t_{n+1}) - R(t_n); I ∫ f a [u s(u)] = t_e R(t_e) - ∫ f a d s
     response = np.concatenate([np.zeros((y.shape[0], 1)), np.cumsum(start, axis=1)], axis=1)

@@ -96,12 +96,6 @@ class PairGeometry(NamedTuple):
     knx: float = 0.0
     kny: float = 0.0
     knz: float = 0.0
-    # every amplitude times w0 + wx x + wy y (a frame coordinate: a hidden rectangle's edge vector
-    # stretching it, analytic/operator/relay_wall_sensitivity.py); none for the plane
-    weighted: bool = False
-    wx: float = 0.0
-    wy: float = 0.0
-    w0: float = 0.0
     # a relay wall's stretch moments are taken about (mx, my) (frame metres); mscale (metres) the weight's
     # scale in their accuracy (a coordinate's reach from there over the rectangle)
     mx: float = 0.0
@@ -162,10 +156,6 @@ def amplitudes(g, x, y, out):
         out[17] = my * (out[2] + out[5])
         out[18] = mx * (out[7] + out[10])
         out[19] = my * (out[8] + out[11])
-    if g.weighted:
-        weight = g.w0 + g.wx * x + g.wy * y
-        for j in range(_counts(g)[0]):
-            out[j] *= weight
 
 
 @njit(cache=True, error_model="numpy", inline="always")

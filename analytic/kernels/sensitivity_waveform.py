@@ -12,6 +12,8 @@ the :data:`OUTPUTS` integrals of each bin n reached (:func:`_point`):
     8      -∫ a d κ_n'(d)                                  (the moment the scaling law of plane.size needs)
     9      ∫ a [S(u) - u s(u)]_{u = t_n - d}^{t_{n+1} - d}    (a unit-peak pulse's widths: its scaling law)
     10     ∫ a [s'(u)]_{u = t_n - d}^{t_{n+1} - d}             (the EMG's Gaussian width: the heat equation)
+    11..13 ∫ ∂a/∂n κ_n(d)                                  (a relay wall's pair: its ends' normals turning)
+    14, 15 ∫ m_j κ_n(d) + m'_j κ_n'(d)                     (its stretch's moments, amplitudes 16..19)
 
 The integrand is analytic on the cell except on the isochrones d = t_e - b_i
 (a bin edge shifted back by a kink b_i of the waveform, where κ_n has a kink
@@ -36,12 +38,14 @@ import numpy as np
 from .bins import bin_edge, pixel_bins
 from .cache import njit
 from .pieces import piece_derivatives, piece_of, piece_value
-from .sensitivity import RELAY_AMPLITUDES, _LADDER, _NODES, _WEIGHTS, _line_roots, _path, amplitudes, isochrone_ellipse
+from .sensitivity import (RELAY_AMPLITUDES, _LADDER, _NODES, _WEIGHTS, _line_roots, _path, amplitudes,
+                          isochrone_ellipse)
 
 __all__ = ["OUTPUTS", "waveform_pair_sums"]
 
-#: y, ∂y/∂p_s (x, y, z), ∂y/∂p_k (x, y, z), ∂y/∂t_0, -∫ a d κ_n'(d), the pulse's two (module docstring).
-OUTPUTS = 11
+#: y, ∂y/∂p_s (x, y, z), ∂y/∂p_k (x, y, z), ∂y/∂t_0, -∫ a d κ_n'(d), the pulse's two, and a relay wall's
+#: ∂y/∂n (x, y, z) and stretch's moments (x, y) (module docstring; zero for the plane).
+OUTPUTS = 16
 _MAX_DEPTH = 24
 #: Rule applications per cell before the rest is kept as it is, and counted.
 _MAX_RULES = 4000
@@ -87,6 +91,11 @@ def _point(g, terms, axis, run, xy, weight, out, work):
         out[i, 8] -= ws * a * d
         out[i, 9] += (wk - weight * (values[3, i + 1] - values[3, i])) * a
         out[i, 10] += weight * (values[4, i + 1] - values[4, i]) * a
+        if g.surfaces:
+            for j in range(3):
+                out[i, 11 + j] += wk * amp[13 + j]
+            out[i, 14] += wk * amp[16] + ws * amp[18]
+            out[i, 15] += wk * amp[17] + ws * amp[19]
 
 
 @njit(cache=True, error_model="numpy")
@@ -245,12 +254,12 @@ def _limits(g, box, scales, rtol, deepest, limits):
     pulse's two ∫ a times their own (inf where they are not wanted: they then never split a cell).
     """
     x0, x1, y0, y1 = box
-    rung, amp, magnitude = 3, np.empty(RELAY_AMPLITUDES), np.zeros(13)
+    rung, amp, magnitude = 3, np.empty(RELAY_AMPLITUDES), np.zeros(RELAY_AMPLITUDES)
     for i in range(_LADDER[rung]):
         for m in range(_LADDER[rung]):
             amplitudes(g, x0 + (x1 - x0) * _NODES[rung, i], y0 + (y1 - y0) * _NODES[rung, m], amp)
             weight = (x1 - x0) * (y1 - y0) * _WEIGHTS[rung, i] * _WEIGHTS[rung, m]
-            for j in range(13):
+            for j in range(RELAY_AMPLITUDES if g.surfaces else 13):
                 magnitude[j] += weight * abs(amp[j])
     kernel, slope, scaled, curvature = scales
     area = magnitude[0]
@@ -261,11 +270,18 @@ def _limits(g, box, scales, rtol, deepest, limits):
     limits[8] = rtol * area * slope * deepest
     limits[9] = rtol * area * scaled
     limits[10] = rtol * area * curvature
+    # a relay wall's normal and moments (zero for the plane): as the positions', the moments' floor times
+    # their weight's reach
+    for j in range(3):
+        limits[11 + j] = rtol * max(magnitude[13 + j] * kernel, area * kernel)
+    for j in range(2):
+        limits[14 + j] = rtol * max(magnitude[16 + j] * kernel + magnitude[18 + j] * slope,
+                                    g.mscale * area * (kernel / g.first + slope))
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
 def waveform_pair_sums(g, cells, terms, axis, scales, rtol, out):
-    """Σ_cells f x the :data:`OUTPUTS` integrals of each bin into ``out`` ((N, 11), zeroed by the caller).
+    """Σ_cells f x the :data:`OUTPUTS` integrals of each bin into ``out`` ((N, 16), zeroed by the caller).
 
     Returns how many cell integrals were kept before meeting ``rtol`` (0 normally).
 
@@ -283,7 +299,7 @@ def waveform_pair_sums(g, cells, terms, axis, scales, rtol, out):
         max_n |[s'(u)]| (1/m) over τ, the last two inf where outputs 9 and 10 are not wanted.
     rtol : float
         Relative accuracy of each cell's integrals (:func:`_limits`).
-    out : float64[N, 11]
+    out : float64[N, 16]
         Outputs: m⁻¹ (y) and m⁻² (the derivatives) times the kernels' units; output 9 as y, 10 as y per m².
     """
     kinked = terms.starts[terms.kinks]

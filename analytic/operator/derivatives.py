@@ -14,15 +14,16 @@
   scale (∂y/∂s = y) and the source's intensity (∂y/∂I = y / I). A relay
   wall's ``laser.position.*`` and ``sensor.position.*`` are exact through
   the laser leg's factor (:mod:`.relay_wall_legs`) unless the end legs are
-  counted; ``sampling.start``, ``hidden.center.*``,
-  ``hidden.rotation.*``, ``scan.laser_point.*`` and the laser's and sensor's
-  positions with the end legs counted are exact through the rectangle's
-  frame (:mod:`.relay_wall_sensitivity`, the waveforms the plane's routes
-  take). The pulse's widths of a plane scene (``illumination.fwhm``, ``.tail``, ``.width``, and
-  ``.cutoff`` with the default duration) are exact by the unit-peak pulse's scaling law and, for the
-  EMG's ``fwhm``, the heat equation (:func:`.waveform_sensitivity.width_column`). Every other key
-  (a Butterworth's stated ``duration`` and the ``cutoff`` beside it, a relay wall's ``illumination.*``
-  and other geometric keys) still takes the differences below.
+  counted; ``sampling.start``, ``hidden.center.*``, ``hidden.rotation.*``,
+  ``hidden.u.*``, ``hidden.v.*``, ``scan.laser_point.*`` and the laser's and
+  sensor's positions with the end legs counted are exact through the
+  rectangle's frame (:mod:`.relay_wall_sensitivity`, the waveforms the
+  plane's routes take). The pulse's widths (``illumination.fwhm``,
+  ``.tail``, ``.width``, and ``.cutoff`` with the default duration) are
+  exact by the unit-peak pulse's scaling law and, for the EMG's ``fwhm``,
+  the heat equation (:func:`.waveform_sensitivity.width_column`), on both
+  scene kinds. Every other key (a Butterworth's stated ``duration`` and the
+  ``cutoff`` beside it) still takes the differences below.
 - ``"differences"``: Richardson-extrapolated central differences of the
   model assembled at tolerance :data:`TOLERANCE`, for every key (the tests'
   independent reference).
@@ -227,9 +228,10 @@ def jacobian(scene, keys, *, step: float | None = None, route: str = "exact", pr
         raise OptionError(f"route: expected one of {', '.join(ROUTES)}, got {route!r}")
     exact = exact_keys(scene, items) if route == "exact" else [False] * len(items)
     y = parts = relay = centre = None
+    pulse = any(closed and item.stem.startswith("illumination.") for item, closed in zip(items, exact))
     if any(closed and supports_relay(scene, item.stem) and not supports_leg(scene, item.stem)
            for item, closed in zip(items, exact)):
-        relay = relay_parts(scene, progress=progress)      # its y serves the linear keys and the legs'
+        relay = relay_parts(scene, progress=progress, pulse=pulse)     # its y serves the linear and legs' keys
         y = relay[0]
     columns, bounds = [], []
     bar = progress_bar(progress and not all(exact), len(items), "jacobian", "key")
@@ -243,10 +245,9 @@ def jacobian(scene, keys, *, step: float | None = None, route: str = "exact", pr
             y = forward(scene) if y is None else y
             columns.append(leg_column(scene, item.stem, item.index[0], y))
         elif closed and supports_relay(scene, item.stem):
-            relay = relay_parts(scene, progress=progress) if relay is None else relay
+            relay = relay_parts(scene, progress=progress, pulse=pulse) if relay is None else relay
             columns.append(relay_column(scene, item.stem, item.index[0] if item.index else 0, relay))
         elif closed:
-            pulse = any(c and i.stem.startswith("illumination.") for i, c in zip(items, exact))
             parts = _position_parts(scene, progress, pulse) if parts is None else parts
             columns.append(_exact_column(scene, item, parts))
         else:

@@ -30,14 +30,24 @@ from .sensitivity import pair_geometry, pixel_cells
 from .system import QuadratureWarning, _problem
 from .waveform_sensitivity import kernel_scales
 
-__all__ = ["offset_parts"]
+__all__ = ["offset_parts", "pulse_terms", "WAVEFORM_COLUMNS"]
 
-#: Where each route's runs keep y, ∂y/∂l, ∂y/∂s and ∂y/∂t_0 (columns 0, 1-3, 4-6, 7), ∂y/∂n and the
-#: stretch's moments (None: the route has none, and the keys that need them take the general passes).
-_IMPULSE_COLUMNS = {"normal": slice(8, 11), "moments": slice(11, 13)}
-_WAVEFORM_COLUMNS = {"normal": None, "moments": None}
 #: Blocks of virtual pixels per thread (the pixels' costs differ: more blocks balance the threads).
 _BLOCKS_PER_THREAD = 8
+
+
+#: The waveform route's outputs in :func:`.relay_wall_sensitivity._pass`'s order: y, ∂y/∂l, ∂y/∂s, ∂y/∂t_0, ∂y/∂n, the moments, the
+#: pulse's two (analytic.kernels.sensitivity_waveform's 0-7, 11-15, 9-10).
+WAVEFORM_COLUMNS = np.r_[0:8, 11:16, 9:11]
+
+
+def pulse_terms(scene, pulse: bool):
+    """(terms, scales) of the waveform route: the pulse's pieces without its tails' kinks (a smooth pulse's
+    truncated tails are no breakpoints: cutting at them is most of the work) and the kernels' scales,
+    the width outputs judged when ``pulse`` (the EMG's [s'] only for it)."""
+    terms = without_tail_kinks(make_waveform(scene.illumination, scene.sampling.bin_width_opl).terms)
+    return terms, kernel_scales(terms, float(scene.sampling.bin_width_opl), pulse,
+                                pulse and scene.illumination.waveform == "emg")
 
 
 def _reach(geometry, boxes):
@@ -122,11 +132,11 @@ def _group_runs(geometry, side, size, pulse, rtol, progress):
     return windows[:, 0], starts, values, failures
 
 
-def offset_parts(scene, normal, *, progress: bool = False):
-    """(y, ∂y/∂l, ∂y/∂s, ∂y/∂t_0, ∂y/∂n, the stretch's moments) of every pair, frame axes, as
-    :func:`.relay_wall_sensitivity._pass` gives them (``normal``: the wall's normal in the rectangle's
-    frame; ∂y/∂n and the moments None where the waveform route has none), or None where the offset
-    route does not apply (:func:`.offsets.offset_plan`)."""
+def offset_parts(scene, normal, *, progress: bool = False, pulse: bool = False):
+    """(y, ∂y/∂l, ∂y/∂s, ∂y/∂t_0, ∂y/∂n, the stretch's moments, the pulse's two) of every pair, frame axes,
+    as :func:`.relay_wall_sensitivity._pass` gives them (``normal``: the wall's normal in the rectangle's
+    frame; ``pulse``: the width outputs judged), or None where the offset route does not apply
+    (:func:`.offsets.offset_plan`)."""
     sampling = scene.sampling
     rectangle, pairs = scene.geometry()
     waveform = make_waveform(scene.illumination, sampling.bin_width_opl)
@@ -139,8 +149,7 @@ def offset_parts(scene, normal, *, progress: bool = False):
     middle = (0.5 * size[0], 0.5 * size[1])
     impulse = scene.illumination.waveform == "impulse"
     if not impulse:
-        terms = without_tail_kinks(waveform.terms)
-        scales = kernel_scales(terms, float(sampling.bin_width_opl))
+        terms, scales = pulse_terms(scene, pulse)
     nx, ny, nz = map(float, normal)
     starts, firsts, values, failures = [], [], [], 0
     for table in virtual.pairs:
@@ -173,11 +182,11 @@ def offset_parts(scene, normal, *, progress: bool = False):
                                            tuple(m[split[b]:split[b + 1]] for m in plan.mapping),
                                            plan.scales[split[b]:split[b + 1]], image, out[split[b]:split[b + 1]]),
                blocks)
-    columns = _IMPULSE_COLUMNS if impulse else _WAVEFORM_COLUMNS
-    normals = None if columns["normal"] is None else out[..., columns["normal"]]
-    moments = (None if columns["moments"] is None else
-               _about_the_centre(out[..., columns["moments"]], out, plan, rectangle, middle))
-    return out[..., 0], out[..., 1:4], out[..., 4:7], out[..., 7], normals, moments
+    if not impulse:
+        out = out[..., WAVEFORM_COLUMNS]         # in the impulse's order, the pulse's two after
+    moments = _about_the_centre(out[..., 11:13], out, plan, rectangle, middle)
+    return (out[..., 0], out[..., 1:4], out[..., 4:7], out[..., 7], out[..., 8:11], moments,
+            None if impulse else out[..., 13:15])
 
 
 def _about_the_centre(moments, out, plan, rectangle, middle) -> np.ndarray:

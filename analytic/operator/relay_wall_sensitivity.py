@@ -17,14 +17,16 @@ shifted by -o_p (o_p the added path of the end legs when the scan counts them). 
 - ``hidden.center.*``: a translation of the rectangle is l and s moving the other way in its frame,
   -(∂y/∂l + ∂y/∂s) (the wall's normal unchanged, the legs untouched);
 - ``hidden.rotation.*``: l, s and n turning the other way in the frame (:func:`_rotation`; n's share
-  from the kernels' ∂a/∂n for the impulse, from two passes with one end's normal replaced otherwise);
+  from the kernels' ∂a/∂n);
 - ``scan.laser_point.{x,y}`` (single scan): ∂y/∂l plus the laser leg's factor (its l-derivative, the
   negative of its o_l-derivative) and the time shift with ∂o_p/∂l = (l - o_l) / |o_l - l|;
-- ``hidden.u.*``, ``hidden.v.*``: a stretch about the centre (the kernels' moments about it for the
-  impulse, a pass weighted by the frame coordinate otherwise) plus a turn (:func:`_edge_vector`).
+- ``hidden.u.*``, ``hidden.v.*``: a stretch about the centre (the kernels' moments about it) plus a
+  turn (:func:`_edge_vector`);
+- ``illumination.*``: the pulse's widths as the plane's (:func:`.waveform_sensitivity.width_column`: the
+  pair's shifted time axis changes nothing, κ depending on t_e - o_p - d alone).
 
-So for the impulse every key comes from one pass, and where the pairs are translates of a few by whole
-pixels (:mod:`.offsets`) from one pass over each distinct offset (:mod:`.relay_wall_offsets`).
+So every key comes from one pass, and where the pairs are translates of a few by whole pixels
+(:mod:`.offsets`) from one pass over each distinct offset (:mod:`.relay_wall_offsets`).
 """
 
 from __future__ import annotations
@@ -37,12 +39,11 @@ from ..kernels.sensitivity_waveform import OUTPUTS, waveform_pair_sums
 from ..resources import require_memory
 from ..scenes.relay_wall import WALL_NORMAL
 from ..waveforms import make_waveform
-from ..waveforms.pieces import without_tail_kinks
 from .parameters import rotation
 from .relay_wall_legs import leg_column
-from .relay_wall_offsets import offset_parts
+from .relay_wall_offsets import WAVEFORM_COLUMNS, offset_parts, pulse_terms
 from .sensitivity import edge_columns, pair_geometry, pixel_cells, run_sensors, warn_edges_on_arrivals
-from .waveform_sensitivity import kernel_scales
+from .waveform_sensitivity import supports_width, width_column
 
 __all__ = ["supports_relay", "relay_parts", "relay_column"]
 
@@ -55,8 +56,9 @@ _STEMS = ("sampling.start", "laser.position", "sensor.position", "hidden.center"
 
 def supports_relay(scene, stem: str) -> bool:
     """Whether :func:`relay_column` gives ``stem``'s column: a relay wall whose waveform one of the plane's
-    exact routes takes (every one but a step S other than the impulse)."""
-    if scene.kind != "relay_wall" or stem not in _STEMS:
+    exact routes takes (every one but a step S other than the impulse), and of its pulse the widths the
+    plane's take (:func:`.waveform_sensitivity.supports_width`)."""
+    if scene.kind != "relay_wall" or (stem not in _STEMS and not supports_width(scene, stem)):
         return False
     light = scene.illumination
     return light.waveform == "impulse" or make_waveform(light, scene.sampling.bin_width_opl).terms.degree != 0
@@ -83,47 +85,42 @@ def _cells(scene) -> np.ndarray:
                        np.unique(np.vstack([local_lit, local_read]), axis=0))
 
 
-def _pass(scene, source_normal, sensor_normal, progress: bool = False, weight=None):
-    """y, ∂y/∂l, ∂y/∂s (frame axes) and ∂y/∂t_0 of every pair, with the ends' cosines taken about
-    ``source_normal`` and ``sensor_normal`` (frame), times the laser leg's factor (and, given
-    ``weight`` = (w_x, w_y, w_0), every integrand times w_0 + w_x x + w_y y, frame metres); for the
-    impulse also ∂y/∂n (``(P, N, 3)``, frame) and the stretch's moments about the centre (``(P, N, 2)``,
-    :func:`_edge_vector`), else None for both.
+def _pass(scene, normal, progress: bool = False, pulse: bool = False):
+    """(y, ∂y/∂l, ∂y/∂s, ∂y/∂t_0, ∂y/∂n, the stretch's moments, the pulse's two) of every pair, frame
+    axes, the ends' cosines about the wall's ``normal`` (frame), times the laser leg's factor: ``(P, N)``,
+    ``(P, N, 3)`` twice, ``(P, N)``, ``(P, N, 3)``, ``(P, N, 2)`` (about the rectangle's centre,
+    :func:`_edge_vector`) and ``(P, N, 2)`` (:func:`.waveform_sensitivity.width_column`; None for the impulse).
 
     The impulse: :func:`pair_sums` (F, H at the pair's bin edges t_e - o_p); any other waveform:
-    :func:`waveform_pair_sums` on the pair's time axis shifted by -o_p.
+    :func:`waveform_pair_sums` on the pair's time axis shifted by -o_p (``pulse``: its width outputs judged).
     """
     rectangle, local_lit, local_read, _ = _frame(scene)
     lit, read = scene.pair_points
     cells = _cells(scene)
     offsets = _offsets(scene, lit, read)
     count, rtol, sampling = len(lit), float(scene.tolerance), scene.sampling
-    (snx, sny, snz), (knx, kny, knz) = map(float, source_normal), map(float, sensor_normal)
-    wx, wy, w0 = (0.0, 0.0, 0.0) if weight is None else map(float, weight)
-
+    nx, ny, nz = map(float, normal)
     middle = (0.5 * rectangle.width, 0.5 * rectangle.height)
 
     def geometry(p):
         return pair_geometry(local_lit[p], local_read[p], "lambertian")._replace(
-            surfaces=True, snx=snx, sny=sny, snz=snz, knx=knx, kny=kny, knz=knz,
-            weighted=weight is not None, wx=wx, wy=wy, w0=w0, mx=middle[0], my=middle[1], mscale=np.hypot(*middle))
+            surfaces=True, snx=nx, sny=ny, snz=nz, knx=nx, kny=ny, knz=nz, mx=middle[0], my=middle[1],
+            mscale=float(np.hypot(*middle)))
 
     leg = scene.laser_leg(lit)
     bins = int(sampling.count)
-    # y, ∂y/∂l, ∂y/∂s, ∂y/∂t_0, ∂y/∂n and the moments (13 doubles per entry), then the kernels' sums a
-    # block of pairs at a time
-    require_memory(8 * 13 * count * bins, f"the exact derivatives of {count:,} pairs x {bins} bins",
-                   "take fewer keys on the exact route, or a smaller scan")
     impulse = scene.illumination.waveform == "impulse"
-    out = np.zeros((count, bins, 13 if impulse else 8))
+    columns = 13 if impulse else 15
+    # the columns above (13 doubles per entry, 15 with the pulse's), then the kernels' sums a block of pairs at a time
+    require_memory(8 * columns * count * bins, f"the exact derivatives of {count:,} pairs x {bins} bins",
+                   "take fewer keys on the exact route, or a smaller scan")
+    out = np.zeros((count, bins, columns))
     if impulse:
         edges = np.asarray(sampling.edges, dtype=np.float64)
         shifted = edges[None, :] - offsets[:, None]
         width = 2 * edges.size * RELAY_AMPLITUDES
     else:
-        # a smooth pulse's truncated tails are no breakpoints: cutting at them is most of the work
-        terms = without_tail_kinks(make_waveform(scene.illumination, sampling.bin_width_opl).terms)
-        scales = kernel_scales(terms, float(sampling.bin_width_opl))
+        terms, scales = pulse_terms(scene, pulse)
         width = bins * OUTPUTS
     block = max(1, _BLOCK_DOUBLES // width)
     for first in range(0, count, block):
@@ -141,10 +138,10 @@ def _pass(scene, source_normal, sensor_normal, progress: bool = False, weight=No
                 return geometry(pairs[i]), cells, terms, axis, scales, rtol, sums[i]
 
             run_sensors(waveform_pair_sums, arguments, len(pairs), rtol, progress)
-            parts = (sums[..., :8],)
+            parts = (sums[..., WAVEFORM_COLUMNS],)
         out[first:first + len(pairs)] = np.concatenate(parts, axis=-1) * leg[pairs.start:pairs.stop, None, None]
-    extra = (out[..., 8:11], out[..., 11:13]) if impulse else (None, None)
-    return out[..., 0], out[..., 1:4], out[..., 4:7], out[..., 7], *extra
+    return (out[..., 0], out[..., 1:4], out[..., 4:7], out[..., 7], out[..., 8:11], out[..., 11:13],
+            None if impulse else out[..., 13:15])
 
 
 def relay_edge_columns(sums) -> tuple:
@@ -158,16 +155,17 @@ def relay_edge_columns(sums) -> tuple:
             interior[..., 16:18] + moving[..., 18:20])
 
 
-def relay_parts(scene, *, progress: bool = False):
-    """y, ∂y/∂l, ∂y/∂s (world axes, the wall's normal fixed) and ∂y/∂sampling.start of every pair.
+def relay_parts(scene, *, progress: bool = False, pulse: bool = False):
+    """y and its derivatives of every pair: :func:`_pass`'s, ∂y/∂l and ∂y/∂s in world axes (the wall's
+    normal fixed).
 
     Returns
     -------
     tuple of numpy.ndarray
         y ``(P, N)``, y's units; ∂y/∂l and ∂y/∂s ``(P, N, 3)``, per metre (l and s each pair's own
-        points, the laser leg's factor held); ∂y/∂t_0 ``(P, N)``, per metre of path length; for the
-        impulse, ∂y/∂n ``(P, N, 3)`` (the wall's normal in the rectangle's frame, both ends' cosines) and
-        the stretch's moments ``(P, N, 2)`` (:func:`_edge_vector`), else None for each.
+        points, the laser leg's factor held); ∂y/∂t_0 ``(P, N)``, per metre of path length; ∂y/∂n
+        ``(P, N, 3)`` (the wall's normal in the rectangle's frame, both ends' cosines); the stretch's
+        moments ``(P, N, 2)`` (:func:`_edge_vector`); the pulse's two ``(P, N, 2)`` (None for the impulse).
 
     Where the pairs are translates of a few, the offset route (:func:`.relay_wall_offsets.offset_parts`):
     each distinct (pair, pixel) offset integrated once.
@@ -178,10 +176,10 @@ def relay_parts(scene, *, progress: bool = False):
         geometries = [pair_geometry(l, s, "lambertian") for l, s in zip(local_lit, local_read)]
         edges = np.asarray(scene.sampling.edges, dtype=np.float64)
         warn_edges_on_arrivals(geometries, _cells(scene), edges[None, :] - offsets[:, None], "pair")
-    parts = offset_parts(scene, normal, progress=progress)
-    y, source, sensor, start, normals, moments = _pass(scene, normal, normal, progress) if parts is None else parts
+    parts = offset_parts(scene, normal, progress=progress, pulse=pulse)
+    y, source, sensor, start, *rest = _pass(scene, normal, progress, pulse) if parts is None else parts
     # the frame's coordinates are axes (p - corner): a world gradient is axesᵀ times the frame's
-    return y, source @ rectangle.axes, sensor @ rectangle.axes, start, normals, moments
+    return (y, source @ rectangle.axes, sensor @ rectangle.axes, start, *rest)
 
 
 def _rotation(scene, axis: int, parts) -> np.ndarray:
@@ -190,7 +188,7 @@ def _rotation(scene, axis: int, parts) -> np.ndarray:
 
     The points' share is the chain rule on ∂y/∂l and ∂y/∂s; n enters through the cosines alone,
     ∂(c_l c_s)/∂n·v = c_s v·(x - l)/|x - l| + c_l v·(x - s)/|x - s| (no path length moves: no edge
-    term), each term the cell integrals with that end's normal replaced by v = dn/dθ (frame).
+    term): the kernels' ∂a/∂n dotted with v = dn/dθ (frame).
     """
     generator = rotation(axis, 1.0) - rotation(axis, -1.0)          # 2 sin(1) [e]x
     return _turn(scene, -generator / (2.0 * np.sin(1.0)), parts)     # v ↦ -e × v
@@ -199,24 +197,18 @@ def _rotation(scene, axis: int, parts) -> np.ndarray:
 def _turn(scene, turn, parts) -> np.ndarray:
     """∂y/∂θ of the rectangle turning about its centre, ``turn`` the world matrix v ↦ -e × v."""
     lit_gradient, read_gradient = parts[1], parts[2]
-    rectangle, _, _, normal = _frame(scene)
+    rectangle = _frame(scene)[0]
     lit, read = scene.pair_points
     column = (np.einsum("pnj,pj->pn", lit_gradient, (lit - scene.center) @ turn.T)
               + np.einsum("pnj,pj->pn", read_gradient, (read - scene.center) @ turn.T))
-    return column + _normal_turn(scene, rectangle.axes @ (turn @ WALL_NORMAL), normal, parts[4])
+    return column + _normal_turn(rectangle.axes @ (turn @ WALL_NORMAL), parts[4])
 
 
-def _normal_turn(scene, velocity, normal, gradient) -> np.ndarray:
-    """∂y/∂θ of the wall's normal (frame ``normal``) turning at ``velocity`` (frame), the points held:
-    the interior integral of a (c_s v·(x - l)/|x - l| + c_l v·(x - s)/|x - s|), ``(P, N)``: ∂y/∂n·v
-    from ``gradient`` (the impulse's parts), else two passes with one end's normal replaced by v."""
-    column = np.zeros((scene.sensor_count, scene.sampling.count))
-    if np.any(velocity != 0.0):
-        if gradient is not None:
-            return gradient @ velocity
-        for ends in ((velocity, normal), (normal, velocity)):
-            column += _pass(scene, *ends)[0]
-    return column
+def _normal_turn(velocity, gradient) -> np.ndarray:
+    """∂y/∂θ of the wall's normal turning at ``velocity`` (frame), the points held: the interior integral
+    of a (c_s v·(x - l)/|x - l| + c_l v·(x - s)/|x - s|), ``(P, N)``, i.e. the pass's ∂y/∂n ``gradient``
+    dotted with v."""
+    return gradient @ velocity
 
 
 def _edge_vector(scene, stem: str, axis: int, parts) -> np.ndarray:
@@ -230,18 +222,13 @@ def _edge_vector(scene, stem: str, axis: int, parts) -> np.ndarray:
     (:func:`_turn`). One along the other edge breaks u ⊥ v: :func:`.parameters.parameter` refuses it.
     """
     y = parts[0]
-    rectangle, _, _, normal = _frame(scene)
+    rectangle = _frame(scene)[0]
     side = 0 if stem == "hidden.u" else 1
     length = (rectangle.width, rectangle.height)[side]
     along, face = rectangle.axes[side], rectangle.axes[2]
     column = np.zeros_like(y)
     if along[axis] != 0.0:
-        moments = parts[5]
-        if moments is None:           # a pass weighted by ξ'
-            weight = (1.0, 0.0, -0.5 * length) if side == 0 else (0.0, 1.0, -0.5 * length)
-            weighted = _pass(scene, normal, normal, weight=weight)
-            moments = (weighted[1] + weighted[2])[..., :2]
-        column += along[axis] / length * (y - moments[..., side])
+        column += along[axis] / length * (y - parts[5][..., side])
     if face[axis] != 0.0:
         e = np.cross(along, face)
         turn = -np.array([[0.0, -e[2], e[1]], [e[2], 0.0, -e[0]], [-e[1], e[0], 0.0]])
@@ -252,6 +239,8 @@ def _edge_vector(scene, stem: str, axis: int, parts) -> np.ndarray:
 def relay_column(scene, stem: str, axis: int, parts) -> np.ndarray:
     """∂y/∂(``stem``'s ``axis`` component), ``(P, N)``, from :func:`relay_parts`' ``parts``."""
     y, lit_gradient, read_gradient, start = parts[:4]
+    if stem.startswith("illumination."):
+        return width_column(scene, stem, y, parts[6])
     if stem in ("hidden.u", "hidden.v"):
         return _edge_vector(scene, stem, axis, parts)
     if stem == "sampling.start":

@@ -28,6 +28,7 @@ from ..kernels.bins import TimeAxis
 from ..kernels.sensitivity_waveform import OUTPUTS, waveform_pair_sums
 from ..waveforms import cumulative_array, derivative_array, make_waveform
 from ..waveforms.gaussian import FWHM_PER_SIGMA
+from ..waveforms.pieces import without_tail_kinks
 from .sensitivity import _cells, pair_geometry, run_sensors
 
 __all__ = ["waveform_derivatives", "kernel_scales", "supports_width", "width_column"]
@@ -92,7 +93,8 @@ def waveform_derivatives(scene, *, progress: bool = False, pulse: bool = False):
         ``(K, N, 2)``: I ∫ f a [S(u) - u s(u)] dx (y's units) and I ∫ f a [s'(u)] dx (y's units per m²),
         [g] = g(t_{n+1} - d) - g(t_n - d) (:func:`width_column`).
     """
-    terms = make_waveform(scene.illumination, scene.sampling.bin_width_opl).terms
+    # a smooth pulse's truncated tails are no breakpoints: cutting at them is most of the work
+    terms = without_tail_kinks(make_waveform(scene.illumination, scene.sampling.bin_width_opl).terms)
     sampling = scene.sampling
     axis = TimeAxis(float(sampling.start_opl), float(sampling.bin_width_opl), int(sampling.count))
     scales = kernel_scales(terms, axis.bin_width_opl, pulse, pulse and scene.illumination.waveform == "emg")
@@ -111,13 +113,14 @@ def waveform_derivatives(scene, *, progress: bool = False, pulse: bool = False):
 
 
 def supports_width(scene, stem: str) -> bool:
-    """Whether ``stem`` is a width of the plane scene's pulse that :func:`width_column` gives exactly.
+    """Whether ``stem`` is a width of the scene's pulse that :func:`width_column` gives exactly (a relay
+    wall's from its own pass, :mod:`.relay_wall_sensitivity`).
 
     The Butterworth's ``cutoff`` only with the default duration (3 / cutoff, scaled with it): a stated
     duration is a truncation the cutoff does not scale, and ``duration`` itself moves that truncation
     alone; both stay on the differences.
     """
-    if scene.kind != "plane" or not stem.startswith("illumination."):
+    if scene.kind not in ("plane", "relay_wall") or not stem.startswith("illumination."):
         return False
     illumination = scene.illumination
     widths = {"gaussian": ("fwhm",), "sech2": ("fwhm",), "square": ("width",), "emg": ("fwhm", "tail"),

@@ -195,17 +195,20 @@ def without_tail_kinks(terms: WaveformTerms) -> WaveformTerms:
     far below any tolerance, but a quadrature that cuts its integrals at every kink isochrone (one per bin
     edge and kink) spends most of its work there when the bins are fine: the exact derivatives' cell
     integrals took 17 times longer on a relay wall with a Gaussian of FWHM 2 bins
-    (analytic/operator/relay_wall_sensitivity.py). s is sampled on each side of each kink, over a
-    hundredth of the pulse's span, in the kink's own neighbouring piece.
+    (analytic/operator/relay_wall_sensitivity.py). s is sampled on each side of each kink, in the kink's
+    own neighbouring piece, over a hundredth of its distance to the peak (a pulse that only starts there,
+    as a Butterworth's rises from 0, is far above the floor that close).
     """
     if terms.degree == 0 or not np.any(terms.kinks):
         return terms
     span = float(terms.duration - terms.lead)
-    peak = float(np.max(np.abs(derivative_array(terms, np.linspace(terms.lead, terms.duration, 4097)))))
-    reach = span * np.geomspace(1e-9, 1e-2, 24)
+    grid = np.linspace(terms.lead, terms.duration, 4097)
+    density = np.abs(derivative_array(terms, grid))
+    peak, crest = float(np.max(density)), float(grid[np.argmax(density)])
     kinks = terms.kinks.copy()
     for i in np.flatnonzero(terms.kinks):
         start = float(terms.starts[i])
+        reach = max(abs(crest - start), 1e-9 * span) * np.geomspace(1e-9, 1e-2, 24)
         small = True
         for piece, points in ((i - 1, start - reach), (i, start + reach)):
             if piece < 0 or not small:

@@ -54,7 +54,7 @@ def _scene(pulse, widths, sensors, sampling):
 
 @pytest.mark.parametrize("pulse", sorted(_NARROW))
 def test_an_isochrone_born_inside_a_bin(pulse):
-    # both sensors' first arrivals (2.26 m, 2.07 m) fall inside bins, away from their edges
+    # sensor 0's first arrival (1.814 m) falls inside bin 0, 0.09 of a bin below its upper edge
     scene = _scene(pulse, _NARROW[pulse], [[0.3, 0.6, 0.8], [0.9, 0.2, 0.5]],
                    Sampling(bin_width_opl=0.07, start_opl=1.75, count=14))
     _against_differences(scene, _NARROW[pulse])
@@ -93,3 +93,22 @@ def test_only_the_widths_the_route_gives_are_reported_exact():
     assert exact_keys(stated, parameters(stated, keys)) == [False, False, True]
     scaled = _scene("butterworth", dict(cutoff=8.0), [[0.3, 0.6, 0.8]], sampling)
     assert exact_keys(scaled, parameters(scaled, keys[:1])) == [True]
+
+
+# a relay wall's pass carries the same two integrals (analytic/operator/relay_wall_sensitivity.py), by the
+# general route (the end legs counted) and by pixel offsets (a square parallel to the wall, a 4 x 4 scan)
+_RELAY = {"general": dict(scan='type = "confocal"\ngrid = [2, 2]\naccount_first_and_last_bounces = true', start=3.01),
+          "offsets": dict(scan='type = "confocal"\ngrid = [4, 4]', start=1.51,
+                          hidden="center = [0.1, -0.05, 0.8]\nu = [1.5, 0.0, 0.0]\nv = [0.0, -1.5, 0.0]")}
+
+
+@pytest.mark.parametrize("route, pulse, widths", [
+    ("general", "gaussian", dict(fwhm=0.08)),
+    pytest.param("general", "emg", dict(fwhm=0.05, tail=0.08), marks=pytest.mark.slow),
+    pytest.param("offsets", "gaussian", dict(fwhm=0.08), marks=pytest.mark.slow),
+    pytest.param("offsets", "emg", dict(fwhm=0.05, tail=0.08), marks=pytest.mark.slow)])
+def test_a_relay_walls_widths(tmp_path, route, pulse, widths):
+    from relay_capture import capture
+
+    light = f'waveform = "{pulse}"\n' + "\n".join(f"{key} = {value}" for key, value in widths.items())
+    _against_differences(capture(tmp_path, light=light, **_RELAY[route]), widths)

@@ -1,6 +1,6 @@
 """The exact Jacobian's cost on a relay wall: every geometric key against ``forward``, by each route.
 
-    python benchmarks/bench_jacobian_relay_wall.py [--repeats 5]
+    python benchmarks/bench_jacobian_relay_wall.py [--repeats 5] [--gaussian FWHM]
 
 examples/nlos.toml with its time zero moved to 1.993 m (its own 1.99 m puts a bin edge on first
 arrivals, where y has no derivative: analytic.EdgeOnArrivalWarning), 17 keys: ``sampling.start``,
@@ -9,7 +9,9 @@ vectors' components the scene accepts. Three captures, each against its own ``fo
 is (both by pixel offsets), the same with every route but the general one closed
 (``offsets.MIN_SAVING = 0``: every pair over every pixel), and with the end legs counted
 (``account_first_and_last_bounces``, tal's convention: the pairs' added paths differ, so the general
-route is the only one). Times are the best of ``--repeats``, kernels warm, wall and CPU.
+route is the only one). Times are the best of ``--repeats``, kernels warm, wall and CPU. ``--gaussian FWHM``
+replaces the impulse by a Gaussian pulse of that FWHM (metres; the waveform route) and adds
+``illumination.fwhm`` to the keys.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import platform
 import time
 
 import analytic
+from analytic.scenes.common import Illumination
 from analytic.operator import offsets
 from analytic.operator.parameters import with_values
 
@@ -56,11 +59,16 @@ def _case(name, scene, repeats, general=False):
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--gaussian", type=float, default=None, metavar="FWHM")
     args = parser.parse_args(argv)
     scene = with_values(analytic.load_scene("examples/nlos.toml"), {"sampling.start": 1.993})
+    if args.gaussian is not None:
+        scene = scene.replace(illumination=Illumination(waveform="gaussian", fwhm=args.gaussian))
+        KEYS.append("illumination.fwhm")
     print(f"machine: {platform.node()}, {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
           f"load {os.getloadavg()[0]:.2f} at the start")
-    print(f"examples/nlos.toml, start 1.993 m ({scene.sensor_count} pairs, M = {scene.pixels}, "
+    pulse = "impulse" if args.gaussian is None else f"Gaussian of FWHM {args.gaussian:g} m"
+    print(f"examples/nlos.toml, start 1.993 m, {pulse} ({scene.sensor_count} pairs, M = {scene.pixels}, "
           f"{scene.sampling.count} bins), {len(KEYS)} keys; seconds, wall (CPU)\n")
     print("| capture | forward | jacobian | forwards |\n|---|---|---|---|")
     _case("as it is (pixel offsets)", scene, args.repeats)

@@ -45,10 +45,12 @@ def test_a_bad_key_exits_2_with_one_line_and_no_files(tmp_path, capsys, keys, wo
 # the differences' model at tolerance 1e-10 leaves a few pieces short of it on this scene (as before the bound)
 @pytest.mark.filterwarnings("ignore::analytic.operator.system.QuadratureWarning")
 def test_meta_states_each_columns_error_bound_and_its_basis(tmp_path):
-    # a Gaussian pulse: its width takes the differences, the intensity the exact (linear) route
-    path = write_scene(tmp_path, GOOD.replace('waveform = "impulse"', 'waveform = "gaussian"\nfwhm = 0.2'))
+    # a Butterworth pulse of a stated duration: its cutoff takes the differences (the duration a truncation
+    # the cutoff does not scale), the intensity the exact (linear) route
+    path = write_scene(tmp_path, GOOD.replace('waveform = "impulse"',
+                                              'waveform = "butterworth"\ncutoff = 8.0\nduration = 0.3'))
     out = tmp_path / "out"
-    keys = ["illumination.fwhm", "source.intensity"]
+    keys = ["illumination.cutoff", "source.intensity"]
     assert main(["jacobian", str(path), "--parameters", *keys, "--out", str(out), "--quiet"]) == 0
     scene = load_scene(path)
     values, bounds = jacobian(scene, keys, errors=True)

@@ -150,17 +150,15 @@ def amplitudes(g, x, y, out):
     out[11] = a * rky / dk
     out[12] = a * g.kh / dk
     if g.surfaces:
-        _surfaces(g, rsx, rsy, rkx, rky, ds, dk, out)
-        mx, my = x - g.mx, y - g.my
-        out[16] = mx * (out[1] + out[4])
-        out[17] = my * (out[2] + out[5])
-        out[18] = mx * (out[7] + out[10])
-        out[19] = my * (out[8] + out[11])
+        _surfaces(g, (x, y, rsx, rsy, rkx, rky, ds, dk), out)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def _surfaces(g, rsx, rsy, rkx, rky, ds, dk, out):
-    """Multiply the amplitudes by the ends' cosines c = n·(x - p) / |x - p| (and ∂a/∂p by the product rule)."""
+# not inlined (every rule inlines amplitudes: the relay wall's part compiled once, not in each of them)
+@njit(cache=True, error_model="numpy")
+def _surfaces(g, point, out):
+    """Multiply the amplitudes by the ends' cosines c = n·(x - p) / |x - p| (and ∂a/∂p by the product rule),
+    and add a relay wall's seven (:data:`RELAY_AMPLITUDES`)."""
+    x, y, rsx, rsy, rkx, rky, ds, dk = point
     # x - p_s = (-rsx, -rsy, -h_s);  ∂c/∂p_j = (-n_j + c (x - p)_j / |x - p|) / |x - p|
     cs = -(g.snx * rsx + g.sny * rsy + g.snz * g.sh) / ds
     ck = -(g.knx * rkx + g.kny * rky + g.knz * g.kh) / dk
@@ -177,6 +175,11 @@ def _surfaces(g, rsx, rsy, rkx, rky, ds, dk, out):
     out[0] = a * both
     for j in range(7, AMPLITUDES):
         out[j] *= both
+    mx, my = x - g.mx, y - g.my
+    out[16] = mx * (out[1] + out[4])
+    out[17] = my * (out[2] + out[5])
+    out[18] = mx * (out[7] + out[10])
+    out[19] = my * (out[8] + out[11])
 
 
 @njit(cache=True, error_model="numpy", inline="always")

@@ -217,7 +217,7 @@ def _edge_vector(scene, stem: str, axis: int, parts) -> np.ndarray:
     A component of u along ê = u/|u| stretches the rectangle about its centre: with the pixels fixed
     in (ξ/|u|, η/|v|), u → (1 + ε) u gives dy/dε = y + ∫ ξ' f ∂_ê(a κ) dx (ξ' = ξ - |u|/2, the area
     element's change and the points' stretch), and ∂_x(a κ) = -(∂_l + ∂_s)(a κ) in the frame (a κ
-    depends on x through x - l and x - s, the normals fixed): the moments, or the pass weighted by ξ'. A
+    depends on x through x - l and x - s, the normals fixed): the pass's moments about the centre. A
     component along the lit face's normal n turns the rectangle about e = ê × n by δ/|u|
     (:func:`_turn`). One along the other edge breaks u ⊥ v: :func:`.parameters.parameter` refuses it.
     """

@@ -3,12 +3,13 @@
 The forward's offset route (:mod:`.offsets`) applies to the derivatives too: when the pairs are
 translates of a few by whole pixels, every integral of :func:`.relay_wall_sensitivity._pass` over (pair,
 pixel) is that of (its group's first pair, the pixel shifted) over the virtual rectangle, so the per-pair
-sums are correlations of the image with per-pixel runs (:func:`analytic.kernels.sensitivity_offsets.window_sums`),
-read as the forward reads A's (:func:`analytic.kernels.sensitivity_offsets.window_products`). The outputs are those of the general pass (y,
-∂y/∂l, ∂y/∂s, ∂y/∂t_0, ∂y/∂n) but for the stretch's moments, which the virtual rectangle takes about
-its own centre c_v: a member shifted by (s_c, s_r) whole pixels sees x - x_c = (x_v - c_v) + (c_v - s_c Δu
-- x_c) (x_c the real centre), so its moment is the virtual one plus that constant times the unweighted
-(∂_l + ∂_s) column.
+sums are correlations of the image with per-pixel runs
+(:func:`analytic.kernels.sensitivity_offsets.window_sums`), read as the forward reads A's
+(:func:`analytic.kernels.sensitivity_offsets.window_products`). The outputs are those of the general
+pass (y, ∂y/∂l, ∂y/∂s, ∂y/∂t_0, ∂y/∂n, the pulse's two) but for the stretch's moments, which the virtual
+rectangle takes about its own centre c_v: a member shifted by (s_c, s_r) whole pixels sees x - x_c =
+(x_v - c_v) + (c_v - s_c Δu - x_c) (x_c the real centre), so its moment is the virtual one plus that
+constant times the unweighted (∂_l + ∂_s) column.
 """
 
 from __future__ import annotations
@@ -34,10 +35,8 @@ __all__ = ["offset_parts", "pulse_terms", "WAVEFORM_COLUMNS"]
 
 #: Blocks of virtual pixels per thread (the pixels' costs differ: more blocks balance the threads).
 _BLOCKS_PER_THREAD = 8
-
-
-#: The waveform route's outputs in :func:`.relay_wall_sensitivity._pass`'s order: y, ∂y/∂l, ∂y/∂s, ∂y/∂t_0, ∂y/∂n, the moments, the
-#: pulse's two (analytic.kernels.sensitivity_waveform's 0-7, 11-15, 9-10).
+#: The waveform route's outputs in :func:`.relay_wall_sensitivity._pass`'s order: y, ∂y/∂l, ∂y/∂s,
+#: ∂y/∂t_0, ∂y/∂n, the moments, the pulse's two (analytic.kernels.sensitivity_waveform's 0-7, 11-15, 9-10).
 WAVEFORM_COLUMNS = np.r_[0:8, 11:16, 9:11]
 
 

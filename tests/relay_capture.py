@@ -5,13 +5,13 @@ from analytic.scenes.scene_file import scene_of
 
 def capture(tmp_path, scan, hidden="center = [0.1, -0.05, 0.8]\nu = [0.6, 0.0, 0.0]\nv = [0.0, -0.6, 0.0]",
             points="[laser]\nposition = [-0.4, 0.2, 0.3]\n[sensor]\nposition = [0.3, -0.1, 0.2]", start=1.4,
-            light='waveform = "impulse"', tolerance=1e-6):
+            light='waveform = "impulse"', tolerance=1e-6, pixels=3):
     text = f"""
 [relay_wall]
 size = [2.0, 2.0]
 [hidden]
 {hidden}
-pixels = 3
+pixels = {pixels}
 reflectance = 0.7
 {points}
 [scan]

@@ -6,42 +6,14 @@ Richardson differences of the model assembled at tolerance 1e-10 (a route that s
 factor's derivative) are good to ~1e-7 of a column's largest entry; the bound asserted is 1e-6.
 """
 
-import json
-
 import numpy as np
 import pytest
 
 from analytic.operator.derivatives import exact_keys, jacobian
 from analytic.operator.parameters import parameters
-from analytic.scenes.scene_file import scene_of
+from relay_capture import capture
 
 _KEYS = ["laser.position.x", "laser.position.y", "laser.position.z", "sensor.position.x", "sensor.position.z"]
-
-
-def _capture(tmp_path, scan):
-    text = f"""
-[relay_wall]
-size = [2.0, 2.0]
-[hidden]
-center = [0.1, -0.05, 0.8]
-u = [0.6, 0.0, 0.0]
-v = [0.0, -0.6, 0.0]
-pixels = 4
-reflectance = 0.7
-[laser]
-position = [-0.4, 0.2, 0.3]
-[sensor]
-position = [0.3, -0.1, 0.2]
-[scan]
-{scan}
-[sampling]
-period = 0.05
-start = 1.4
-count = 40
-"""
-    path = tmp_path / "capture.toml"
-    path.write_text(text)
-    return scene_of(path)
 
 
 @pytest.mark.parametrize("scan", ['type = "confocal"\ngrid = [2, 2]',
@@ -49,7 +21,7 @@ count = 40
                                   pytest.param('type = "single"\nlaser_point = [0.2, 0.1, 0.0]\ngrid = [3, 3]',
                                                marks=pytest.mark.slow)])
 def test_the_laser_and_sensor_positions_against_differences_of_the_model(tmp_path, scan):
-    scene = _capture(tmp_path, scan)
+    scene = capture(tmp_path, scan, pixels=4)
     assert all(exact_keys(scene, parameters(scene, _KEYS)))
     exact = jacobian(scene, _KEYS)
     reference = jacobian(scene, _KEYS, route="differences", step=1e-4)
